@@ -1,0 +1,78 @@
+//! The error type of the geometry crate.
+
+use thiserror::Error;
+
+/// Everything that can go wrong in `autoteach-geometry`. Messages carry the offending values.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum GeometryError {
+    /// An input value was NaN or infinite.
+    #[error("non-finite value in {what}: {value}")]
+    NonFinite {
+        /// Which input held the value.
+        what: &'static str,
+        /// The offending value.
+        value: f64,
+    },
+    /// A parameter vector or array had the wrong length.
+    #[error("{what} has length {got}, expected {expected}")]
+    WrongLength {
+        /// Which input.
+        what: &'static str,
+        /// Length received.
+        got: usize,
+        /// Length required.
+        expected: usize,
+    },
+    /// A parameter is outside its valid domain (for example a non-positive focal length).
+    #[error("invalid parameter {what} = {value}: {reason}")]
+    InvalidParameter {
+        /// Parameter name.
+        what: &'static str,
+        /// Its value.
+        value: f64,
+        /// Why it is rejected.
+        reason: &'static str,
+    },
+    /// A desired pose cannot be reached by the robot.
+    #[error("pose unreachable: {reason}")]
+    Unreachable {
+        /// What makes it unreachable, with the numbers.
+        reason: String,
+    },
+    /// A conic is degenerate (not a real, non-degenerate ellipse) for the requested operation.
+    #[error("degenerate conic: {reason}")]
+    DegenerateConic {
+        /// Why, with the numbers.
+        reason: String,
+    },
+    /// A point cannot be projected (behind the camera or outside the model's valid domain).
+    #[error("cannot project point ({x}, {y}, {z}): {reason}")]
+    NotProjectable {
+        /// Point x.
+        x: f64,
+        /// Point y.
+        y: f64,
+        /// Point z.
+        z: f64,
+        /// Why.
+        reason: &'static str,
+    },
+    /// An iterative computation (undistortion, inverse kinematics refinement) did not converge.
+    #[error("{what} did not converge after {iterations} iterations (residual {residual:e})")]
+    NoConvergence {
+        /// What was being computed.
+        what: &'static str,
+        /// Iterations spent.
+        iterations: usize,
+        /// Final residual.
+        residual: f64,
+    },
+}
+
+/// Returns `Err(NonFinite)` naming `what` if any value is NaN or infinite.
+pub fn check_finite(what: &'static str, values: &[f64]) -> crate::Result<()> {
+    match values.iter().find(|v| !v.is_finite()) {
+        Some(&value) => Err(GeometryError::NonFinite { what, value }),
+        None => Ok(()),
+    }
+}

@@ -1,0 +1,90 @@
+//! The Python exception hierarchy of autoteach, and the mapping from each core error variant
+//! to the exception a caller would catch.
+//!
+//! ```text
+//! AutoteachError(Exception)
+//! ├── InvalidInputError(AutoteachError, ValueError)       wrong shape, dtype, NaN, bad parameter
+//! ├── DegenerateGeometryError(AutoteachError, ValueError) degenerate conic, collinear points
+//! ├── UnreachablePoseError(AutoteachError, ValueError)    inverse kinematics has no solution
+//! ├── ConvergenceError(AutoteachError, RuntimeError)      an iteration did not converge
+//! └── InternalError(AutoteachError, RuntimeError)         a bug: a Rust panic caught at the boundary
+//! ```
+//! The classes are built at module initialisation (so they can derive from both
+//! `AutoteachError` and the matching built-in) and live in `autoteach._core`.
+
+use autoteach_geometry::GeometryError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+
+/// The exception classes, by name, in creation order: (name, built-in second base, doc).
+const CLASSES: &[(&str, Option<&str>, &str)] = &[
+    ("InvalidInputError", Some("ValueError"), "An input has the wrong shape, dtype, a NaN/inf, or an invalid value."),
+    ("DegenerateGeometryError", Some("ValueError"), "The data are geometrically degenerate (collinear points, a degenerate conic, ...)."),
+    ("UnreachablePoseError", Some("ValueError"), "A requested robot pose cannot be reached."),
+    ("ConvergenceError", Some("RuntimeError"), "An iterative computation did not converge."),
+    ("InternalError", Some("RuntimeError"), "A bug inside autoteach (a Rust panic caught at the Python boundary)."),
+];
+
+/// Creates `AutoteachError` and its subclasses and adds them to the module.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    let builtins = py.import("builtins")?;
+    let type_ = builtins.getattr("type")?;
+    let exception = builtins.getattr("Exception")?;
+    let ns = PyDict::new(py);
+    ns.set_item("__doc__", "Base class of every error raised by autoteach.")?;
+    ns.set_item("__module__", "autoteach")?;
+    let base = type_.call1(("AutoteachError", PyTuple::new(py, [exception])?, ns))?;
+    m.add("AutoteachError", &base)?;
+    for (name, builtin, doc) in CLASSES {
+        let mut bases = vec![base.clone()];
+        if let Some(b) = builtin {
+            bases.push(builtins.getattr(*b)?);
+        }
+        let ns = PyDict::new(py);
+        ns.set_item("__doc__", *doc)?;
+        ns.set_item("__module__", "autoteach")?;
+        let cls = type_.call1((*name, PyTuple::new(py, bases)?, ns))?;
+        m.add(*name, cls)?;
+    }
+    Ok(())
+}
+
+/// Builds an instance of the autoteach exception `class` with `message`.
+pub fn new_err(class: &str, message: impl Into<String>) -> PyErr {
+    let message = message.into();
+    Python::attach(|py| {
+        let cls = py
+            .import("autoteach._core")
+            .and_then(|m| m.getattr(class))
+            .and_then(|c| c.cast_into::<pyo3::types::PyType>().map_err(PyErr::from));
+        match cls {
+            Ok(cls) => PyErr::from_type(cls, message),
+            Err(e) => e,
+        }
+    })
+}
+
+/// `InvalidInputError(message)`.
+pub fn invalid_input(message: impl Into<String>) -> PyErr {
+    new_err("InvalidInputError", message)
+}
+
+/// `InternalError(message)`.
+pub fn internal(message: impl Into<String>) -> PyErr {
+    new_err("InternalError", message)
+}
+
+/// Maps a geometry error to its Python exception.
+pub fn geometry(err: GeometryError) -> PyErr {
+    let class = match &err {
+        GeometryError::NonFinite { .. }
+        | GeometryError::WrongLength { .. }
+        | GeometryError::InvalidParameter { .. }
+        | GeometryError::NotProjectable { .. } => "InvalidInputError",
+        GeometryError::Unreachable { .. } => "UnreachablePoseError",
+        GeometryError::DegenerateConic { .. } => "DegenerateGeometryError",
+        GeometryError::NoConvergence { .. } => "ConvergenceError",
+    };
+    new_err(class, err.to_string())
+}
