@@ -8,6 +8,8 @@ use pyo3::prelude::*;
 
 pub mod convert;
 pub mod errors;
+mod detect;
+mod estimate;
 mod geometry;
 mod sim;
 
@@ -17,6 +19,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     geometry::register(m)?;
     sim::register(m)?;
+    detect::register(m)?;
+    estimate::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -1,0 +1,32 @@
+"""The exception hierarchy of autoteach.
+
+Every error autoteach raises derives from :class:`AutoteachError`, and also from the built-in
+exception a caller would naturally catch (``ValueError`` for bad input, ``RuntimeError`` for a
+computation that failed, ``OSError`` for a log that cannot be read).
+"""
+
+from __future__ import annotations
+
+from autoteach._core import (
+    AutoteachError,
+    ConvergenceError,
+    DegenerateGeometryError,
+    InternalError,
+    InvalidInputError,
+    UnreachablePoseError,
+)
+
+
+class LogReadError(AutoteachError, OSError):
+    """An MCAP log cannot be read (fully): the message says which file and where reading stopped."""
+
+
+__all__ = [
+    "AutoteachError",
+    "ConvergenceError",
+    "DegenerateGeometryError",
+    "InternalError",
+    "InvalidInputError",
+    "LogReadError",
+    "UnreachablePoseError",
+]
