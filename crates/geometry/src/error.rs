@@ -67,6 +67,47 @@ pub enum GeometryError {
         /// Final residual.
         residual: f64,
     },
+    /// A quaternion given as (w, x, y, z) has (near-)zero norm and encodes no rotation.
+    #[error("quaternion (w={w}, x={x}, y={y}, z={z}) has norm {norm:e}, too small to normalise")]
+    DegenerateQuaternion {
+        /// Scalar part.
+        w: f64,
+        /// First vector component.
+        x: f64,
+        /// Second vector component.
+        y: f64,
+        /// Third vector component.
+        z: f64,
+        /// Its Euclidean norm.
+        norm: f64,
+    },
+    /// A camera model name was not recognised.
+    #[error(
+        "unknown camera model {name:?} (expected \"pinhole\", \"brown_conrady\"/\"opencv\" or \"kannala_brandt\"/\"fisheye\"/\"kb\")"
+    )]
+    UnknownModel {
+        /// The name received.
+        name: String,
+    },
+    /// A pixel has no ray under the camera model (for example it lies outside the image of the
+    /// Kannala–Brandt model's monotonic range).
+    #[error("cannot unproject pixel ({u}, {v}): {reason}")]
+    NotUnprojectable {
+        /// Pixel column.
+        u: f64,
+        /// Pixel row.
+        v: f64,
+        /// Why.
+        reason: &'static str,
+    },
+    /// An element of a batch failed; `source` is the error of that element.
+    #[error("element {index}: {source}")]
+    AtIndex {
+        /// Index of the first failing element in the batch.
+        index: usize,
+        /// What went wrong with it.
+        source: Box<GeometryError>,
+    },
 }
 
 /// Returns `Err(NonFinite)` naming `what` if any value is NaN or infinite.

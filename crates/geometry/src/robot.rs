@@ -110,7 +110,8 @@ impl RobotParams {
     ];
 
     /// Checks that every value is finite, the link and blade lengths `l1..l4` are positive and
-    /// the camera tilt satisfies `|β_c| < 90°`.
+    /// the camera tilt and blade pitches satisfy `|β_c|, |α1|, |α2| < 90°` (a blade pitched by
+    /// 90° or more is not a blade, and the inverse kinematics' yaw extraction needs it).
     pub fn validate(&self) -> Result<()> {
         for (name, value) in Self::NAMES.iter().zip(self.to_array()) {
             if !value.is_finite() {
@@ -131,12 +132,18 @@ impl RobotParams {
                 });
             }
         }
-        if self.beta_c.abs() >= FRAC_PI_2 {
-            return Err(GeometryError::InvalidParameter {
-                what: "beta_c",
-                value: self.beta_c,
-                reason: "camera tilt must satisfy |beta_c| < pi/2",
-            });
+        for (name, value) in [
+            ("beta_c", self.beta_c),
+            ("alpha1", self.alpha1),
+            ("alpha2", self.alpha2),
+        ] {
+            if value.abs() >= FRAC_PI_2 {
+                return Err(GeometryError::InvalidParameter {
+                    what: name,
+                    value,
+                    reason: "camera tilt and blade pitches must be below pi/2 in magnitude",
+                });
+            }
         }
         Ok(())
     }
@@ -160,7 +167,20 @@ impl RobotParams {
 
     /// Builds and validates parameters from a slice in the order [`RobotParams::NAMES`].
     pub fn from_slice(values: &[f64]) -> Result<Self> {
-        let &[l1, l2, l3, l4, h01, h02, alpha1, alpha2, beta_c, cam_d, cam_h] = values else {
+        let &[
+            l1,
+            l2,
+            l3,
+            l4,
+            h01,
+            h02,
+            alpha1,
+            alpha2,
+            beta_c,
+            cam_d,
+            cam_h,
+        ] = values
+        else {
             return Err(GeometryError::WrongLength {
                 what: "robot parameters",
                 got: values.len(),
@@ -477,9 +497,9 @@ impl WaferRobot {
     /// Closed-form inverse kinematics of one blade: every joint vector whose
     /// [`WaferRobot::blade_pose`] equals `t_be` (inverse of eq. (2.4) with the yaw restored).
     ///
-    /// The orientation must be `Rz(ψ)·Ry(α)` with the blade's fixed pitch `α`; removing `Ry(α)`
-    /// and decomposing the rest as `Rz·Ry·Rx` gives the yaw `ψ` and a roll/pitch mismatch that
-    /// must stay below 1e-6 rad. The lift is `h = z − h0`. The wrist point
+    /// The orientation must be `Rz(ψ)·Ry(α)` with the blade's fixed pitch `α`: its Z-Y-X Euler
+    /// decomposition `Rz(ψ)·Ry(pitch)·Rx(roll)` gives the yaw `ψ`, and the roll and `pitch − α`
+    /// mismatches must stay below 1e-6 rad. The lift is `h = z − h0`. The wrist point
     /// `w = p − l_blade (cos ψ, sin ψ)` must lie in the annulus `|l1 − l2| ≤ |w| ≤ l1 + l2`
     /// (1e-12 relative tolerance); then `cos θ2 = (|w|² − l1² − l2²) / (2 l1 l2)` gives the
     /// elbow-up/elbow-down pair `±θ2`, `θ1 = atan2(w_y, w_x) − atan2(l2 sin θ2, l1 + l2 cos θ2)`
@@ -502,17 +522,17 @@ impl WaferRobot {
         let g = self.geom(blade);
         let p = &self.params;
 
-        // Orientation: R = Rz(ψ)·Ry(α)  ⇔  R·Ry(α)ᵀ = Rz(ψ).
-        let r_yaw = t_be.rotation * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -g.pitch);
-        let (roll, pitch, psi) = r_yaw.euler_angles();
-        if roll.abs() > ORIENTATION_TOL || pitch.abs() > ORIENTATION_TOL {
+        // Orientation: R = Rz(yaw)·Ry(pitch)·Rx(roll) must have roll = 0 and pitch = α.
+        let (roll, pitch, psi) = t_be.rotation.euler_angles();
+        let pitch_mismatch = pitch - g.pitch;
+        if roll.abs() > ORIENTATION_TOL || pitch_mismatch.abs() > ORIENTATION_TOL {
             return Err(GeometryError::Unreachable {
                 reason: format!(
-                    "blade orientation is not a yaw of the blade pitch {:.6}°: roll mismatch \
-                     {:.6}°, pitch mismatch {:.6}° (tolerance {:.2e} rad)",
+                    "blade orientation is not Rz(yaw)·Ry(alpha) with the blade pitch alpha = \
+                     {:.6}°: roll mismatch {:.6}°, pitch mismatch {:.6}° (tolerance {:.1e} rad)",
                     g.pitch.to_degrees(),
                     roll.to_degrees(),
-                    pitch.to_degrees(),
+                    pitch_mismatch.to_degrees(),
                     ORIENTATION_TOL
                 ),
             });
@@ -551,9 +571,9 @@ impl WaferRobot {
             for k in 0..4 {
                 q[k] = wrap_angle(q[k]);
             }
-            let duplicate = solutions.iter().any(|s| {
-                (0..4).all(|k| wrap_angle(s[k] - q[k]).abs() < DUPLICATE_TOL)
-            });
+            let duplicate = solutions
+                .iter()
+                .any(|s| (0..4).all(|k| wrap_angle(s[k] - q[k]).abs() < DUPLICATE_TOL));
             if !duplicate {
                 solutions.push(q);
             }
@@ -569,7 +589,10 @@ impl WaferRobot {
         t_wc: &Isometry3<f64>,
         theta3: f64,
     ) -> Result<Vec<Joints>> {
-        check_finite("camera pose translation", t_wc.translation.vector.as_slice())?;
+        check_finite(
+            "camera pose translation",
+            t_wc.translation.vector.as_slice(),
+        )?;
         check_finite("camera pose rotation", t_wc.rotation.coords.as_slice())?;
         let t_be2 = self.base.inverse() * t_wc * self.camera_mount().inverse();
         self.inverse_kinematics(&t_be2, Blade::Two, theta3)
@@ -580,4 +603,543 @@ impl WaferRobot {
 fn yaw_pitch(yaw: f64, pitch: f64) -> UnitQuaternion<f64> {
     UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw)
         * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix4;
+    use rand::{Rng, SeedableRng};
+    use rand_pcg::Pcg64;
+
+    /// A non-symmetric parameter set (l1 ≠ l2, pitched blades) to exercise every term.
+    fn skewed_params() -> RobotParams {
+        RobotParams {
+            l1: 0.41,
+            l2: 0.33,
+            l3: 0.29,
+            l4: 0.35,
+            h01: 0.21,
+            h02: 0.27,
+            alpha1: 0.03,
+            alpha2: -0.05,
+            beta_c: 0.2,
+            cam_d: 0.07,
+            cam_h: 0.04,
+        }
+    }
+
+    fn skewed_robot() -> WaferRobot {
+        let base = Isometry3::new(Vector3::new(1.2, -0.4, 0.3), Vector3::new(0.02, -0.01, 0.7));
+        WaferRobot::new(skewed_params(), base).unwrap()
+    }
+
+    fn random_joints(rng: &mut Pcg64) -> Joints {
+        Joints::new(
+            rng.random_range(-PI..PI),
+            rng.random_range(-PI..PI),
+            rng.random_range(-PI..PI),
+            rng.random_range(-PI..PI),
+            rng.random_range(-0.2..0.4),
+        )
+    }
+
+    /// (translation error, rotation angle error) between two poses.
+    fn pose_error(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
+        let d = a.inverse() * b;
+        (d.translation.vector.norm(), d.rotation.angle())
+    }
+
+    fn joints_close(a: &Joints, b: &Joints, tol: f64) -> bool {
+        (0..4).all(|k| wrap_angle(a[k] - b[k]).abs() < tol) && (a[4] - b[4]).abs() < tol
+    }
+
+    #[test]
+    fn default_params_are_valid_and_round_trip_through_arrays() {
+        let p = RobotParams::default();
+        p.validate().unwrap();
+        assert_eq!(RobotParams::from_slice(&p.to_array()).unwrap(), p);
+        let s = skewed_params();
+        assert_eq!(RobotParams::from_slice(&s.to_array()).unwrap(), s);
+        // The documented order: check a few positions by name.
+        let a = s.to_array();
+        assert_eq!(
+            a[RobotParams::NAMES.iter().position(|n| *n == "l4").unwrap()],
+            s.l4
+        );
+        assert_eq!(
+            a[RobotParams::NAMES
+                .iter()
+                .position(|n| *n == "beta_c")
+                .unwrap()],
+            s.beta_c
+        );
+        assert_eq!(
+            a[RobotParams::NAMES
+                .iter()
+                .position(|n| *n == "cam_h")
+                .unwrap()],
+            s.cam_h
+        );
+    }
+
+    #[test]
+    fn invalid_params_are_rejected() {
+        let base = RobotParams::default();
+        let cases: Vec<(RobotParams, &str)> = vec![
+            (RobotParams { l1: 0.0, ..base }, "l1"),
+            (RobotParams { l2: -0.1, ..base }, "l2"),
+            (RobotParams { l3: 0.0, ..base }, "l3"),
+            (RobotParams { l4: -1.0, ..base }, "l4"),
+            (
+                RobotParams {
+                    beta_c: FRAC_PI_2,
+                    ..base
+                },
+                "beta_c",
+            ),
+            (
+                RobotParams {
+                    beta_c: -1.6,
+                    ..base
+                },
+                "beta_c",
+            ),
+            (
+                RobotParams {
+                    alpha2: 2.0,
+                    ..base
+                },
+                "alpha2",
+            ),
+            (
+                RobotParams {
+                    h01: f64::NAN,
+                    ..base
+                },
+                "h01",
+            ),
+            (
+                RobotParams {
+                    cam_d: f64::INFINITY,
+                    ..base
+                },
+                "cam_d",
+            ),
+        ];
+        for (p, name) in cases {
+            match p.validate() {
+                Err(GeometryError::InvalidParameter { what, .. })
+                | Err(GeometryError::NonFinite { what, .. }) => assert_eq!(what, name),
+                other => panic!("{name}: expected a parameter error, got {other:?}"),
+            }
+            assert!(WaferRobot::new(p, Isometry3::identity()).is_err());
+        }
+        assert!(matches!(
+            RobotParams::from_slice(&[0.3; 10]),
+            Err(GeometryError::WrongLength {
+                got: 10,
+                expected: 11,
+                ..
+            })
+        ));
+        let mut bad_base = Isometry3::identity();
+        bad_base.translation.vector.x = f64::NAN;
+        assert!(WaferRobot::new(base, bad_base).is_err());
+    }
+
+    #[test]
+    fn blade_pose_matches_eq_2_4_with_yaw_restored() {
+        // Independent construction with 4×4 homogeneous matrices: translation of (2.4) and the
+        // rotation Rz(θ123)·Ry(α), where Ry is the printed block of (2.4).
+        let robot = skewed_robot();
+        let p = robot.params;
+        let mut rng = Pcg64::seed_from_u64(1);
+        for _ in 0..50 {
+            let q = random_joints(&mut rng);
+            for (blade, len, h0, a, wrist) in [
+                (Blade::One, p.l3, p.h01, p.alpha1, q[2]),
+                (Blade::Two, p.l4, p.h02, p.alpha2, q[3]),
+            ] {
+                let (t1, t12) = (q[0], q[0] + q[1]);
+                let psi = t12 + wrist;
+                let (sa, ca) = a.sin_cos();
+                let ry = Matrix4::new(
+                    ca, 0.0, sa, 0.0, 0.0, 1.0, 0.0, 0.0, -sa, 0.0, ca, 0.0, 0.0, 0.0, 0.0, 1.0,
+                );
+                let (sp, cp) = psi.sin_cos();
+                let rz = Matrix4::new(
+                    cp, -sp, 0.0, 0.0, sp, cp, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+                );
+                let mut expected = rz * ry;
+                expected[(0, 3)] = p.l1 * t1.cos() + p.l2 * t12.cos() + len * psi.cos();
+                expected[(1, 3)] = p.l1 * t1.sin() + p.l2 * t12.sin() + len * psi.sin();
+                expected[(2, 3)] = q[4] + h0;
+                let got = robot.blade_pose(&q, blade).to_homogeneous();
+                assert!(
+                    (got - expected).abs().max() < 1e-12,
+                    "{blade:?} {got} {expected}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn camera_mount_matches_printed_eq_2_7_up_to_inverse_and_tilt_sign() {
+        let p = skewed_params();
+        let robot = WaferRobot::new(p, Isometry3::identity()).unwrap();
+        // Printed (2.7) evaluated at −β_c.
+        let b = -p.beta_c;
+        let (s, c) = b.sin_cos();
+        let (d, h) = (p.cam_d, p.cam_h);
+        let printed = Matrix4::new(
+            0.0,
+            -1.0,
+            0.0,
+            0.0,
+            s,
+            0.0,
+            -c,
+            d * s + h * c,
+            c,
+            0.0,
+            s,
+            d * c - h * s,
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+        );
+        let got = robot.camera_mount().inverse().to_homogeneous();
+        assert!((got - printed).abs().max() < 1e-12, "{got} vs {printed}");
+    }
+
+    #[test]
+    fn camera_looks_along_blade_and_down_by_beta_c() {
+        let robot = skewed_robot();
+        let p = robot.params;
+        let mut rng = Pcg64::seed_from_u64(2);
+        for _ in 0..50 {
+            let q = random_joints(&mut rng);
+            let t_wb2 = robot.base * robot.blade_pose(&q, Blade::Two);
+            let t_wc = robot.camera_pose(&q);
+            let blade_x = t_wb2.rotation * Vector3::x();
+            let blade_y = t_wb2.rotation * Vector3::y();
+            let blade_z = t_wb2.rotation * Vector3::z();
+            let cam_z = t_wc.rotation * Vector3::z();
+            let cam_x = t_wc.rotation * Vector3::x();
+            let cam_y = t_wc.rotation * Vector3::y();
+            // Optical axis: in the blade's x–z plane, below the blade x axis by β_c.
+            assert!(cam_z.dot(&blade_y).abs() < 1e-12);
+            assert!((cam_z.dot(&blade_x) - p.beta_c.cos()).abs() < 1e-12);
+            assert!((cam_z.dot(&blade_z) + p.beta_c.sin()).abs() < 1e-12);
+            // Image x to the blade's right, image y downward.
+            assert!((cam_x + blade_y).norm() < 1e-12);
+            assert!(cam_y.dot(&blade_z) < -0.9);
+            // Camera centre at (−d, 0, h) in the blade frame.
+            let centre_in_blade = t_wb2.inverse() * nalgebra::Point3::from(t_wc.translation.vector);
+            let expected = Vector3::new(-p.cam_d, 0.0, p.cam_h);
+            assert!((centre_in_blade.coords - expected).norm() < 1e-12);
+            // Batched FK agrees with the single one.
+            let batch = robot.camera_poses(&[q]);
+            let (et, er) = pose_error(&batch[0], &t_wc);
+            assert!(et < 1e-12 && er < 1e-12);
+        }
+        // Level blade on the world-aligned default robot: optical axis pitched down by β_c.
+        let robot = WaferRobot::default();
+        let t_wc = robot.camera_pose(&Joints::zeros());
+        let z = t_wc.rotation * Vector3::z();
+        assert!((z.z.atan2(z.x) + robot.params.beta_c).abs() < 1e-12);
+    }
+
+    #[test]
+    fn batched_fk_matches_single_fk_serial_and_parallel() {
+        let robot = skewed_robot();
+        let mut rng = Pcg64::seed_from_u64(3);
+        for n in [0, 1, 17, PARALLEL_BATCH, PARALLEL_BATCH + 1, 1000] {
+            let qs: Vec<Joints> = (0..n).map(|_| random_joints(&mut rng)).collect();
+            let poses = robot.camera_poses(&qs);
+            assert_eq!(poses.len(), n);
+            for (q, t) in qs.iter().zip(&poses) {
+                let (et, er) = pose_error(t, &robot.camera_pose(q));
+                assert!(et < 1e-12 && er < 1e-12, "n = {n}: {et} {er}");
+            }
+        }
+    }
+
+    #[test]
+    fn fk_ik_round_trip_over_random_reachable_poses() {
+        for robot in [WaferRobot::default(), skewed_robot()] {
+            let mut rng = Pcg64::seed_from_u64(4);
+            for blade in [Blade::One, Blade::Two] {
+                for _ in 0..600 {
+                    let q = random_joints(&mut rng);
+                    let other = if blade == Blade::One { q[3] } else { q[2] };
+                    let target = robot.blade_pose(&q, blade);
+                    let sols = robot.inverse_kinematics(&target, blade, other).unwrap();
+                    assert!(!sols.is_empty() && sols.len() <= 2);
+                    assert!(
+                        sols.iter().any(|s| joints_close(s, &q, 1e-8)),
+                        "{blade:?}: {q} not among {sols:?}"
+                    );
+                    for s in &sols {
+                        let (et, er) = pose_error(&robot.blade_pose(s, blade), &target);
+                        assert!(et < 1e-9 && er < 1e-9, "{blade:?} {q}: {et} {er}");
+                        assert!(s.iter().take(4).all(|a| *a > -PI && *a <= PI));
+                        let (other_idx, other_val) = match blade {
+                            Blade::One => (3, s[3]),
+                            Blade::Two => (2, s[2]),
+                        };
+                        assert_eq!(other_val, wrap_angle(q[other_idx]));
+                    }
+                    if sols.len() == 2 {
+                        // Elbow up and elbow down: opposite elbow angles.
+                        assert!((sols[0][1] + sols[1][1]).abs() < 1e-9);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn camera_ik_round_trip() {
+        let robot = skewed_robot();
+        let mut rng = Pcg64::seed_from_u64(5);
+        for _ in 0..500 {
+            let q = random_joints(&mut rng);
+            let t_wc = robot.camera_pose(&q);
+            let sols = robot.inverse_kinematics_camera(&t_wc, q[2]).unwrap();
+            assert!(sols.iter().any(|s| joints_close(s, &q, 1e-8)));
+            for s in &sols {
+                let (et, er) = pose_error(&robot.camera_pose(s), &t_wc);
+                assert!(et < 1e-9 && er < 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn boundary_solutions_collapse_to_one() {
+        let robot = skewed_robot();
+        for (t2, name) in [(0.0, "stretched"), (PI, "folded")] {
+            let q = Joints::new(0.4, t2, -0.7, 0.2, 0.1);
+            let target = robot.blade_pose(&q, Blade::One);
+            let sols = robot.inverse_kinematics(&target, Blade::One, 0.2).unwrap();
+            assert_eq!(sols.len(), 1, "{name}: {sols:?}");
+            let (et, er) = pose_error(&robot.blade_pose(&sols[0], Blade::One), &target);
+            assert!(et < 1e-9 && er < 1e-9, "{name}");
+        }
+        // l1 = l2 with the wrist on the shoulder axis: θ1 is free, one representative.
+        let robot = WaferRobot::default();
+        let q = Joints::new(0.0, PI, 0.9, 0.0, 0.0);
+        let target = robot.blade_pose(&q, Blade::One);
+        let sols = robot.inverse_kinematics(&target, Blade::One, 0.0).unwrap();
+        assert_eq!(sols.len(), 1);
+        let (et, er) = pose_error(&robot.blade_pose(&sols[0], Blade::One), &target);
+        assert!(et < 1e-9 && er < 1e-9);
+    }
+
+    #[test]
+    fn unreachable_poses_are_reported_with_numbers() {
+        let robot = skewed_robot();
+        let p = robot.params;
+        let yaw = 0.3;
+        let rot = yaw_pitch(yaw, p.alpha1);
+        // Blade tip placed so that the wrist is at distance r from the shoulder axis.
+        let at = |r: f64| {
+            let wrist = Vector3::new(r, 0.0, 0.0);
+            let tip = wrist + Vector3::new(p.l3 * yaw.cos(), p.l3 * yaw.sin(), 0.5);
+            Isometry3::from_parts(Translation3::from(tip), rot)
+        };
+        let r_max = p.l1 + p.l2;
+        let r_min = p.l1 - p.l2;
+        for r in [r_max + 1e-6, r_max * 2.0, r_min - 1e-6, 0.0] {
+            match robot.inverse_kinematics(&at(r), Blade::One, 0.0) {
+                Err(GeometryError::Unreachable { reason }) => {
+                    assert!(reason.contains("annulus"), "{reason}");
+                    assert!(reason.contains(&format!("{r_max:.9}")), "{reason}");
+                }
+                other => panic!("r = {r}: expected Unreachable, got {other:?}"),
+            }
+        }
+        // Just inside both limits is reachable.
+        assert!(
+            robot
+                .inverse_kinematics(&at(r_max - 1e-9), Blade::One, 0.0)
+                .is_ok()
+        );
+        assert!(
+            robot
+                .inverse_kinematics(&at(r_min + 1e-9), Blade::One, 0.0)
+                .is_ok()
+        );
+
+        // Wrong roll or pitch: a reachable position with a tilted blade.
+        let good = at(0.5);
+        for (axis, angle) in [(Vector3::x_axis(), 1e-3), (Vector3::y_axis(), -0.02)] {
+            let tilted = Isometry3::from_parts(
+                good.translation,
+                good.rotation * UnitQuaternion::from_axis_angle(&axis, angle),
+            );
+            match robot.inverse_kinematics(&tilted, Blade::One, 0.0) {
+                Err(GeometryError::Unreachable { reason }) => {
+                    assert!(reason.contains("mismatch"), "{reason}");
+                    let deg = format!("{:.6}", angle.abs().to_degrees());
+                    assert!(reason.contains(&deg), "{reason} should contain {deg}");
+                }
+                other => panic!("expected Unreachable, got {other:?}"),
+            }
+        }
+        // Blade 2 has a different pitch: blade-1 orientation is not reachable for blade 2.
+        assert!(matches!(
+            robot.inverse_kinematics(&good, Blade::Two, 0.0),
+            Err(GeometryError::Unreachable { .. })
+        ));
+        // Non-finite input.
+        let mut nan = good;
+        nan.translation.vector.y = f64::NAN;
+        assert!(matches!(
+            robot.inverse_kinematics(&nan, Blade::One, 0.0),
+            Err(GeometryError::NonFinite { .. })
+        ));
+        assert!(
+            robot
+                .inverse_kinematics(&good, Blade::One, f64::INFINITY)
+                .is_err()
+        );
+    }
+
+    /// Blade position and yaw (continuous, unwrapped) for finite differences.
+    fn position_yaw(robot: &WaferRobot, q: &Joints, blade: Blade) -> Vector4<f64> {
+        let t = robot.blade_pose(q, blade).translation.vector;
+        let wrist = if blade == Blade::One { q[2] } else { q[3] };
+        Vector4::new(t.x, t.y, t.z, q[0] + q[1] + wrist)
+    }
+
+    #[test]
+    fn jacobian_matches_central_finite_differences() {
+        let robot = skewed_robot();
+        let mut rng = Pcg64::seed_from_u64(6);
+        let eps = 1e-6;
+        for _ in 0..100 {
+            let q = random_joints(&mut rng);
+            for blade in [Blade::One, Blade::Two] {
+                let j = robot.jacobian(&q, blade);
+                for col in 0..5 {
+                    let mut qp = q;
+                    let mut qm = q;
+                    qp[col] += eps;
+                    qm[col] -= eps;
+                    let fd = (position_yaw(&robot, &qp, blade) - position_yaw(&robot, &qm, blade))
+                        / (2.0 * eps);
+                    let err = (fd - j.column(col)).abs().max();
+                    assert!(err < 1e-8, "{blade:?} column {col}: {err}");
+                }
+                // The yaw row must also agree with the rotation of blade_pose itself.
+                let mut qp = q;
+                qp[0] += eps;
+                let d = robot.blade_pose(&q, blade).inverse() * robot.blade_pose(&qp, blade);
+                let yaw_axis_in_blade =
+                    robot.blade_pose(&q, blade).rotation.inverse() * Vector3::z();
+                let w = d.rotation.scaled_axis() / eps;
+                assert!((w - yaw_axis_in_blade * j[(3, 0)]).norm() < 1e-6);
+            }
+        }
+    }
+
+    #[test]
+    fn acceleration_matches_finite_differences_of_velocity_along_trajectory() {
+        let robot = skewed_robot();
+        let mut rng = Pcg64::seed_from_u64(7);
+        for _ in 0..20 {
+            let c = random_joints(&mut rng);
+            let amp = Joints::from_fn(|_, _| rng.random_range(-1.5..1.5));
+            let freq = Joints::from_fn(|_, _| rng.random_range(0.3..3.0));
+            let phase = Joints::from_fn(|_, _| rng.random_range(-PI..PI));
+            let q_at =
+                |t: f64| Joints::from_fn(|i, _| c[i] + amp[i] * (freq[i] * t + phase[i]).sin());
+            let qd_at =
+                |t: f64| Joints::from_fn(|i, _| amp[i] * freq[i] * (freq[i] * t + phase[i]).cos());
+            let qdd_at = |t: f64| {
+                Joints::from_fn(|i, _| -amp[i] * freq[i] * freq[i] * (freq[i] * t + phase[i]).sin())
+            };
+            let t0 = rng.random_range(0.0..5.0);
+            let dt = 1e-5;
+            for blade in [Blade::One, Blade::Two] {
+                // The velocity itself is a finite difference of the pose along the trajectory.
+                let vel_fd = (position_yaw(&robot, &q_at(t0 + dt), blade)
+                    - position_yaw(&robot, &q_at(t0 - dt), blade))
+                    / (2.0 * dt);
+                let vel = robot.jacobian(&q_at(t0), blade) * qd_at(t0);
+                assert!((vel_fd - vel).abs().max() < 1e-7, "{blade:?} velocity");
+                let v = |t: f64| robot.jacobian(&q_at(t), blade) * qd_at(t);
+                let acc_fd = (v(t0 + dt) - v(t0 - dt)) / (2.0 * dt);
+                let acc = robot.acceleration(&q_at(t0), &qd_at(t0), &qdd_at(t0), blade);
+                let err = (acc_fd - acc).abs().max();
+                assert!(
+                    err < 1e-6 * (1.0 + acc.abs().max()),
+                    "{blade:?}: {acc_fd} vs {acc}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn camera_jacobian_matches_finite_differences_with_se3_minus() {
+        use crate::lie::{se3_minus, se3_plus};
+        let robot = skewed_robot();
+        let mut rng = Pcg64::seed_from_u64(8);
+        let eps = 1e-6;
+        for _ in 0..100 {
+            let q = random_joints(&mut rng);
+            let t_wc = robot.camera_pose(&q);
+            let j = robot.camera_jacobian(&q);
+            for col in 0..5 {
+                let mut qp = q;
+                let mut qm = q;
+                qp[col] += eps;
+                qm[col] -= eps;
+                let fd = (se3_minus(&robot.camera_pose(&qp), &t_wc)
+                    - se3_minus(&robot.camera_pose(&qm), &t_wc))
+                    / (2.0 * eps);
+                let err = (fd - j.column(col)).abs().max();
+                assert!(err < 1e-8, "column {col}: {err}\n{fd}\n{}", j.column(col));
+            }
+            // First-order prediction of a small joint step, T(q + δq) ≈ T(q) ⊕ J δq.
+            let dq = Joints::from_fn(|_, _| rng.random_range(-1e-4..1e-4));
+            let predicted = se3_plus(&t_wc, &(j * dq));
+            let (et, er) = pose_error(&predicted, &robot.camera_pose(&(q + dq)));
+            assert!(et < 1e-7 && er < 1e-7, "{et} {er}");
+            // Blade 1 (θ3) does not move the camera.
+            assert!(j.column(2).norm() == 0.0);
+        }
+    }
+
+    #[test]
+    fn joint_offsets_follow_the_encoder_convention() {
+        let robot = skewed_robot();
+        let q_true = Joints::new(0.2, -1.0, 0.5, 2.0, 0.12);
+        let offsets = Joints::new(0.01, -0.02, 0.003, 0.0, -0.004);
+        let q_enc = encoders_from_joints(&q_true, &offsets);
+        // q_enc = q_true + δ, component by component.
+        for k in 0..5 {
+            assert_eq!(q_enc[k], q_true[k] + offsets[k]);
+        }
+        let back = joints_from_encoders(&q_enc, &offsets);
+        assert!((back - q_true).norm() < 1e-15);
+        // Correcting the readings restores the true camera pose; ignoring the offsets does not.
+        let (et, er) = pose_error(&robot.camera_pose(&back), &robot.camera_pose(&q_true));
+        assert!(et < 1e-12 && er < 1e-12);
+        let (et, _) = pose_error(&robot.camera_pose(&q_enc), &robot.camera_pose(&q_true));
+        assert!(et > 1e-3);
+    }
+
+    #[test]
+    fn wrap_angle_range() {
+        for a in [-7.0, -PI, -3.0, 0.0, 3.0, PI, 7.0, 100.0] {
+            let w = wrap_angle(a);
+            assert!(w > -PI && w <= PI, "{a} -> {w}");
+            assert!(((a - w) / TAU - ((a - w) / TAU).round()).abs() < 1e-12);
+        }
+        assert_eq!(wrap_angle(-PI), PI);
+    }
 }

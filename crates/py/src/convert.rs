@@ -22,7 +22,13 @@ impl<'py> Array<'py> {
         let inner = obj.extract::<PyReadonlyArrayDyn<'py, f64>>().map_err(|_| {
             let what = match obj.getattr("dtype") {
                 Ok(dt) => format!("an array of dtype {dt}"),
-                Err(_) => format!("a {}", obj.get_type().name().map(|n| n.to_string()).unwrap_or_default()),
+                Err(_) => format!(
+                    "a {}",
+                    obj.get_type()
+                        .name()
+                        .map(|n| n.to_string())
+                        .unwrap_or_default()
+                ),
             };
             errors::invalid_input(format!("{name} must be a float64 NumPy array, got {what}"))
         })?;
@@ -41,7 +47,16 @@ impl<'py> Array<'py> {
 
     /// Fails unless every element is finite.
     pub fn finite(self) -> PyResult<Self> {
-        if let Some((idx, v)) = self.view().indexed_iter().find(|(_, v)| !v.is_finite()) {
+        let view = self.view();
+        // Fast path over contiguous memory; the (slower) indexed walk only runs to report.
+        let all_finite = match view.as_slice() {
+            Some(s) => s.iter().all(|v| v.is_finite()),
+            None => view.iter().all(|v| v.is_finite()),
+        };
+        if all_finite {
+            return Ok(self);
+        }
+        if let Some((idx, v)) = view.indexed_iter().find(|(_, v)| !v.is_finite()) {
             return Err(errors::invalid_input(format!(
                 "{} contains a non-finite value {} at index {:?}",
                 self.name,
@@ -76,10 +91,10 @@ impl<'py> Array<'py> {
     pub fn exact(&self, shape: &[usize]) -> PyResult<Vec<f64>> {
         if self.shape() != shape {
             return Err(errors::invalid_input(format!(
-                "{} must have shape {:?}, got {:?}",
+                "{} must have shape {}, got {}",
                 self.name,
-                shape,
-                self.shape()
+                shape_str(shape),
+                shape_str(self.shape())
             )));
         }
         Ok(self.view().iter().copied().collect())
@@ -98,6 +113,169 @@ impl<'py> Array<'py> {
     }
 }
 
+impl Array<'_> {
+    /// Requires shape `(..., *item)` (any number of leading dimensions, including none) and
+    /// returns the elements in row-major order with the leading shape, so batched results can
+    /// be reshaped to `(..., *out_item)`. `expected` spells the shape for the error message,
+    /// e.g. `"(..., 4, 4)"`.
+    pub fn batch(&self, item: &[usize], expected: &str) -> PyResult<(Vec<f64>, Vec<usize>)> {
+        let shape = self.shape();
+        if shape.len() < item.len() || shape[shape.len() - item.len()..] != *item {
+            return Err(errors::invalid_input(format!(
+                "{} must have shape {}, got {}",
+                self.name,
+                expected,
+                shape_str(shape)
+            )));
+        }
+        let lead = shape[..shape.len() - item.len()].to_vec();
+        let view = self.view();
+        let data = match view.as_slice() {
+            // C-contiguous: one copy.
+            Some(s) => s.to_vec(),
+            // `iter` walks the logical (row-major) order whatever the strides.
+            None => view.iter().copied().collect(),
+        };
+        Ok((data, lead))
+    }
+
+    /// The argument name used in error messages.
+    pub fn name(&self) -> &'static str {
+        self.name
+    }
+}
+
+/// A shape as Python prints it: `(3,)`, `(2, 2)`, `()`.
+pub fn shape_str(shape: &[usize]) -> String {
+    match shape {
+        [n] => format!("({n},)"),
+        _ => format!(
+            "({})",
+            shape
+                .iter()
+                .map(|n| n.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+}
+
+/// Reads a finite batch of shape `(..., *item)`: the row-major elements and the leading shape.
+pub fn finite_batch(
+    obj: &Bound<'_, PyAny>,
+    name: &'static str,
+    item: &[usize],
+    expected: &str,
+) -> PyResult<(Vec<f64>, Vec<usize>)> {
+    finite_array(obj, name)?.batch(item, expected)
+}
+
+/// Reads a batch `(..., 4, 4)` of rigid transforms (each checked by [`matrix_to_isometry`]).
+pub fn isometries(
+    obj: &Bound<'_, PyAny>,
+    name: &'static str,
+) -> PyResult<(Vec<nalgebra::Isometry3<f64>>, Vec<usize>)> {
+    let (data, lead) = finite_batch(obj, name, &[4, 4], "(..., 4, 4)")?;
+    let poses = data
+        .chunks_exact(16)
+        .enumerate()
+        .map(|(i, m)| {
+            let mat = nalgebra::Matrix4::from_row_slice(m);
+            matrix_to_isometry(&mat, name).map_err(|e| with_index(e, name, i, &lead))
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((poses, lead))
+}
+
+/// Reads a batch `(..., 3, 3)` of rotation matrices (each checked by [`matrix_to_rotation`]).
+pub fn rotations(
+    obj: &Bound<'_, PyAny>,
+    name: &'static str,
+) -> PyResult<(Vec<nalgebra::Rotation3<f64>>, Vec<usize>)> {
+    let (data, lead) = finite_batch(obj, name, &[3, 3], "(..., 3, 3)")?;
+    let rots = data
+        .chunks_exact(9)
+        .enumerate()
+        .map(|(i, m)| {
+            let mat = nalgebra::Matrix3::from_row_slice(m);
+            matrix_to_rotation(&mat, name).map_err(|e| with_index(e, name, i, &lead))
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((rots, lead))
+}
+
+/// Prefixes an error about item `flat` of a batch with its multi-index (when batched).
+fn with_index(err: PyErr, name: &str, flat: usize, lead: &[usize]) -> PyErr {
+    if lead.is_empty() {
+        return err;
+    }
+    let mut idx = vec![0; lead.len()];
+    let mut rest = flat;
+    for (k, n) in lead.iter().enumerate().rev() {
+        idx[k] = rest % n;
+        rest /= n;
+    }
+    let msg = Python::attach(|py| err.value(py).to_string());
+    errors::invalid_input(format!(
+        "{name}[{}]: {msg}",
+        idx.iter()
+            .map(|i| i.to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    ))
+}
+
+/// Converts a 3×3 matrix to a rotation, rejecting matrices that are not orthonormal with
+/// determinant +1 (to 1e-6).
+pub fn matrix_to_rotation(
+    r: &nalgebra::Matrix3<f64>,
+    name: &str,
+) -> PyResult<nalgebra::Rotation3<f64>> {
+    let orth = (r.transpose() * r - nalgebra::Matrix3::identity()).norm();
+    if orth > 1e-6 || r.determinant() < 0.0 {
+        return Err(errors::invalid_input(format!(
+            "{name} is not a rotation matrix (|RᵀR − I| = {orth:.3e}, det R = {:.6})",
+            r.determinant()
+        )));
+    }
+    // Re-orthonormalise so tiny input errors do not leak into the core.
+    Ok(nalgebra::Rotation3::from_matrix(r))
+}
+
+/// A new float64 NumPy array of `shape` holding `data` in row-major order.
+pub fn to_numpy<'py>(
+    py: Python<'py>,
+    data: Vec<f64>,
+    shape: &[usize],
+) -> PyResult<Bound<'py, numpy::PyArrayDyn<f64>>> {
+    let arr = numpy::ndarray::ArrayD::from_shape_vec(numpy::ndarray::IxDyn(shape), data)
+        .map_err(|e| errors::internal(format!("building an array of shape {shape:?}: {e}")))?;
+    Ok(numpy::IntoPyArray::into_pyarray(arr, py))
+}
+
+/// `lead` followed by `item`: the shape of a batched result.
+pub fn batched_shape(lead: &[usize], item: &[usize]) -> Vec<usize> {
+    lead.iter().chain(item).copied().collect()
+}
+
+/// Batches with more elements than this release the GIL (see [`run_batched`]).
+pub const DETACH_THRESHOLD: usize = 10_000;
+
+/// Runs a batched computation over `elements` scalars: without the GIL (through [`detached`])
+/// when the batch is large, holding it (through [`guarded`]) when it is too small for the
+/// release to pay off. Either way a panic becomes `InternalError`.
+pub fn run_batched<T, F>(py: Python<'_>, elements: usize, f: F) -> PyResult<T>
+where
+    T: Send,
+    F: FnOnce() -> PyResult<T> + Send,
+{
+    if elements > DETACH_THRESHOLD {
+        detached(py, f)
+    } else {
+        guarded(f)
+    }
+}
+
 /// Extracts a finite float64 array in one call.
 pub fn finite_array<'py>(obj: &Bound<'py, PyAny>, name: &'static str) -> PyResult<Array<'py>> {
     Array::new(obj, name)?.finite()
@@ -112,10 +290,14 @@ pub fn isometry(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<nalgebra
 }
 
 /// Converts a 4×4 homogeneous matrix to an isometry, rejecting non-rigid matrices.
-pub fn matrix_to_isometry(m: &nalgebra::Matrix4<f64>, name: &str) -> PyResult<nalgebra::Isometry3<f64>> {
+pub fn matrix_to_isometry(
+    m: &nalgebra::Matrix4<f64>,
+    name: &str,
+) -> PyResult<nalgebra::Isometry3<f64>> {
     let r = m.fixed_view::<3, 3>(0, 0).into_owned();
     let orth = (r.transpose() * r - nalgebra::Matrix3::identity()).norm();
-    let last = (m[(3, 0)].abs() + m[(3, 1)].abs() + m[(3, 2)].abs() + (m[(3, 3)] - 1.0).abs()) > 1e-9;
+    let last =
+        (m[(3, 0)].abs() + m[(3, 1)].abs() + m[(3, 2)].abs() + (m[(3, 3)] - 1.0).abs()) > 1e-9;
     if orth > 1e-6 || r.determinant() < 0.0 || last {
         return Err(errors::invalid_input(format!(
             "{name} is not a rigid transform (|RᵀR − I| = {orth:.3e}, det R = {:.6}, last row {:?})",
@@ -125,7 +307,10 @@ pub fn matrix_to_isometry(m: &nalgebra::Matrix4<f64>, name: &str) -> PyResult<na
     }
     let rot = nalgebra::Rotation3::from_matrix(&r);
     let t = nalgebra::Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]);
-    Ok(nalgebra::Isometry3::from_parts(t, nalgebra::UnitQuaternion::from_rotation_matrix(&rot)))
+    Ok(nalgebra::Isometry3::from_parts(
+        t,
+        nalgebra::UnitQuaternion::from_rotation_matrix(&rot),
+    ))
 }
 
 /// Row-major 4×4 of an isometry.

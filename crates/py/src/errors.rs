@@ -18,11 +18,31 @@ use pyo3::types::{PyDict, PyTuple};
 
 /// The exception classes, by name, in creation order: (name, built-in second base, doc).
 const CLASSES: &[(&str, Option<&str>, &str)] = &[
-    ("InvalidInputError", Some("ValueError"), "An input has the wrong shape, dtype, a NaN/inf, or an invalid value."),
-    ("DegenerateGeometryError", Some("ValueError"), "The data are geometrically degenerate (collinear points, a degenerate conic, ...)."),
-    ("UnreachablePoseError", Some("ValueError"), "A requested robot pose cannot be reached."),
-    ("ConvergenceError", Some("RuntimeError"), "An iterative computation did not converge."),
-    ("InternalError", Some("RuntimeError"), "A bug inside autoteach (a Rust panic caught at the Python boundary)."),
+    (
+        "InvalidInputError",
+        Some("ValueError"),
+        "An input has the wrong shape, dtype, a NaN/inf, or an invalid value.",
+    ),
+    (
+        "DegenerateGeometryError",
+        Some("ValueError"),
+        "The data are geometrically degenerate (collinear points, a degenerate conic, ...).",
+    ),
+    (
+        "UnreachablePoseError",
+        Some("ValueError"),
+        "A requested robot pose cannot be reached.",
+    ),
+    (
+        "ConvergenceError",
+        Some("RuntimeError"),
+        "An iterative computation did not converge.",
+    ),
+    (
+        "InternalError",
+        Some("RuntimeError"),
+        "A bug inside autoteach (a Rust panic caught at the Python boundary).",
+    ),
 ];
 
 /// Creates `AutoteachError` and its subclasses and adds them to the module.
@@ -77,14 +97,62 @@ pub fn internal(message: impl Into<String>) -> PyErr {
 
 /// Maps a geometry error to its Python exception.
 pub fn geometry(err: GeometryError) -> PyErr {
-    let class = match &err {
+    new_err(geometry_class(&err), err.to_string())
+}
+
+/// The name of the exception class a geometry error maps to (a batch error takes the class of
+/// the failing element's error).
+fn geometry_class(err: &GeometryError) -> &'static str {
+    match err {
         GeometryError::NonFinite { .. }
         | GeometryError::WrongLength { .. }
         | GeometryError::InvalidParameter { .. }
-        | GeometryError::NotProjectable { .. } => "InvalidInputError",
+        | GeometryError::NotProjectable { .. }
+        | GeometryError::NotUnprojectable { .. }
+        | GeometryError::UnknownModel { .. }
+        | GeometryError::DegenerateQuaternion { .. } => "InvalidInputError",
         GeometryError::Unreachable { .. } => "UnreachablePoseError",
         GeometryError::DegenerateConic { .. } => "DegenerateGeometryError",
         GeometryError::NoConvergence { .. } => "ConvergenceError",
-    };
-    new_err(class, err.to_string())
+        GeometryError::AtIndex { source, .. } => geometry_class(source),
+    }
+}
+
+/// Maps an estimation error to its Python exception: bad inputs (sizes, parameters, NaN/inf
+/// inputs, invalid P/Q/R, a failing model) → `InvalidInputError`; a covariance that lost
+/// positive definiteness or symmetry, or NaN produced during filtering (the recursion broke
+/// down at the named step) → `ConvergenceError`.
+pub fn estimate(err: autoteach_estimate::EstimateError) -> PyErr {
+    use autoteach_estimate::EstimateError as E;
+    match err {
+        E::Geometry(e) => geometry(e),
+        E::DimensionMismatch { .. }
+        | E::InvalidParameter { .. }
+        | E::NonFiniteInput { .. }
+        | E::InvalidCovariance { .. }
+        | E::Model { .. } => invalid_input(err.to_string()),
+        // `EstimateError` is `#[non_exhaustive]`: variants added later default to a numerical
+        // failure until they get their own arm.
+        E::NotPositiveDefinite { .. } | E::NotSymmetric { .. } | E::NonFinite { .. } => {
+            new_err("ConvergenceError", err.to_string())
+        }
+        _ => new_err("ConvergenceError", err.to_string()),
+    }
+}
+
+/// Maps a detection error to its Python exception: bad inputs (too few points, NaN/inf, invalid
+/// costs, lengths or options, an infeasible assignment) → `InvalidInputError`; degenerate data
+/// (collinear or coincident points, a hyperbola, an undetermined fit) → `DegenerateGeometryError`.
+pub fn detect(err: autoteach_detect::DetectError) -> PyErr {
+    use autoteach_detect::DetectError as E;
+    match err {
+        E::Geometry(e) => geometry(e),
+        E::TooFewPoints { .. }
+        | E::NonFinite { .. }
+        | E::InvalidParameter { .. }
+        | E::InvalidCost { .. }
+        | E::WrongLength { .. }
+        | E::Infeasible { .. } => invalid_input(err.to_string()),
+        E::Degenerate { .. } | E::RankDeficient { .. } => new_err("DegenerateGeometryError", err.to_string()),
+    }
 }

@@ -1,8 +1,1052 @@
-//! Bindings of `autoteach_estimate` (being written).
+//! Bindings of `autoteach_estimate::ukf`: the unscented Kalman filter.
+//!
+//! * `UkfLinearModel(F, H, B=None)` and `UkfConstantVelocityModel(dim)`: the built-in models
+//!   (the fast path: a batch runs entirely in Rust with the GIL released).
+//! * `UkfFilter`: one standard or square-root filter, built with `UkfFilter.builtin(model,
+//!   …)` or with Python callbacks by `UkfFilter.callbacks(dim_x, dim_z, fx, hx, …)`.
+//!   Callbacks are called from Rust holding the GIL; an exception raised by a callback is
+//!   re-raised unchanged.
+//! * `merwe_sigma_points(x, P, alpha, beta, kappa)` and `merwe_weights(n, alpha, beta, kappa)`.
+//!
+//! The friendly filterpy-compatible classes live in `autoteach.estimate`.
 
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use autoteach_estimate::EstimateError;
+use autoteach_estimate::ukf::{
+    BatchInputs, ConstantVelocityModel, CovariancePolicy, LinearModel, MerweScaledSigmaPoints,
+    NoiseForm, SigmaPointFilter, SquareRootUkf, UkfModel, UnscentedKalmanFilter,
+};
+use nalgebra::{DMatrix, DVector, DVectorView};
+use numpy::{PyArray1, PyArrayDyn, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+
+use crate::convert::{self, to_numpy};
+use crate::errors;
 
 /// Adds the estimate functions and classes to the module.
-pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyLinearModel>()?;
+    m.add_class::<PyCvModel>()?;
+    m.add_class::<PyUkf>()?;
+    m.add_function(wrap_pyfunction!(merwe_sigma_points, m)?)?;
+    m.add_function(wrap_pyfunction!(merwe_weights, m)?)?;
     Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Conversions
+// ---------------------------------------------------------------------------------------------
+
+/// A finite float64 2-D array as a matrix.
+fn matrix(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<DMatrix<f64>> {
+    let a = convert::finite_array(obj, name)?;
+    let shape = a.shape().to_vec();
+    if shape.len() != 2 {
+        return Err(errors::invalid_input(format!(
+            "{name} must be two-dimensional, got shape {}",
+            convert::shape_str(&shape)
+        )));
+    }
+    let data = a.exact(&shape)?;
+    Ok(DMatrix::from_row_slice(shape[0], shape[1], &data))
+}
+
+/// A finite float64 1-D array as a vector.
+fn vector(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<DVector<f64>> {
+    Ok(DVector::from_vec(
+        convert::finite_array(obj, name)?.vector()?,
+    ))
+}
+
+/// A vector as a 1-D NumPy array.
+fn vec_out<'py>(py: Python<'py>, v: &DVector<f64>) -> Bound<'py, PyArray1<f64>> {
+    PyArray1::from_slice(py, v.as_slice())
+}
+
+/// A matrix as a 2-D NumPy array.
+fn mat_out<'py>(py: Python<'py>, m: &DMatrix<f64>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    to_numpy(
+        py,
+        m.transpose().as_slice().to_vec(),
+        &[m.nrows(), m.ncols()],
+    )
+}
+
+fn sigma_points(alpha: f64, beta: f64, kappa: f64, n: usize) -> PyResult<MerweScaledSigmaPoints> {
+    MerweScaledSigmaPoints::new(n, alpha, beta, kappa).map_err(errors::estimate)
+}
+
+/// Sigma points `(2n+1, n)` of (x, P) (van der Merwe's scaled points, in filterpy's order).
+#[pyfunction]
+fn merwe_sigma_points<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    p: &Bound<'py, PyAny>,
+    alpha: f64,
+    beta: f64,
+    kappa: f64,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let x = vector(x, "x")?;
+    let p = matrix(p, "P")?;
+    let pts = sigma_points(alpha, beta, kappa, x.len())?;
+    let s = pts.sigma_points(&x, &p).map_err(errors::estimate)?;
+    // Columns are the points: the column-major data is the row-major (2n+1, n) array.
+    to_numpy(py, s.as_slice().to_vec(), &[s.ncols(), s.nrows()])
+}
+
+/// The weights `(Wm, Wc)` of van der Merwe's scaled sigma points.
+#[pyfunction]
+fn merwe_weights<'py>(
+    py: Python<'py>,
+    n: usize,
+    alpha: f64,
+    beta: f64,
+    kappa: f64,
+) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+    let pts = sigma_points(alpha, beta, kappa, n)?;
+    Ok((vec_out(py, pts.wm()), vec_out(py, pts.wc())))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Built-in models
+// ---------------------------------------------------------------------------------------------
+
+/// The linear model `x' = F x + B u`, `z = H x` (compiled; see `autoteach.estimate`).
+#[pyclass(name = "UkfLinearModel", module = "autoteach._core", frozen)]
+struct PyLinearModel {
+    inner: LinearModel,
+}
+
+#[pymethods]
+impl PyLinearModel {
+    #[new]
+    #[pyo3(signature = (f, h, b=None))]
+    fn new(f: &Bound<'_, PyAny>, h: &Bound<'_, PyAny>, b: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+        let f = matrix(f, "F")?;
+        let h = matrix(h, "H")?;
+        let b = b.map(|b| matrix(b, "B")).transpose()?;
+        Ok(Self {
+            inner: LinearModel::new(f, h, b).map_err(errors::estimate)?,
+        })
+    }
+
+    /// State dimension.
+    #[getter]
+    fn dim_x(&self) -> usize {
+        self.inner.dim_x()
+    }
+
+    /// Measurement dimension.
+    #[getter]
+    fn dim_z(&self) -> usize {
+        self.inner.dim_z()
+    }
+
+    /// Input dimension (0 without B).
+    #[getter]
+    fn dim_u(&self) -> usize {
+        self.inner.dim_u()
+    }
+}
+
+/// The constant-velocity model in `dim` dimensions (compiled; see `autoteach.estimate`).
+#[pyclass(name = "UkfConstantVelocityModel", module = "autoteach._core", frozen)]
+struct PyCvModel {
+    inner: ConstantVelocityModel,
+}
+
+#[pymethods]
+impl PyCvModel {
+    #[new]
+    fn new(dim: usize) -> PyResult<Self> {
+        Ok(Self {
+            inner: ConstantVelocityModel::new(dim).map_err(errors::estimate)?,
+        })
+    }
+
+    /// State dimension (2·dim).
+    #[getter]
+    fn dim_x(&self) -> usize {
+        self.inner.dim_x()
+    }
+
+    /// Measurement dimension (dim).
+    #[getter]
+    fn dim_z(&self) -> usize {
+        self.inner.dim_z()
+    }
+
+    /// Input dimension (dim: an acceleration).
+    #[getter]
+    fn dim_u(&self) -> usize {
+        self.inner.dim_u()
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Python-callback model
+// ---------------------------------------------------------------------------------------------
+
+/// Per-call state shared between the filter object and its callback model.
+#[derive(Default)]
+struct Shared {
+    fx_kwargs: Mutex<Option<Py<PyDict>>>,
+    hx_kwargs: Mutex<Option<Py<PyDict>>>,
+    fx_override: Mutex<Option<Py<PyAny>>>,
+    hx_override: Mutex<Option<Py<PyAny>>>,
+    /// The exception raised by the last failing callback (re-raised by the binding).
+    error: Mutex<Option<PyErr>>,
+}
+
+/// Locks a mutex, ignoring poisoning (the data are plain options).
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Optional callbacks of the filterpy interface.
+#[derive(Default)]
+struct Hooks {
+    x_mean: Option<Py<PyAny>>,
+    z_mean: Option<Py<PyAny>>,
+    residual_x: Option<Py<PyAny>>,
+    residual_z: Option<Py<PyAny>>,
+    state_add: Option<Py<PyAny>>,
+    subtract: Option<Py<PyAny>>,
+    sqrt: Option<Py<PyAny>>,
+}
+
+/// A [`UkfModel`] whose functions are Python callables, called as filterpy calls them:
+/// `fx(x, dt, **fx_args)`, `hx(x, **hx_args)` (augmented form: `fx(x, dt, w, **fx_args)`,
+/// `hx(x, v, **hx_args)`), `x_mean_fn(sigmas, Wm)` with `sigmas` of shape `(2n+1, n)`,
+/// `residual_x(a, b)`, `state_add(x, dx)`, `subtract(x, -offset)` for the sigma points, and
+/// `sqrt_method(M)` returning a matrix whose ROWS are the offsets.
+struct PyModel {
+    dim_x: usize,
+    dim_z: usize,
+    dim_w: usize,
+    dim_v: usize,
+    fx: Py<PyAny>,
+    hx: Py<PyAny>,
+    hooks: Hooks,
+    shared: Arc<Shared>,
+}
+
+impl PyModel {
+    /// Records a Python error and returns the core error that stops the filter.
+    fn fail(&self, function: &'static str, err: PyErr) -> EstimateError {
+        let message = err.to_string();
+        *lock(&self.shared.error) = Some(err);
+        EstimateError::Model {
+            function,
+            step: 0,
+            message,
+        }
+    }
+
+    /// Calls `f(*args, **kwargs)` and writes its result (any array-like of `out.len()`
+    /// numbers) into `out`.
+    fn call(
+        &self,
+        function: &'static str,
+        f: &Py<PyAny>,
+        args: impl FnOnce(Python<'_>) -> PyResult<Bound<'_, PyTuple>>,
+        kwargs: Option<&Py<PyDict>>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        Python::attach(|py| {
+            let result = args(py)
+                .and_then(|a| f.bind(py).call(a, kwargs.map(|k| k.bind(py))))
+                .and_then(|r| read_values(py, &r, out, function));
+            result.map_err(|e| self.fail(function, e))
+        })
+    }
+}
+
+/// Writes the values of an array-like `r` (any shape with `out.len()` elements) into `out`.
+fn read_values(
+    py: Python<'_>,
+    r: &Bound<'_, PyAny>,
+    out: &mut DVector<f64>,
+    function: &str,
+) -> PyResult<()> {
+    let arr = match r.extract::<PyReadonlyArrayDyn<'_, f64>>() {
+        Ok(a) => a,
+        Err(_) => py
+            .import("numpy")?
+            .call_method1("asarray", (r, "float64"))?
+            .extract::<PyReadonlyArrayDyn<'_, f64>>()?,
+    };
+    if arr.len() != out.len() {
+        return Err(errors::invalid_input(format!(
+            "{function} returned an array of shape {}, expected {} values",
+            convert::shape_str(arr.shape()),
+            out.len()
+        )));
+    }
+    for (o, v) in out.iter_mut().zip(arr.as_array().iter()) {
+        *o = *v;
+    }
+    Ok(())
+}
+
+fn view_out<'py>(py: Python<'py>, v: DVectorView<'_, f64>) -> Bound<'py, PyArray1<f64>> {
+    PyArray1::from_iter(py, v.iter().copied())
+}
+
+/// `sigmas` (columns are points) as the `(2n+1, n)` array filterpy passes to `x_mean_fn`.
+fn sigmas_out<'py>(py: Python<'py>, s: &DMatrix<f64>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    to_numpy(py, s.as_slice().to_vec(), &[s.ncols(), s.nrows()])
+}
+
+impl UkfModel for PyModel {
+    fn dim_x(&self) -> usize {
+        self.dim_x
+    }
+
+    fn dim_z(&self) -> usize {
+        self.dim_z
+    }
+
+    fn dim_w(&self) -> usize {
+        self.dim_w
+    }
+
+    fn dim_v(&self) -> usize {
+        self.dim_v
+    }
+
+    fn fx(
+        &self,
+        x: DVectorView<'_, f64>,
+        dt: f64,
+        _u: Option<&DVector<f64>>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        let over = lock(&self.shared.fx_override).as_ref().map(|f| Python::attach(|py| f.clone_ref(py)));
+        let kwargs = lock(&self.shared.fx_kwargs).as_ref().map(|k| Python::attach(|py| k.clone_ref(py)));
+        let f = over.as_ref().unwrap_or(&self.fx);
+        self.call(
+            "fx",
+            f,
+            |py| PyTuple::new(py, [view_out(py, x).into_any(), dt.into_pyobject(py)?.into_any()]),
+            kwargs.as_ref(),
+            out,
+        )
+    }
+
+    fn hx(&self, x: DVectorView<'_, f64>, out: &mut DVector<f64>) -> autoteach_estimate::Result<()> {
+        let over = lock(&self.shared.hx_override).as_ref().map(|f| Python::attach(|py| f.clone_ref(py)));
+        let kwargs = lock(&self.shared.hx_kwargs).as_ref().map(|k| Python::attach(|py| k.clone_ref(py)));
+        let f = over.as_ref().unwrap_or(&self.hx);
+        self.call(
+            "hx",
+            f,
+            |py| PyTuple::new(py, [view_out(py, x)]),
+            kwargs.as_ref(),
+            out,
+        )
+    }
+
+    fn fx_noise(
+        &self,
+        x: DVectorView<'_, f64>,
+        w: DVectorView<'_, f64>,
+        dt: f64,
+        _u: Option<&DVector<f64>>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        let over = lock(&self.shared.fx_override).as_ref().map(|f| Python::attach(|py| f.clone_ref(py)));
+        let kwargs = lock(&self.shared.fx_kwargs).as_ref().map(|k| Python::attach(|py| k.clone_ref(py)));
+        let f = over.as_ref().unwrap_or(&self.fx);
+        self.call(
+            "fx",
+            f,
+            |py| {
+                PyTuple::new(
+                    py,
+                    [
+                        view_out(py, x).into_any(),
+                        dt.into_pyobject(py)?.into_any(),
+                        view_out(py, w).into_any(),
+                    ],
+                )
+            },
+            kwargs.as_ref(),
+            out,
+        )
+    }
+
+    fn hx_noise(
+        &self,
+        x: DVectorView<'_, f64>,
+        v: DVectorView<'_, f64>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        let over = lock(&self.shared.hx_override).as_ref().map(|f| Python::attach(|py| f.clone_ref(py)));
+        let kwargs = lock(&self.shared.hx_kwargs).as_ref().map(|k| Python::attach(|py| k.clone_ref(py)));
+        let f = over.as_ref().unwrap_or(&self.hx);
+        self.call(
+            "hx",
+            f,
+            |py| PyTuple::new(py, [view_out(py, x), view_out(py, v)]),
+            kwargs.as_ref(),
+            out,
+        )
+    }
+
+    fn x_mean(
+        &self,
+        sigmas: &DMatrix<f64>,
+        wm: &DVector<f64>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        match &self.hooks.x_mean {
+            None => {
+                out.gemv(1.0, sigmas, wm, 0.0);
+                Ok(())
+            }
+            Some(f) => self.call(
+                "x_mean_fn",
+                f,
+                |py| PyTuple::new(py, [sigmas_out(py, sigmas)?.into_any(), vec_out(py, wm).into_any()]),
+                None,
+                out,
+            ),
+        }
+    }
+
+    fn z_mean(
+        &self,
+        sigmas: &DMatrix<f64>,
+        wm: &DVector<f64>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        match &self.hooks.z_mean {
+            None => {
+                out.gemv(1.0, sigmas, wm, 0.0);
+                Ok(())
+            }
+            Some(f) => self.call(
+                "z_mean_fn",
+                f,
+                |py| PyTuple::new(py, [sigmas_out(py, sigmas)?.into_any(), vec_out(py, wm).into_any()]),
+                None,
+                out,
+            ),
+        }
+    }
+
+    fn x_residual(
+        &self,
+        a: DVectorView<'_, f64>,
+        b: DVectorView<'_, f64>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        match &self.hooks.residual_x {
+            None => {
+                out.copy_from(&a);
+                *out -= b;
+                Ok(())
+            }
+            Some(f) => self.call(
+                "residual_x",
+                f,
+                |py| PyTuple::new(py, [view_out(py, a), view_out(py, b)]),
+                None,
+                out,
+            ),
+        }
+    }
+
+    fn z_residual(
+        &self,
+        a: DVectorView<'_, f64>,
+        b: DVectorView<'_, f64>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        match &self.hooks.residual_z {
+            None => {
+                out.copy_from(&a);
+                *out -= b;
+                Ok(())
+            }
+            Some(f) => self.call(
+                "residual_z",
+                f,
+                |py| PyTuple::new(py, [view_out(py, a), view_out(py, b)]),
+                None,
+                out,
+            ),
+        }
+    }
+
+    fn x_add(
+        &self,
+        x: DVectorView<'_, f64>,
+        dx: DVectorView<'_, f64>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        match &self.hooks.state_add {
+            None => {
+                out.copy_from(&x);
+                *out += dx;
+                Ok(())
+            }
+            Some(f) => self.call(
+                "state_add",
+                f,
+                |py| PyTuple::new(py, [view_out(py, x), view_out(py, dx)]),
+                None,
+                out,
+            ),
+        }
+    }
+
+    fn sigma_add(
+        &self,
+        x: DVectorView<'_, f64>,
+        offset: DVectorView<'_, f64>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        match &self.hooks.subtract {
+            None => {
+                out.copy_from(&x);
+                *out += offset;
+                Ok(())
+            }
+            Some(f) => self.call(
+                "subtract",
+                f,
+                |py| PyTuple::new(py, [view_out(py, x), PyArray1::from_iter(py, offset.iter().map(|v| -v))]),
+                None,
+                out,
+            ),
+        }
+    }
+
+    fn sqrt_cov(&self, m: &DMatrix<f64>) -> Option<autoteach_estimate::Result<DMatrix<f64>>> {
+        let f = self.hooks.sqrt.as_ref()?;
+        let n = m.nrows();
+        let mut flat = DVector::zeros(n * n);
+        let r = self.call(
+            "sqrt_method",
+            f,
+            |py| PyTuple::new(py, [mat_out(py, m)?]),
+            None,
+            &mut flat,
+        );
+        // The returned rows are the offsets: the row-major data read column-major is the
+        // transpose, whose columns are those rows.
+        Some(r.map(|()| DMatrix::from_column_slice(n, n, flat.as_slice())))
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The filter
+// ---------------------------------------------------------------------------------------------
+
+type DynModel = Box<dyn UkfModel + Send + Sync>;
+type DynFilter = Box<dyn SigmaPointFilter + Send + Sync>;
+
+/// The compiled unscented Kalman filter behind `autoteach.estimate.UnscentedKalmanFilter`.
+#[pyclass(name = "UkfFilter", module = "autoteach._core")]
+struct PyUkf {
+    inner: DynFilter,
+    /// Set for callback models: per-call arguments and the last callback exception.
+    shared: Option<Arc<Shared>>,
+    points: MerweScaledSigmaPoints,
+}
+
+/// Builds the engine.
+fn build(
+    model: DynModel,
+    points: MerweScaledSigmaPoints,
+    square_root: bool,
+    augmented: bool,
+    repair: bool,
+) -> autoteach_estimate::Result<DynFilter> {
+    let noise = if augmented {
+        NoiseForm::Augmented
+    } else {
+        NoiseForm::Additive
+    };
+    let policy = if repair {
+        CovariancePolicy::Repair
+    } else {
+        CovariancePolicy::Strict
+    };
+    Ok(if square_root {
+        Box::new(SquareRootUkf::new(model, points)?.with_noise(noise)?.with_policy(policy))
+    } else {
+        Box::new(
+            UnscentedKalmanFilter::new(model, points)?
+                .with_noise(noise)?
+                .with_policy(policy),
+        )
+    })
+}
+
+/// Clears the per-call state when dropped (also on error).
+struct CallGuard<'a>(&'a Option<Arc<Shared>>);
+
+impl Drop for CallGuard<'_> {
+    fn drop(&mut self) {
+        if let Some(s) = self.0 {
+            *lock(&s.fx_kwargs) = None;
+            *lock(&s.hx_kwargs) = None;
+            *lock(&s.fx_override) = None;
+            *lock(&s.hx_override) = None;
+        }
+    }
+}
+
+impl PyUkf {
+    /// Maps a core error, re-raising the Python exception of a failed callback unchanged.
+    fn error(&self, err: EstimateError) -> PyErr {
+        if let Some(s) = &self.shared
+            && let Some(e) = lock(&s.error).take()
+        {
+            return e;
+        }
+        errors::estimate(err)
+    }
+
+    fn is_callback(&self) -> bool {
+        self.shared.is_some()
+    }
+
+    fn set_call(
+        &self,
+        fx_kwargs: Option<Bound<'_, PyDict>>,
+        hx_kwargs: Option<Bound<'_, PyDict>>,
+        fx: Option<Bound<'_, PyAny>>,
+        hx: Option<Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        match &self.shared {
+            Some(s) => {
+                *lock(&s.fx_kwargs) = fx_kwargs.map(|k| k.unbind());
+                *lock(&s.hx_kwargs) = hx_kwargs.map(|k| k.unbind());
+                *lock(&s.fx_override) = fx.map(|k| k.unbind());
+                *lock(&s.hx_override) = hx.map(|k| k.unbind());
+                *lock(&s.error) = None;
+                Ok(())
+            }
+            None => {
+                let has_kwargs = fx_kwargs.is_some_and(|k| !k.is_empty())
+                    || hx_kwargs.is_some_and(|k| !k.is_empty());
+                if has_kwargs || fx.is_some() || hx.is_some() {
+                    return Err(errors::invalid_input(
+                        "a filter with a built-in model takes no fx/hx overrides or keyword arguments",
+                    ));
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+#[pymethods]
+impl PyUkf {
+    /// A filter on a built-in model (`UkfLinearModel` or `UkfConstantVelocityModel`).
+    #[staticmethod]
+    #[pyo3(signature = (model, alpha, beta, kappa, *, square_root=false, augmented=false, repair=false))]
+    fn builtin(
+        model: &Bound<'_, PyAny>,
+        alpha: f64,
+        beta: f64,
+        kappa: f64,
+        square_root: bool,
+        augmented: bool,
+        repair: bool,
+    ) -> PyResult<Self> {
+        let m: DynModel = if let Ok(m) = model.cast::<PyLinearModel>() {
+            Box::new(m.get().inner.clone())
+        } else if let Ok(m) = model.cast::<PyCvModel>() {
+            Box::new(m.get().inner)
+        } else {
+            return Err(errors::invalid_input(format!(
+                "model must be a UkfLinearModel or UkfConstantVelocityModel, got {}",
+                model.get_type().name()?
+            )));
+        };
+        let points = sigma_points(alpha, beta, kappa, m.dim_x())?;
+        let inner = build(m, points.clone(), square_root, augmented, repair).map_err(errors::estimate)?;
+        Ok(Self {
+            inner,
+            shared: None,
+            points,
+        })
+    }
+
+    /// A filter whose model is Python callables (see the module docs for their signatures).
+    #[staticmethod]
+    #[pyo3(signature = (dim_x, dim_z, fx, hx, alpha, beta, kappa, *, x_mean=None, z_mean=None,
+        residual_x=None, residual_z=None, state_add=None, subtract=None, sqrt=None,
+        square_root=false, augmented=false, repair=false, dim_w=None, dim_v=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn callbacks(
+        dim_x: usize,
+        dim_z: usize,
+        fx: Bound<'_, PyAny>,
+        hx: Bound<'_, PyAny>,
+        alpha: f64,
+        beta: f64,
+        kappa: f64,
+        x_mean: Option<Bound<'_, PyAny>>,
+        z_mean: Option<Bound<'_, PyAny>>,
+        residual_x: Option<Bound<'_, PyAny>>,
+        residual_z: Option<Bound<'_, PyAny>>,
+        state_add: Option<Bound<'_, PyAny>>,
+        subtract: Option<Bound<'_, PyAny>>,
+        sqrt: Option<Bound<'_, PyAny>>,
+        square_root: bool,
+        augmented: bool,
+        repair: bool,
+        dim_w: Option<usize>,
+        dim_v: Option<usize>,
+    ) -> PyResult<Self> {
+        if dim_x == 0 || dim_z == 0 {
+            return Err(errors::invalid_input(format!(
+                "dim_x and dim_z must be positive, got {dim_x} and {dim_z}"
+            )));
+        }
+        for (name, f) in [("fx", Some(&fx)), ("hx", Some(&hx)), ("x_mean_fn", x_mean.as_ref()),
+            ("z_mean_fn", z_mean.as_ref()), ("residual_x", residual_x.as_ref()),
+            ("residual_z", residual_z.as_ref()), ("state_add", state_add.as_ref()),
+            ("subtract", subtract.as_ref()), ("sqrt_method", sqrt.as_ref())]
+        {
+            if let Some(f) = f
+                && !f.is_callable()
+            {
+                return Err(errors::invalid_input(format!("{name} must be callable")));
+            }
+        }
+        let shared = Arc::new(Shared::default());
+        let model = PyModel {
+            dim_x,
+            dim_z,
+            dim_w: dim_w.unwrap_or(dim_x),
+            dim_v: dim_v.unwrap_or(dim_z),
+            fx: fx.unbind(),
+            hx: hx.unbind(),
+            hooks: Hooks {
+                x_mean: x_mean.map(Bound::unbind),
+                z_mean: z_mean.map(Bound::unbind),
+                residual_x: residual_x.map(Bound::unbind),
+                residual_z: residual_z.map(Bound::unbind),
+                state_add: state_add.map(Bound::unbind),
+                subtract: subtract.map(Bound::unbind),
+                sqrt: sqrt.map(Bound::unbind),
+            },
+            shared: shared.clone(),
+        };
+        let points = sigma_points(alpha, beta, kappa, dim_x)?;
+        let inner = build(Box::new(model), points.clone(), square_root, augmented, repair)
+            .map_err(errors::estimate)?;
+        Ok(Self {
+            inner,
+            shared: Some(shared),
+            points,
+        })
+    }
+
+    /// Sets any of x, P, Q, R (validated: sizes, finiteness, symmetry, definiteness).
+    #[pyo3(signature = (x=None, p=None, q=None, r=None))]
+    fn set_state(
+        &mut self,
+        x: Option<&Bound<'_, PyAny>>,
+        p: Option<&Bound<'_, PyAny>>,
+        q: Option<&Bound<'_, PyAny>>,
+        r: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        if let Some(x) = x {
+            let x = vector(x, "x")?;
+            self.inner.set_x(x).map_err(errors::estimate)?;
+        }
+        if let Some(p) = p {
+            let p = matrix(p, "P")?;
+            self.inner.set_p(p).map_err(errors::estimate)?;
+        }
+        if let Some(q) = q {
+            let q = matrix(q, "Q")?;
+            self.inner.set_q(q).map_err(errors::estimate)?;
+        }
+        if let Some(r) = r {
+            let r = matrix(r, "R")?;
+            self.inner.set_r(r).map_err(errors::estimate)?;
+        }
+        Ok(())
+    }
+
+    /// One prediction over `dt` (optional input `u` for built-in models; keyword arguments
+    /// `fx_kwargs` and an `fx` override for callback models).
+    #[pyo3(signature = (dt, u=None, fx_kwargs=None, fx=None))]
+    fn predict(
+        &mut self,
+        dt: f64,
+        u: Option<&Bound<'_, PyAny>>,
+        fx_kwargs: Option<Bound<'_, PyDict>>,
+        fx: Option<Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let u = u.map(|u| vector(u, "u")).transpose()?;
+        self.set_call(fx_kwargs, None, fx, None)?;
+        let _guard = CallGuard(&self.shared);
+        let r = convert::guarded(|| Ok(self.inner.predict(dt, u.as_ref())))?;
+        r.map_err(|e| self.error(e))
+    }
+
+    /// One update with measurement `z` (optional `R` for this update only; `hx_kwargs` and
+    /// an `hx` override for callback models).
+    #[pyo3(signature = (z, r=None, hx_kwargs=None, hx=None))]
+    fn update(
+        &mut self,
+        z: &Bound<'_, PyAny>,
+        r: Option<&Bound<'_, PyAny>>,
+        hx_kwargs: Option<Bound<'_, PyDict>>,
+        hx: Option<Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let z = vector(z, "z")?;
+        let r = r.map(|r| matrix(r, "R")).transpose()?;
+        self.set_call(None, hx_kwargs, None, hx)?;
+        let _guard = CallGuard(&self.shared);
+        let res = convert::guarded(|| Ok(self.inner.update(&z, r.as_ref())))?;
+        res.map_err(|e| self.error(e))
+    }
+
+    /// Records a missing measurement (posterior = prior).
+    fn skip_update(&mut self) {
+        self.inner.skip_update();
+    }
+
+    /// Runs predict/update over all steps. `zs` is `(n, dim_z)`; `mask` `(n,)` bool marks the
+    /// measurements present (default all); `us` `(n, dim_u)`, `dts` `(n,)` and `rs`
+    /// `(n, dim_z, dim_z)` are optional. Returns a dict of `xs`, `Ps`, `x_priors`,
+    /// `P_priors` and `log_likelihoods`. Built-in models run without the GIL.
+    #[pyo3(signature = (zs, dt, mask=None, us=None, dts=None, rs=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn batch<'py>(
+        &mut self,
+        py: Python<'py>,
+        zs: &Bound<'py, PyAny>,
+        dt: f64,
+        mask: Option<Vec<bool>>,
+        us: Option<&Bound<'py, PyAny>>,
+        dts: Option<&Bound<'py, PyAny>>,
+        rs: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let m = self.inner.dim_z();
+        let n = self.inner.dim_x();
+        let (zdata, lead) = convert::finite_batch(zs, "zs", &[m], &format!("(n, {m})"))?;
+        if lead.len() != 1 {
+            return Err(errors::invalid_input(format!(
+                "zs must have shape (n, {m}), got {}",
+                convert::shape_str(&convert::batched_shape(&lead, &[m]))
+            )));
+        }
+        let steps = lead[0];
+        if let Some(mask) = &mask
+            && mask.len() != steps
+        {
+            return Err(errors::invalid_input(format!(
+                "mask must have shape ({steps},), got ({},)",
+                mask.len()
+            )));
+        }
+        let zs: Vec<Option<DVector<f64>>> = zdata
+            .chunks_exact(m)
+            .enumerate()
+            .map(|(i, z)| {
+                mask.as_ref()
+                    .is_none_or(|mk| mk[i])
+                    .then(|| DVector::from_column_slice(z))
+            })
+            .collect();
+        let us = match us {
+            Some(u) => {
+                let a = convert::finite_array(u, "us")?;
+                let shape = a.shape().to_vec();
+                if shape.len() != 2 || shape[0] != steps {
+                    return Err(errors::invalid_input(format!(
+                        "us must have shape ({steps}, dim_u), got {}",
+                        convert::shape_str(&shape)
+                    )));
+                }
+                let data = a.exact(&shape)?;
+                Some(
+                    data.chunks_exact(shape[1].max(1))
+                        .map(DVector::from_column_slice)
+                        .collect::<Vec<_>>(),
+                )
+            }
+            None => None,
+        };
+        let dts = dts
+            .map(|d| {
+                let (v, lead) = convert::finite_batch(d, "dts", &[], "(n,)")?;
+                if lead != [steps] {
+                    return Err(errors::invalid_input(format!(
+                        "dts must have shape ({steps},), got {}",
+                        convert::shape_str(&lead)
+                    )));
+                }
+                Ok(v)
+            })
+            .transpose()?;
+        let rs = rs
+            .map(|r| {
+                let (v, lead) = convert::finite_batch(r, "Rs", &[m, m], &format!("(n, {m}, {m})"))?;
+                if lead != [steps] {
+                    return Err(errors::invalid_input(format!(
+                        "Rs must have shape ({steps}, {m}, {m}), got {}",
+                        convert::shape_str(&convert::batched_shape(&lead, &[m, m]))
+                    )));
+                }
+                Ok(v.chunks_exact(m * m)
+                    .map(|c| DMatrix::from_row_slice(m, m, c))
+                    .collect::<Vec<_>>())
+            })
+            .transpose()?;
+        let mut inputs = BatchInputs::new(dt, &zs);
+        if let Some(us) = &us {
+            inputs = inputs.with_us(us);
+        }
+        if let Some(d) = &dts {
+            inputs = inputs.with_dts(d);
+        }
+        if let Some(r) = &rs {
+            inputs = inputs.with_rs(r);
+        }
+        self.set_call(None, None, None, None)?;
+        let result = if self.is_callback() {
+            convert::guarded(|| Ok(self.inner.batch(&inputs)))?
+        } else {
+            let inner = &mut self.inner;
+            convert::detached(py, || Ok(inner.batch(&inputs)))?
+        };
+        let out = result.map_err(|e| self.error(e))?;
+        let flat_v = |vs: &[DVector<f64>]| vs.iter().flat_map(|v| v.iter().copied()).collect::<Vec<_>>();
+        // Covariances are symmetric up to rounding; write them row-major all the same.
+        let flat_m = |ms: &[DMatrix<f64>]| {
+            ms.iter()
+                .flat_map(|p| p.transpose().as_slice().to_vec())
+                .collect::<Vec<_>>()
+        };
+        let d = PyDict::new(py);
+        d.set_item("xs", to_numpy(py, flat_v(&out.xs), &[steps, n])?)?;
+        d.set_item("Ps", to_numpy(py, flat_m(&out.ps), &[steps, n, n])?)?;
+        d.set_item("x_priors", to_numpy(py, flat_v(&out.x_priors), &[steps, n])?)?;
+        d.set_item("P_priors", to_numpy(py, flat_m(&out.p_priors), &[steps, n, n])?)?;
+        d.set_item("log_likelihoods", PyArray1::from_vec(py, out.log_likelihoods))?;
+        Ok(d)
+    }
+
+    /// State dimension.
+    #[getter]
+    fn dim_x(&self) -> usize {
+        self.inner.dim_x()
+    }
+
+    /// Measurement dimension.
+    #[getter]
+    fn dim_z(&self) -> usize {
+        self.inner.dim_z()
+    }
+
+    /// The state estimate.
+    #[getter]
+    fn x<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec_out(py, self.inner.x())
+    }
+
+    /// The covariance.
+    #[getter(P)]
+    fn p<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        mat_out(py, &self.inner.p())
+    }
+
+    /// Q.
+    #[getter(Q)]
+    fn q<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        mat_out(py, self.inner.q())
+    }
+
+    /// R.
+    #[getter(R)]
+    fn r<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        mat_out(py, self.inner.r())
+    }
+
+    /// The state after the last prediction.
+    #[getter]
+    fn x_prior<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec_out(py, self.inner.x_prior())
+    }
+
+    /// The covariance after the last prediction.
+    #[getter(P_prior)]
+    fn p_prior<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        mat_out(py, &self.inner.p_prior())
+    }
+
+    /// The state after the last update.
+    #[getter]
+    fn x_post<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec_out(py, self.inner.x_post())
+    }
+
+    /// The covariance after the last update.
+    #[getter(P_post)]
+    fn p_post<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        mat_out(py, &self.inner.p_post())
+    }
+
+    /// The Kalman gain of the last update.
+    #[getter(K)]
+    fn k<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        mat_out(py, self.inner.k())
+    }
+
+    /// The innovation of the last update.
+    #[getter]
+    fn y<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec_out(py, self.inner.y())
+    }
+
+    /// The innovation covariance of the last update.
+    #[getter(S)]
+    fn s<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        mat_out(py, &self.inner.s())
+    }
+
+    /// The log-likelihood of the last measurement.
+    #[getter]
+    fn log_likelihood(&self) -> f64 {
+        self.inner.log_likelihood()
+    }
+
+    /// The number of predictions made.
+    #[getter]
+    fn step(&self) -> usize {
+        self.inner.step()
+    }
+
+    /// The number of covariance repairs made (repair policy).
+    #[getter]
+    fn repairs(&self) -> usize {
+        self.inner.repairs()
+    }
+
+    /// The mean weights of the sigma points.
+    #[getter(Wm)]
+    fn wm<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec_out(py, self.points.wm())
+    }
+
+    /// The covariance weights of the sigma points.
+    #[getter(Wc)]
+    fn wc<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec_out(py, self.points.wc())
+    }
 }

@@ -1,8 +1,241 @@
-//! Bindings of `autoteach_geometry::render` (being written).
+//! Bindings of `autoteach_geometry::render`: the ray-cast renderer of the simulated wafer
+//! carrier and the ground truth of the visible wafer rims.
+//!
+//! Each function reads its arrays through [`crate::convert`], builds the scene and the camera,
+//! runs one core function without the GIL (through [`convert::detached`]) and converts the
+//! result.
 
+use autoteach_geometry::render::{self, Carrier, RenderOptions, Rim, RimTruth, Scene, WaferShape};
+use nalgebra::{Isometry3, Matrix3, Vector2, Vector3};
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
 
-/// Adds the sim functions and classes to the module.
-pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+use crate::convert;
+use crate::errors;
+
+/// Adds the sim functions to the module.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(render_frame, m)?)?;
+    m.add_function(wrap_pyfunction!(rim_visibility, m)?)?;
+    m.add_function(wrap_pyfunction!(rim_points_visible, m)?)?;
     Ok(())
+}
+
+/// Pinhole camera `(fx, fy, cx, cy)` used until `autoteach_geometry::camera` lands.
+struct ParamPinhole {
+    k: Matrix3<f64>,
+    k_inv: Matrix3<f64>,
+    w: usize,
+    h: usize,
+}
+
+impl render::RayCamera for ParamPinhole {
+    fn width(&self) -> usize {
+        self.w
+    }
+    fn height(&self) -> usize {
+        self.h
+    }
+    fn bearing(&self, u: f64, v: f64) -> Option<Vector3<f64>> {
+        Some(self.k_inv * Vector3::new(u, v, 1.0))
+    }
+    fn project(&self, p: &Vector3<f64>) -> Option<Vector2<f64>> {
+        (p.z > 0.0).then(|| {
+            let q = self.k * p;
+            Vector2::new(q.x / q.z, q.y / q.z)
+        })
+    }
+    fn k_matrix(&self) -> Matrix3<f64> {
+        self.k
+    }
+}
+
+/// Reads the camera arguments.
+fn camera(model: &str, params: &Bound<'_, PyAny>, width: i64, height: i64) -> PyResult<ParamPinhole> {
+    let p = convert::finite_array(params, "camera_params")?.vector()?;
+    if width <= 0 || height <= 0 {
+        return Err(errors::invalid_input(format!("image size must be positive, got {width}x{height}")));
+    }
+    if model != "pinhole" {
+        return Err(errors::invalid_input(format!("camera model {model:?} is not supported by the renderer yet")));
+    }
+    if p.len() != 4 || p[0] <= 0.0 || p[1] <= 0.0 {
+        return Err(errors::invalid_input(format!(
+            "pinhole camera_params must be (fx, fy, cx, cy) with positive focal lengths, got {p:?}"
+        )));
+    }
+    let k = Matrix3::new(p[0], 0.0, p[2], 0.0, p[1], p[3], 0.0, 0.0, 1.0);
+    let k_inv = k.try_inverse().ok_or_else(|| errors::invalid_input("singular K"))?;
+    Ok(ParamPinhole { k, k_inv, w: width as usize, h: height as usize })
+}
+
+/// Reads the wafer poses `(N, 4, 4)` and builds the scene.
+fn scene(wafer_poses: &Bound<'_, PyAny>, radius: f64, thickness: f64, carrier: bool) -> PyResult<Scene> {
+    let (wafers, lead) = convert::isometries(wafer_poses, "wafer_poses")?;
+    if lead.len() != 1 {
+        return Err(errors::invalid_input(format!(
+            "wafer_poses must have shape (N, 4, 4), got leading shape {}",
+            convert::shape_str(&lead)
+        )));
+    }
+    Ok(Scene {
+        wafers,
+        shape: WaferShape { radius, thickness },
+        carrier: carrier.then(Carrier::default),
+    })
+}
+
+/// Renders one grayscale frame of the simulated wafer carrier.
+///
+/// Wafers are discs of `wafer_radius` and `wafer_thickness` (metres) at poses `wafer_poses`
+/// `(N, 4, 4)` (`T_w,wafer`, world = carrier frame, z up, opening toward −x); `t_wc` (4×4) is
+/// the camera pose (camera → world; camera z forward, x right, y down). Returns a
+/// `(height, width)` uint8 array; pixel `(u, v)` is centred at image position `(u, v)`.
+/// The same inputs and `seed` give identical bytes.
+#[pyfunction]
+#[pyo3(signature = (
+    wafer_poses, camera_model, camera_params, width, height, t_wc, *,
+    wafer_radius=0.15, wafer_thickness=0.001, carrier=true, gain=1.0, gradient=(0.0, 0.0),
+    blur_sigma=0.8, noise_sigma=2.0, supersample=4, seed=0
+))]
+#[allow(clippy::too_many_arguments)]
+fn render_frame<'py>(
+    py: Python<'py>,
+    wafer_poses: &Bound<'py, PyAny>,
+    camera_model: &str,
+    camera_params: &Bound<'py, PyAny>,
+    width: i64,
+    height: i64,
+    t_wc: &Bound<'py, PyAny>,
+    wafer_radius: f64,
+    wafer_thickness: f64,
+    carrier: bool,
+    gain: f64,
+    gradient: (f64, f64),
+    blur_sigma: f64,
+    noise_sigma: f64,
+    supersample: i64,
+    seed: i128,
+) -> PyResult<Bound<'py, PyArray2<u8>>> {
+    let cam = camera(camera_model, camera_params, width, height)?;
+    let scene = scene(wafer_poses, wafer_radius, wafer_thickness, carrier)?;
+    let t_wc = convert::isometry(t_wc, "t_wc")?;
+    if !(1..=16).contains(&supersample) {
+        return Err(errors::invalid_input(format!("supersample must be in 1..=16, got {supersample}")));
+    }
+    let opts = RenderOptions {
+        gain,
+        gradient: [gradient.0, gradient.1],
+        blur_sigma,
+        noise_sigma,
+        supersample: supersample as usize,
+        seed: u64::try_from(seed)
+            .map_err(|_| errors::invalid_input(format!("seed must be an integer in [0, 2**64), got {seed}")))?,
+        ..RenderOptions::default()
+    };
+    let img = convert::detached(py, || render::render(&scene, &cam, &t_wc, &opts).map_err(errors::geometry))?;
+    let arr = Array2::from_shape_vec((img.height, img.width), img.data)
+        .map_err(|e| errors::internal(format!("image of {}x{}: {e}", img.width, img.height)))?;
+    Ok(arr.into_pyarray(py))
+}
+
+/// One rim's ground truth as a dict.
+fn truth_dict<'py>(py: Python<'py>, t: RimTruth) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("wafer", t.wafer)?;
+    d.set_item("rim", t.rim.name())?;
+    match t.ellipse {
+        Some(e) => d.set_item("ellipse", PyArray1::from_vec(py, vec![e.cx, e.cy, e.a, e.b, e.theta]))?,
+        None => d.set_item("ellipse", py.None())?,
+    }
+    let n = t.intervals.len();
+    let iv: Vec<f64> = t.intervals.iter().flatten().copied().collect();
+    d.set_item("intervals", convert::to_numpy(py, iv, &[n, 2])?)?;
+    d.set_item("fraction", t.fraction)?;
+    let m = t.points.len();
+    let pts: Vec<f64> = t.points.iter().flat_map(|p| [p.x, p.y]).collect();
+    d.set_item("points", convert::to_numpy(py, pts, &[m, 2])?)?;
+    d.set_item("angles", PyArray1::from_vec(py, t.angles))?;
+    d.set_item("side_facing", PyArray1::from_vec(py, t.side_facing))?;
+    Ok(d)
+}
+
+/// Ground truth of the visible wafer rims in one frame: a list with, for each wafer, a dict
+/// for its upper rim then one for its lower rim. Arguments as `render_frame`.
+#[pyfunction]
+#[pyo3(signature = (
+    wafer_poses, camera_model, camera_params, width, height, t_wc, *,
+    wafer_radius=0.15, wafer_thickness=0.001, carrier=true, n_samples=720
+))]
+#[allow(clippy::too_many_arguments)]
+fn rim_visibility<'py>(
+    py: Python<'py>,
+    wafer_poses: &Bound<'py, PyAny>,
+    camera_model: &str,
+    camera_params: &Bound<'py, PyAny>,
+    width: i64,
+    height: i64,
+    t_wc: &Bound<'py, PyAny>,
+    wafer_radius: f64,
+    wafer_thickness: f64,
+    carrier: bool,
+    n_samples: i64,
+) -> PyResult<Bound<'py, PyList>> {
+    let cam = camera(camera_model, camera_params, width, height)?;
+    let scene = scene(wafer_poses, wafer_radius, wafer_thickness, carrier)?;
+    let t_wc = convert::isometry(t_wc, "t_wc")?;
+    if !(3..=1_000_000).contains(&n_samples) {
+        return Err(errors::invalid_input(format!("n_samples must be in 3..=1000000, got {n_samples}")));
+    }
+    let truths = convert::detached(py, || {
+        render::rim_visibility(&scene, &cam, &t_wc, n_samples as usize).map_err(errors::geometry)
+    })?;
+    let list = PyList::empty(py);
+    for t in truths {
+        list.append(truth_dict(py, t)?)?;
+    }
+    Ok(list)
+}
+
+/// Visibility of the points at circle angles `angles` (radians, wafer frame) of one rim
+/// (`"upper"` or `"lower"`) of wafer `wafer`: a bool array like `angles`.
+#[pyfunction]
+#[pyo3(signature = (
+    wafer_poses, camera_model, camera_params, width, height, t_wc, wafer, rim, angles, *,
+    wafer_radius=0.15, wafer_thickness=0.001, carrier=true
+))]
+#[allow(clippy::too_many_arguments)]
+fn rim_points_visible<'py>(
+    py: Python<'py>,
+    wafer_poses: &Bound<'py, PyAny>,
+    camera_model: &str,
+    camera_params: &Bound<'py, PyAny>,
+    width: i64,
+    height: i64,
+    t_wc: &Bound<'py, PyAny>,
+    wafer: i64,
+    rim: &str,
+    angles: &Bound<'py, PyAny>,
+    wafer_radius: f64,
+    wafer_thickness: f64,
+    carrier: bool,
+) -> PyResult<Bound<'py, PyArray1<bool>>> {
+    let cam = camera(camera_model, camera_params, width, height)?;
+    let scene = scene(wafer_poses, wafer_radius, wafer_thickness, carrier)?;
+    let t_wc: Isometry3<f64> = convert::isometry(t_wc, "t_wc")?;
+    let rim = match rim {
+        "upper" => Rim::Upper,
+        "lower" => Rim::Lower,
+        other => return Err(errors::invalid_input(format!("rim must be \"upper\" or \"lower\", got {other:?}"))),
+    };
+    if wafer < 0 || wafer as usize >= scene.wafers.len() {
+        return Err(errors::invalid_input(format!("wafer index {wafer} out of range for {} wafers", scene.wafers.len())));
+    }
+    let angles = convert::finite_array(angles, "angles")?.vector()?;
+    let vis = convert::detached(py, || {
+        render::rim_points_visible(&scene, &cam, &t_wc, wafer as usize, rim, &angles).map_err(errors::geometry)
+    })?;
+    Ok(PyArray1::from_vec(py, vis))
 }

@@ -1,0 +1,350 @@
+//! Signed orthogonal distances to an ellipse, their analytic gradient with respect to
+//! `(cx, cy, a, b, θ)`, and the fit statistics (residuals, covariance) built from them.
+
+use std::f64::consts::PI;
+
+use autoteach_geometry::conic::Ellipse;
+use nalgebra::{Matrix5, Matrix6, SymmetricEigen, Vector2, Vector5, Vector6};
+
+use crate::{DetectError, Result};
+
+/// Smallest eigenvalue of the correlation form of `JᵀJ` accepted as full rank.
+const RANK_TOL: f64 = 1e-12;
+/// Variance of an angle uniform over the orientation range `(−π/2, π/2]`.
+const THETA_UNIFORM_VAR: f64 = PI * PI / 12.0;
+
+/// Foot point of `p` on `e`: signed orthogonal distance `r` (positive outside), the foot point
+/// `x'`, the outward unit normal `n̂` there and `(sin t, cos t)` of its eccentric angle.
+pub(crate) struct Foot {
+    /// Signed orthogonal distance.
+    pub r: f64,
+    /// The closest point of the ellipse.
+    pub x: Vector2<f64>,
+    /// Outward unit normal at `x`.
+    pub normal: Vector2<f64>,
+    /// `sin t`.
+    pub st: f64,
+    /// `cos t`.
+    pub ct: f64,
+    /// `N = ‖[b cos t, a sin t]‖`.
+    pub nn: f64,
+}
+
+/// Most Newton passes over all points in [`foot_angles`] before the certifying step.
+const MAX_NEWTON_PASSES: usize = 8;
+
+/// The [`Foot`] of `p` on `e` (`sc = (sin θ, cos θ)` of `e`), for a single point.
+pub(crate) fn foot(e: &Ellipse, sc: (f64, f64), p: &Vector2<f64>) -> Foot {
+    let mut angles = Vec::with_capacity(1);
+    foot_angles(e, std::slice::from_ref(p), &[], &mut angles);
+    let t = angles.first().copied().unwrap_or_else(|| e.parameter_of(p).sin_cos());
+    foot_at(e, sc, p, t)
+}
+
+/// The [`Foot`] of `p` at the foot angle `t = (sin t, cos t)` found by [`foot_angles`]:
+/// `x' = c + R(θ)·[a cos t, b sin t]ᵀ` (eq. 3.2), `n̂ = R(θ)·[b cos t, a sin t]ᵀ/N`,
+/// `r = n̂·(p − x')`.
+pub(crate) fn foot_at(e: &Ellipse, sc: (f64, f64), p: &Vector2<f64>, (st, ct): (f64, f64)) -> Foot {
+    let (sth, cth) = sc;
+    let (dx, dy) = (p.x - e.cx, p.y - e.cy);
+    let u = cth * dx + sth * dy;
+    let v = -sth * dx + cth * dy;
+    let (fu, fv) = (e.a * ct, e.b * st);
+    let (nu, nv) = (e.b * ct, e.a * st);
+    let nn = (nu * nu + nv * nv).sqrt();
+    Foot {
+        r: ((u - fu) * nu + (v - fv) * nv) / nn,
+        x: Vector2::new(e.cx + cth * fu - sth * fv, e.cy + sth * fu + cth * fv),
+        normal: Vector2::new(cth * nu - sth * nv, sth * nu + cth * nv) / nn,
+        st,
+        ct,
+        nn,
+    }
+}
+
+/// Eccentric angles `(sin t, cos t)` of the points of `e` closest to `points`, into `angles`.
+/// `start` holds the angles of the same points on a nearby ellipse (during an iteration) or is
+/// empty.
+///
+/// Fast path for the fitting loops, exact like the general solver [`Ellipse::parameter_of`] of
+/// the geometry crate, which decides every point this path cannot certify. Newton runs on
+/// `g(t) = (p − x(t))·x'(t) = −au·sin t + bv·cos t + (a² − b²) sin t cos t` (`(u, v)`: the
+/// point in the ellipse frame) from `start` or the "radial" angle `(cos t, sin t) ∝ (u/a, v/b)`,
+/// rotating the unit vector `(cos t, sin t)` without trigonometric calls, in passes over all
+/// points until every step is below 1e-6 (independent points pipeline well; the general
+/// solver's bracketing is several times slower per point). A final Newton step certifies each
+/// point: it must be a
+/// minimum (`g' < 0`) reached to rounding (last step ≤ 1e-8, so the error is ~1e-16), at a
+/// distance below the reach of the curve — its smallest radius of curvature
+/// `min(a, b)²/max(a, b)` (the half-bottleneck `min(a, b)` is larger) — where normal segments
+/// never cross, so the foot point found is *the* closest point. Anything else (points near the
+/// centre, far away, or not converged) goes to [`Ellipse::parameter_of`]. Returns how many
+/// points did.
+pub(crate) fn foot_angles(
+    e: &Ellipse,
+    points: &[Vector2<f64>],
+    start: &[(f64, f64)],
+    angles: &mut Vec<(f64, f64)>,
+) -> usize {
+    let (sth, cth) = e.theta.sin_cos();
+    let (a, b) = (e.a, e.b);
+    let k = (a - b) * (a + b);
+    let reach = a.min(b).powi(2) / a.max(b);
+    let local: Vec<(f64, f64)> = points
+        .iter()
+        .map(|p| {
+            let (dx, dy) = (p.x - e.cx, p.y - e.cy);
+            (cth * dx + sth * dy, -sth * dx + cth * dy)
+        })
+        .collect();
+    angles.clear();
+    angles.extend(local.iter().enumerate().map(|(i, &(u, v))| {
+        let (s, c) = start.get(i).copied().unwrap_or((v / b, u / a));
+        // A zero vector gives NaN here, which the certificate below sends to the general solver.
+        let inv = 1.0 / (c * c + s * s).sqrt();
+        (s * inv, c * inv)
+    }));
+    // Newton passes over all points until every step is small; the certifying pass below
+    // then takes one more, quadratically convergent, step.
+    for _ in 0..MAX_NEWTON_PASSES {
+        let mut largest: f64 = 0.0;
+        for ((s, c), &(u, v)) in angles.iter_mut().zip(&local) {
+            let g = -a * u * *s + b * v * *c + k * *s * *c;
+            let dg = -a * u * *c - b * v * *s + k * (*c - *s) * (*c + *s);
+            let delta = (-g / dg).clamp(-0.5, 0.5);
+            // Rotate by about delta and bring the norm back toward 1 without a square root
+            // (one Newton step for 1/√n², exact to O((n² − 1)²)).
+            let (cd, sd) = (1.0 - 0.5 * delta * delta, delta);
+            let (nc, ns) = (*c * cd - *s * sd, *s * cd + *c * sd);
+            let inv = 0.5 * (3.0 - (nc * nc + ns * ns));
+            *c = nc * inv;
+            *s = ns * inv;
+            // Only points headed for a minimum count (others go to the general solver anyway);
+            // NaN (a point at the centre) is ignored by `max` and caught by the certificate.
+            if dg < 0.0 {
+                largest = largest.max(delta.abs());
+            }
+        }
+        if largest <= 1e-6 {
+            break;
+        }
+    }
+    let mut general = 0;
+    for (i, ((s, c), &(u, v))) in angles.iter_mut().zip(&local).enumerate() {
+        let g = -a * u * *s + b * v * *c + k * *s * *c;
+        let dg = -a * u * *c - b * v * *s + k * (*c - *s) * (*c + *s);
+        let delta = -g / dg;
+        let (nc, ns) = (*c - *s * delta, *s + *c * delta);
+        let inv = 1.0 / (nc * nc + ns * ns).sqrt();
+        let (nc, ns) = (nc * inv, ns * inv);
+        let (nu, nv) = (b * nc, a * ns);
+        let r = ((u - a * nc) * nu + (v - b * ns) * nv) / (nu * nu + nv * nv).sqrt();
+        if dg < 0.0 && delta.abs() <= 1e-8 && r.abs() < 0.999 * reach {
+            (*s, *c) = (ns, nc);
+        } else if let Some(p) = points.get(i) {
+            (*s, *c) = e.parameter_of(p).sin_cos();
+            general += 1;
+        }
+    }
+    general
+}
+
+/// Signed orthogonal distance `r` from `p` to `e` (positive outside) and its gradient
+/// `∂r/∂(cx, cy, a, b, θ)`; `sc = (sin θ, cos θ)`.
+///
+/// With `x'` the foot point and `n̂` the outward unit normal there (see [`foot`]),
+/// `r = n̂·(p − x')`. Because `p − x'` is normal to the curve at the optimal `t`, the envelope
+/// theorem gives `∂r/∂q = −n̂·∂x'/∂q` at fixed `t`:
+/// `(−n̂ₓ, −n̂ᵧ, −b cos²t/N, −a sin²t/N, −(a² − b²) sin t cos t/N)` (Ahn, Rauh & Warnecke 2001,
+/// orthogonal distance fitting, with the foot-point angle eliminated).
+pub(crate) fn distance_and_gradient(e: &Ellipse, sc: (f64, f64), p: &Vector2<f64>) -> (f64, Vector5<f64>) {
+    gradient_at(e, &foot(e, sc, p))
+}
+
+/// [`distance_and_gradient`] from a computed foot point.
+fn gradient_at(e: &Ellipse, f: &Foot) -> (f64, Vector5<f64>) {
+    let grad = Vector5::new(
+        -f.normal.x,
+        -f.normal.y,
+        -e.b * f.ct * f.ct / f.nn,
+        -e.a * f.st * f.st / f.nn,
+        -(e.a - e.b) * (e.a + e.b) * f.st * f.ct / f.nn,
+    );
+    (f.r, grad)
+}
+
+/// Signed orthogonal distance `r` from `p` to the ellipse `e` and its gradient with respect to
+/// the coefficients `q = [A, B, C, D, E, F]` of the same curve `f(x) = Ax² + Bxy + Cy² + Dx +
+/// Ey + F = 0` (eq. 3.3 written out, `f > 0` outside): perturbing `q` by `dq` moves the curve at
+/// the foot point `x'` along its normal by `−dq·m(x')/‖∇f(x')‖`, with
+/// `m = [x², xy, y², x, y, 1]`, so `∂r/∂q = m(x')/‖∇f(x')‖`.
+pub(crate) fn distance_and_conic_gradient(
+    e: &Ellipse,
+    sc: (f64, f64),
+    q: &[f64; 6],
+    p: &Vector2<f64>,
+    t: (f64, f64),
+) -> (f64, Vector6<f64>) {
+    let f = foot_at(e, sc, p, t);
+    let (x, y) = (f.x.x, f.x.y);
+    let gx = 2.0 * q[0] * x + q[1] * y + q[3];
+    let gy = q[1] * x + 2.0 * q[2] * y + q[4];
+    let g = 1.0 / (gx * gx + gy * gy).sqrt();
+    (f.r, Vector6::new(x * x * g, x * y * g, y * y * g, x * g, y * g, g))
+}
+
+/// Gauss–Newton normal equations of the orthogonal distances of `points` to `e`.
+pub(crate) struct Normal {
+    /// `JᵀJ`.
+    pub jtj: Matrix5<f64>,
+    /// `Jᵀr`.
+    pub jtr: Vector5<f64>,
+    /// `Σ r²`.
+    pub ssr: f64,
+    /// `Σ |r|`.
+    pub sum_abs: f64,
+}
+
+/// Accumulates [`Normal`] without storing the Jacobian. `known` may hold the foot angles of
+/// the points on exactly this ellipse (from the last fitting iteration); otherwise they are
+/// computed.
+pub(crate) fn accumulate(e: &Ellipse, points: &[Vector2<f64>], known: Option<&[(f64, f64)]>) -> Normal {
+    let sc = e.theta.sin_cos();
+    let mut out = Normal { jtj: Matrix5::zeros(), jtr: Vector5::zeros(), ssr: 0.0, sum_abs: 0.0 };
+    let mut computed = Vec::new();
+    let angles = match known {
+        Some(k) if k.len() == points.len() => k,
+        _ => {
+            foot_angles(e, points, &[], &mut computed);
+            &computed
+        }
+    };
+    for (p, &t) in points.iter().zip(angles) {
+        let (r, g) = gradient_at(e, &foot_at(e, sc, p, t));
+        // Upper triangle only; mirrored below.
+        for j in 0..5 {
+            for i in 0..=j {
+                out.jtj[(i, j)] += g[i] * g[j];
+            }
+        }
+        out.jtr += g * r;
+        out.ssr += r * r;
+        out.sum_abs += r.abs();
+    }
+    for j in 0..5 {
+        for i in 0..j {
+            out.jtj[(j, i)] = out.jtj[(i, j)];
+        }
+    }
+    out
+}
+
+/// Normal equations of the orthogonal distances with respect to the conic coefficients `q`
+/// of `e` (see [`distance_and_conic_gradient`]): `(JᵀJ, Jᵀr, Σ r²)`. `angles` holds the foot
+/// angles `(sin t, cos t)` of the points on a nearby ellipse to start from (or is empty), and
+/// receives those on `e`.
+pub(crate) fn accumulate_conic(
+    e: &Ellipse,
+    q: &[f64; 6],
+    points: &[Vector2<f64>],
+    start: &[(f64, f64)],
+    angles: &mut Vec<(f64, f64)>,
+) -> (Matrix6<f64>, Vector6<f64>, f64) {
+    let sc = e.theta.sin_cos();
+    let mut jtj = Matrix6::zeros();
+    let mut jtr = Vector6::zeros();
+    let mut ssr = 0.0;
+    foot_angles(e, points, start, angles);
+    for (p, &t) in points.iter().zip(angles.iter()) {
+        let (r, g) = distance_and_conic_gradient(e, sc, q, p, t);
+        for j in 0..6 {
+            for i in 0..=j {
+                jtj[(i, j)] += g[i] * g[j];
+            }
+        }
+        jtr += g * r;
+        ssr += r * r;
+    }
+    for j in 0..6 {
+        for i in 0..j {
+            jtj[(j, i)] = jtj[(i, j)];
+        }
+    }
+    (jtj, jtr, ssr)
+}
+
+/// Mean and RMS absolute orthogonal residual and the covariance of `(cx, cy, a, b, θ)` of the
+/// fit `e` to `points` (see [`super::EllipseFit::covariance`] for the conventions).
+/// `known`: foot angles on `e`, as for [`accumulate`].
+///
+/// # Errors
+/// [`DetectError::RankDeficient`] when `JᵀJ` (apart from a circle's undefined `θ`) is singular.
+pub(crate) fn evaluate(
+    e: &Ellipse,
+    points: &[Vector2<f64>],
+    known: Option<&[(f64, f64)]>,
+) -> Result<(f64, f64, Option<Matrix5<f64>>)> {
+    let n = points.len();
+    let acc = accumulate(e, points, known);
+    let mean = acc.sum_abs / n as f64;
+    let rms = (acc.ssr / n as f64).sqrt();
+    if n <= 5 {
+        return Ok((mean, rms, None));
+    }
+    let sigma2 = acc.ssr / (n - 5) as f64;
+    let a = acc.jtj;
+    let diag = a.diagonal();
+    let dmax = diag.max();
+    let names = ["cx", "cy", "a", "b", "theta"];
+    if let Some(k) = (0..4).find(|&k| !(diag[k] > RANK_TOL * dmax)) {
+        return Err(DetectError::RankDeficient {
+            reason: format!("the points do not constrain {} (JᵀJ diagonal {:?})", names[k], diag.as_slice()),
+        });
+    }
+    // θ is undefined for a circle to rounding: its Jacobian column vanishes.
+    let circular = !(diag[4] > RANK_TOL * dmax);
+    if !circular {
+        let cov = scaled_inverse(&a, false, "(cx, cy, a, b, theta)")? * sigma2;
+        if cov[(4, 4)] <= THETA_UNIFORM_VAR {
+            return Ok((mean, rms, Some(cov)));
+        }
+    }
+    // θ not determined by the data: hold it fixed for the others, report a uniform variance.
+    let mut cov = scaled_inverse(&a, true, "(cx, cy, a, b) of a near-circle")? * sigma2;
+    cov[(4, 4)] = THETA_UNIFORM_VAR;
+    Ok((mean, rms, Some(cov)))
+}
+
+/// Inverse of the symmetric positive semi-definite `a` through its correlation form
+/// `D⁻¹AD⁻¹` (unit diagonal), rejecting it when that form is singular to `RANK_TOL`. With
+/// `without_theta`, the `θ` row and column are ignored (the result's are zero): the inverse of
+/// the 4×4 block of the other parameters.
+fn scaled_inverse(a: &Matrix5<f64>, without_theta: bool, what: &str) -> Result<Matrix5<f64>> {
+    let keep = |i: usize| !(without_theta && i == 4);
+    let d = Vector5::from_fn(|i, _| if keep(i) { 1.0 / a[(i, i)].sqrt() } else { 0.0 });
+    // The dropped parameter gets an identity row/column: it decouples and has eigenvalue 1.
+    let r = Matrix5::from_fn(|i, j| {
+        if keep(i) && keep(j) {
+            a[(i, j)] * d[i] * d[j]
+        } else if i == j {
+            1.0
+        } else {
+            0.0
+        }
+    });
+    let eig = SymmetricEigen::new(r);
+    let kmin = eig.eigenvalues.imin();
+    let lmin = eig.eigenvalues[kmin];
+    if !(lmin > RANK_TOL) {
+        let v = eig.eigenvectors.column(kmin);
+        return Err(DetectError::RankDeficient {
+            reason: format!(
+                "the Jacobian of {what} is rank deficient: smallest eigenvalue {lmin:.3e} of the \
+                 normalised JᵀJ, along (cx, cy, a, b, theta) = {:?}",
+                v.iter().map(|x| (x * 1e3).round() / 1e3).collect::<Vec<_>>()
+            ),
+        });
+    }
+    let rinv = eig.eigenvectors * Matrix5::from_diagonal(&eig.eigenvalues.map(|l| 1.0 / l)) * eig.eigenvectors.transpose();
+    Ok(Matrix5::from_fn(|i, j| rinv[(i, j)] * d[i] * d[j]))
+}

@@ -1,0 +1,382 @@
+//! Tests of the ellipse fits against known ellipses, finite differences and Monte-Carlo truth.
+
+use std::f64::consts::PI;
+
+use autoteach_geometry::conic::Ellipse;
+use nalgebra::{Matrix5, Vector2, Vector5};
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use rand_pcg::Pcg64;
+
+use super::*;
+
+fn params(e: &Ellipse) -> Vector5<f64> {
+    Vector5::new(e.cx, e.cy, e.a, e.b, e.theta)
+}
+
+/// Parameter error with θ wrapped modulo π.
+fn param_error(fit: &Ellipse, truth: &Ellipse) -> Vector5<f64> {
+    let mut d = params(fit) - params(truth);
+    d[4] = (d[4] + PI / 2.0).rem_euclid(PI) - PI / 2.0;
+    d
+}
+
+/// Points of `e` on an arc of `span` radians (eccentric angle) starting at `t0`, with
+/// isotropic Gaussian noise `sigma` (pixels).
+fn arc(e: &Ellipse, t0: f64, span: f64, n: usize, sigma: f64, rng: &mut Pcg64) -> Vec<Vector2<f64>> {
+    let noise = Normal::new(0.0, sigma.max(1e-300)).unwrap();
+    e.sample(n, t0, t0 + span)
+        .unwrap()
+        .into_iter()
+        .map(|p| if sigma > 0.0 { p + Vector2::new(noise.sample(rng), noise.sample(rng)) } else { p })
+        .collect()
+}
+
+fn truths() -> Vec<Ellipse> {
+    vec![
+        Ellipse::new(320.0, 240.0, 300.0, 40.0, 0.3).unwrap(),
+        Ellipse::new(-50.0, 1000.0, 300.0, 150.0, -1.2).unwrap(),
+        Ellipse::new(640.0, 480.0, 300.0, 290.0, 1.5).unwrap(),
+        Ellipse::new(10.0, 20.0, 5.0, 2.0, 0.0).unwrap(),
+    ]
+}
+
+#[test]
+fn noiseless_full_and_partial_arcs_are_recovered_exactly() {
+    let mut rng = Pcg64::seed_from_u64(1);
+    for truth in truths() {
+        for span_deg in [360.0, 160.0, 120.0, 90.0, 60.0] {
+            for t0 in [0.0, 1.0, 2.5, -2.0] {
+                let span = f64::to_radians(span_deg);
+                let pts = arc(&truth, t0, span, 100, 0.0, &mut rng);
+                for method in [FitMethod::Direct, FitMethod::Geometric] {
+                    let fit = fit_ellipse(&pts, method).unwrap();
+                    let d = param_error(&fit.ellipse, &truth);
+                    let tol = 1e-9 * truth.a;
+                    assert!(
+                        d.fixed_rows::<4>(0).amax() < tol && d[4].abs() < 1e-9,
+                        "{method:?} span {span_deg}° t0 {t0} truth {truth:?}: error {d:?}"
+                    );
+                    assert!(fit.residual_mean < tol && fit.residual_rms < tol);
+                    assert!(fit.converged);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn jacobian_matches_finite_differences() {
+    let mut rng = Pcg64::seed_from_u64(2);
+    for e in [Ellipse::new(3.0, -2.0, 7.0, 3.0, 0.7).unwrap(), Ellipse::new(0.0, 0.0, 5.0, 4.9, -1.3).unwrap()] {
+        let sc = e.theta.sin_cos();
+        for _ in 0..200 {
+            // Points inside and outside, away from the centre and the evolute.
+            let t = rng.random_range(-PI..PI);
+            let off = rng.random_range(-1.0..3.0);
+            let p = e.point_at(t) + Vector2::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3)) * off;
+            let (r, g) = residual::distance_and_gradient(&e, sc, &p);
+            assert!((r - e.orthogonal_distance(&p)).abs() < 1e-12, "distance {r} vs {}", e.orthogonal_distance(&p));
+            for k in 0..5 {
+                let h = 1e-6;
+                let mut plus = params(&e);
+                let mut minus = params(&e);
+                plus[k] += h;
+                minus[k] -= h;
+                let ep = Ellipse { cx: plus[0], cy: plus[1], a: plus[2], b: plus[3], theta: plus[4] };
+                let em = Ellipse { cx: minus[0], cy: minus[1], a: minus[2], b: minus[3], theta: minus[4] };
+                let fd = (ep.orthogonal_distance(&p) - em.orthogonal_distance(&p)) / (2.0 * h);
+                assert!((fd - g[k]).abs() < 1e-7, "param {k}: analytic {} vs finite difference {fd}", g[k]);
+            }
+        }
+    }
+}
+
+/// One Monte-Carlo case: a = 300 px, b in 40..300, random pose, arc 60–160°, 0.5 px noise.
+fn random_case(rng: &mut Pcg64, min_span: f64, max_span: f64) -> (Ellipse, Vec<Vector2<f64>>) {
+    let b = rng.random_range(40.0..300.0);
+    let truth = Ellipse::new(
+        rng.random_range(200.0..800.0),
+        rng.random_range(200.0..600.0),
+        300.0,
+        b,
+        rng.random_range(-PI / 2.0..PI / 2.0),
+    )
+    .unwrap();
+    let span = f64::to_radians(rng.random_range(min_span..max_span));
+    // About one point per pixel of arc length, as an edge detector gives.
+    let n = ((truth.a + truth.b) * 0.5 * span) as usize;
+    let pts = arc(&truth, rng.random_range(-PI..PI), span, n.max(20), 0.5, rng);
+    (truth, pts)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+#[test]
+fn geometric_fit_beats_direct_fit_on_noisy_partial_arcs() {
+    let mut rng = Pcg64::seed_from_u64(3);
+    let (mut err_direct, mut err_geom, mut ax_direct, mut ax_geom) = (vec![], vec![], vec![], vec![]);
+    for _ in 0..300 {
+        let (truth, pts) = random_case(&mut rng, 60.0, 160.0);
+        let d = fit_ellipse(&pts, FitMethod::Direct).unwrap();
+        let g = fit_ellipse(&pts, FitMethod::Geometric).unwrap();
+        assert!(g.converged);
+        // The geometric fit minimises exactly what it reports.
+        assert!(g.residual_rms <= d.residual_rms + 1e-12);
+        let cd = param_error(&d.ellipse, &truth);
+        let cg = param_error(&g.ellipse, &truth);
+        err_direct.push(cd[0].hypot(cd[1]));
+        err_geom.push(cg[0].hypot(cg[1]));
+        ax_direct.push(cd[2].abs().max(cd[3].abs()));
+        ax_geom.push(cg[2].abs().max(cg[3].abs()));
+    }
+    let (md, mg) = (median(err_direct), median(err_geom));
+    let (ad, ag) = (median(ax_direct), median(ax_geom));
+    eprintln!("median centre error: direct {md:.3} px, geometric {mg:.3} px; axes {ad:.3} / {ag:.3} px");
+    assert!(mg < 0.5 * md, "geometric {mg} vs direct {md}");
+    assert!(ag < 0.5 * ad, "geometric axes {ag} vs direct {ad}");
+}
+
+#[test]
+fn covariance_is_calibrated() {
+    let mut rng = Pcg64::seed_from_u64(4);
+    let trials = 400;
+    let mut nees = Vec::with_capacity(trials);
+    for _ in 0..trials {
+        let (truth, pts) = random_case(&mut rng, 120.0, 160.0);
+        let g = fit_ellipse(&pts, FitMethod::Geometric).unwrap();
+        let cov: Matrix5<f64> = g.covariance.unwrap();
+        let d = param_error(&g.ellipse, &truth);
+        let q = d.dot(&(cov.try_inverse().unwrap() * d));
+        nees.push(q);
+    }
+    let mean = nees.iter().sum::<f64>() / trials as f64;
+    eprintln!("mean normalised estimation error squared {mean:.3} (expected 5)");
+    // χ²(5) has variance 10: the standard error of the mean of 400 is 0.16.
+    assert!((mean - 5.0).abs() < 0.6, "mean NEES {mean}");
+}
+
+#[test]
+fn near_circle_covariance_stays_finite() {
+    // Radial errors with no Fourier component of order 0, 1 or 2 leave the best-fitting
+    // ellipse exactly the circle (or near-circle) they perturb, with a non-zero residual.
+    let n = 200;
+    for b in [100.0, 100.0 - 1e-7] {
+        let truth = Ellipse::new(50.0, 60.0, 100.0, b, 0.2).unwrap();
+        let pts: Vec<_> = (0..n)
+            .map(|i| {
+                let t = 2.0 * PI * i as f64 / n as f64;
+                let dr = 0.5 * (3.0 * t).cos() + 0.3 * (5.0 * t).sin();
+                truth.point_at(t) + residual::foot(&truth, truth.theta.sin_cos(), &truth.point_at(t)).normal * dr
+            })
+            .collect();
+        let g = fit_ellipse(&pts, FitMethod::Geometric).unwrap();
+        let d = param_error(&g.ellipse, &truth);
+        assert!(d.fixed_rows::<4>(0).amax() < 1e-6, "{d:?}");
+        let cov = g.covariance.unwrap();
+        assert!(cov.iter().all(|v| v.is_finite()));
+        assert_eq!(cov[(4, 4)], PI * PI / 12.0);
+        assert!((0..4).all(|k| cov[(k, 4)] == 0.0 && cov[(4, k)] == 0.0));
+        // Centre of a full circle: var = σ²/Σcos²t = 2σ²/n, with σ̂² = SSR/(n − 5).
+        let s2 = g.residual_rms.powi(2) * n as f64 / (n - 5) as f64;
+        assert!((cov[(0, 0)] / (2.0 * s2 / n as f64) - 1.0).abs() < 1e-3, "var cx {}", cov[(0, 0)]);
+        assert!(cov[(2, 2)] > 0.0 && cov[(3, 3)] > 0.0);
+    }
+    // A noisy circle whose fit is a slightly flattened ellipse: θ is (weakly) determined and
+    // its variance comes from the data; it never exceeds the uniform bound.
+    let mut rng = Pcg64::seed_from_u64(5);
+    for _ in 0..20 {
+        let truth = Ellipse::new(50.0, 60.0, 100.0, 100.0, 0.0).unwrap();
+        let pts = arc(&truth, 0.0, 2.0 * PI, 100, 0.5, &mut rng);
+        let cov = fit_ellipse(&pts, FitMethod::Geometric).unwrap().covariance.unwrap();
+        assert!(cov.iter().all(|v| v.is_finite()) && cov[(4, 4)] <= PI * PI / 12.0);
+    }
+}
+
+#[test]
+fn five_points_interpolate_without_covariance() {
+    let truth = Ellipse::new(1.0, 2.0, 6.0, 3.0, 0.4).unwrap();
+    let pts: Vec<_> = [0.1, 1.0, 2.0, 3.5, 5.0].iter().map(|&t| truth.point_at(t)).collect();
+    for method in [FitMethod::Direct, FitMethod::Geometric] {
+        let fit = fit_ellipse(&pts, method).unwrap();
+        assert!(param_error(&fit.ellipse, &truth).amax() < 1e-9);
+        assert!(fit.covariance.is_none());
+    }
+}
+
+fn both_fail(pts: &[Vector2<f64>], check: impl Fn(&DetectError) -> bool) {
+    for method in [FitMethod::Direct, FitMethod::Geometric] {
+        match fit_ellipse(pts, method) {
+            Ok(fit) => panic!("{method:?} fabricated an ellipse {:?}", fit.ellipse),
+            Err(e) => assert!(check(&e), "{method:?}: unexpected error {e}"),
+        }
+    }
+}
+
+#[test]
+fn bad_inputs_are_errors() {
+    let truth = Ellipse::new(0.0, 0.0, 10.0, 5.0, 0.3).unwrap();
+    let five = truth.sample(5, 0.0, 5.0).unwrap();
+    // Four points.
+    both_fail(&five[..4], |e| matches!(e, DetectError::TooFewPoints { got: 4, needed: 5 }));
+    both_fail(&[], |e| matches!(e, DetectError::TooFewPoints { got: 0, needed: 5 }));
+    // NaN and infinity.
+    let mut nan = five.clone();
+    nan[2].y = f64::NAN;
+    both_fail(&nan, |e| matches!(e, DetectError::NonFinite { index: 2, .. }));
+    nan[2].y = f64::INFINITY;
+    both_fail(&nan, |e| matches!(e, DetectError::NonFinite { index: 2, .. }));
+    // Collinear points.
+    let line: Vec<_> = (0..20).map(|i| Vector2::new(1.0 + 2.0 * i as f64, -3.0 + 0.5 * i as f64)).collect();
+    both_fail(&line, |e| matches!(e, DetectError::Degenerate { .. }));
+    // All points coincide.
+    both_fail(&[Vector2::new(3.0, 4.0); 10], |e| matches!(e, DetectError::Degenerate { .. }));
+    // Four distinct points repeated.
+    let dup: Vec<_> = five[..4].iter().cycle().take(12).copied().collect();
+    both_fail(&dup, |e| matches!(e, DetectError::Degenerate { .. }));
+    // Four collinear points and one off the line: a pencil of line pairs fits.
+    let mut four_on_line: Vec<_> = line[..4].to_vec();
+    four_on_line.push(Vector2::new(0.0, 10.0));
+    both_fail(&four_on_line, |e| matches!(e, DetectError::Degenerate { .. }));
+    // A hyperbola: x²/4 − y² = 1, both branches and one branch.
+    let hyp: Vec<_> = (-10..=10)
+        .flat_map(|i| {
+            let s = i as f64 * 0.2;
+            [Vector2::new(2.0 * s.cosh(), s.sinh()), Vector2::new(-2.0 * s.cosh(), s.sinh())]
+        })
+        .collect();
+    both_fail(&hyp, |e| matches!(e, DetectError::Degenerate { .. }));
+    let branch: Vec<_> = (-15..=15).map(|i| Vector2::new(5.0 + 2.0 * (i as f64 * 0.1).cosh(), (i as f64 * 0.1).sinh())).collect();
+    both_fail(&branch, |e| matches!(e, DetectError::Degenerate { .. }));
+    // Two crossing lines.
+    let cross: Vec<_> = (-5..=5)
+        .flat_map(|i| [Vector2::new(i as f64, 0.5 * i as f64), Vector2::new(i as f64, -2.0 * i as f64 + 1.0)])
+        .collect();
+    both_fail(&cross, |e| matches!(e, DetectError::Degenerate { .. }));
+}
+
+#[test]
+fn noisy_short_arcs_are_not_mistaken_for_hyperbolas() {
+    // The hyperbola test must not reject genuine ellipse arcs, even short, flat and noisy ones.
+    let mut rng = Pcg64::seed_from_u64(6);
+    for _ in 0..300 {
+        let b = rng.random_range(40.0..300.0);
+        let truth = Ellipse::new(0.0, 0.0, 300.0, b, rng.random_range(-1.5..1.5)).unwrap();
+        let span = f64::to_radians(rng.random_range(30.0..90.0));
+        let pts = arc(&truth, rng.random_range(-PI..PI), span, 60, 2.0, &mut rng);
+        fit_ellipse(&pts, FitMethod::Direct).unwrap();
+    }
+}
+
+#[test]
+fn geometric_options_and_initial_guess() {
+    let truth = Ellipse::new(5.0, 6.0, 30.0, 20.0, 0.5).unwrap();
+    let pts = truth.sample(50, 0.0, 3.0).unwrap();
+    let start = Ellipse::new(4.0, 7.0, 28.0, 22.0, 0.3).unwrap();
+    let fit = fit_ellipse_geometric(&pts, Some(start), &GeometricFitOptions::default()).unwrap();
+    assert!(param_error(&fit.ellipse, &truth).amax() < 1e-9);
+    assert!(fit.iterations > 0);
+    // One iteration is not enough from there.
+    let one = GeometricFitOptions { max_iterations: 1, ..Default::default() };
+    let fit = fit_ellipse_geometric(&pts, Some(start), &one).unwrap();
+    assert!(!fit.converged && fit.iterations == 1);
+    let bad = Ellipse { cx: 0.0, cy: 0.0, a: -1.0, b: 1.0, theta: 0.0 };
+    assert!(matches!(
+        fit_ellipse_geometric(&pts, Some(bad), &GeometricFitOptions::default()),
+        Err(DetectError::InvalidParameter { .. })
+    ));
+    let zero = GeometricFitOptions { max_iterations: 0, ..Default::default() };
+    assert!(matches!(fit_ellipse_geometric(&pts, None, &zero), Err(DetectError::InvalidParameter { .. })));
+}
+
+
+#[test]
+#[ignore = "timing of the parts, run with --release --nocapture"]
+fn timing_parts() {
+    let truth = Ellipse { cx: 500.0, cy: 400.0, a: 300.0, b: 120.0, theta: 0.3 };
+    let mut rng = Pcg64::seed_from_u64(1);
+    let pts = arc(&truth, 0.4, 2.0, 250, 0.5, &mut rng);
+    let k = 2000;
+    let per = |t: std::time::Instant| t.elapsed().as_nanos() as f64 / k as f64 / 1e3;
+    let mut s = 0.0;
+    let t = std::time::Instant::now();
+    for _ in 0..k {
+        for p in &pts {
+            s += truth.parameter_of(p);
+        }
+    }
+    eprintln!("parameter_of x250 {:.2} us", per(t));
+    let prep = Prepared::new(&pts).unwrap();
+    let t = std::time::Instant::now();
+    for _ in 0..k {
+        s += Prepared::new(&pts).unwrap().scale;
+    }
+    eprintln!("prepare {:.2} us", per(t));
+    let t = std::time::Instant::now();
+    for _ in 0..k {
+        s += direct::solve(&prep).unwrap().a;
+    }
+    eprintln!("direct solve {:.2} us", per(t));
+    let e = direct::solve(&prep).unwrap();
+    let mut angles = vec![];
+    let t = std::time::Instant::now();
+    for _ in 0..k {
+        residual::foot_angles(&e, &prep.centred, &[], &mut angles);
+    }
+    eprintln!("foot_angles x250 {:.2} us", per(t));
+    let t = std::time::Instant::now();
+    for _ in 0..k {
+        s += residual::evaluate(&e, &prep.centred, None).unwrap().0;
+    }
+    eprintln!("evaluate {:.2} us", per(t));
+    let g = fit_ellipse(&pts, FitMethod::Geometric).unwrap();
+    eprintln!("iterations {}", g.iterations);
+    for m in [FitMethod::Direct, FitMethod::Geometric] {
+        let t = std::time::Instant::now();
+        for _ in 0..k {
+            s += fit_ellipse(&pts, m).unwrap().ellipse.a;
+        }
+        eprintln!("{m:?} {:.2} us {s}", per(t));
+    }
+}
+
+#[test]
+fn fast_foot_points_agree_with_the_general_solver() {
+    let mut rng = Pcg64::seed_from_u64(8);
+    for e in [
+        Ellipse::new(3.0, -2.0, 300.0, 40.0, 0.7).unwrap(),
+        Ellipse::new(0.0, 0.0, 5.0, 4.9, -1.3).unwrap(),
+        Ellipse::new(1.0, 1.0, 10.0, 10.0, 0.0).unwrap(),
+        Ellipse::new(1.0, 1.0, 100.0, 3.0, 1.0).unwrap(),
+    ] {
+        // Edge points near the curve: the fast path must take (nearly) all of them.
+        let near: Vec<_> = (0..2000)
+            .map(|_| {
+                let t = rng.random_range(-PI..PI);
+                let d = 0.2 * e.b * e.b / e.a;
+                e.point_at(t) + Vector2::new(rng.random_range(-d..d), rng.random_range(-d..d))
+            })
+            .collect();
+        // Points anywhere in and around the ellipse, including near the centre.
+        let anywhere: Vec<_> = (0..2000)
+            .map(|_| Vector2::new(e.cx, e.cy) + Vector2::new(rng.random_range(-1.5..1.5), rng.random_range(-1.5..1.5)) * e.a)
+            .collect();
+        let sc = e.theta.sin_cos();
+        for (pts, max_general) in [(&near, 20), (&anywhere, 2000)] {
+            let mut angles = vec![];
+            let general = residual::foot_angles(&e, pts, &[], &mut angles);
+            assert!(general <= max_general, "{e:?}: {general} points needed the general solver");
+            for (p, &(s, c)) in pts.iter().zip(&angles) {
+                let t = e.parameter_of(p);
+                let exact = e.orthogonal_distance(p);
+                let f = residual::foot_at(&e, sc, p, (s, c));
+                assert!((f.r - exact).abs() <= 1e-10 * (1.0 + exact.abs()), "{e:?} {p:?}: {} vs {exact}", f.r);
+                assert!(e.algebraic_distance(&f.x).abs() < 1e-12);
+                assert!((s - t.sin()).abs() < 1e-9 && (c - t.cos()).abs() < 1e-9, "{e:?} {p:?}");
+            }
+        }
+    }
+}

@@ -1,0 +1,51 @@
+//! The unscented Kalman filter (seed 000_3b1454b2b2194811.txt §5.2).
+//!
+//! * [`MerweScaledSigmaPoints`]: van der Merwe's scaled sigma points, weights as filterpy.
+//! * [`UkfModel`]: the process/measurement model with ⊕/⊖ hooks for angle and SO(3) parts.
+//! * [`UnscentedKalmanFilter`]: the covariance-form filter (additive or augmented noise).
+//! * [`SquareRootUkf`]: the square-root form (van der Merwe & Wan 2001).
+//! * [`SigmaPointFilter`]: their common interface, with the batch runner
+//!   [`SigmaPointFilter::batch`].
+//! * Built-in models: [`LinearModel`] and [`ConstantVelocityModel`].
+//!
+//! # Example
+//!
+//! ```
+//! use autoteach_estimate::ukf::{
+//!     BatchInputs, ConstantVelocityModel, MerweScaledSigmaPoints, SigmaPointFilter,
+//!     UnscentedKalmanFilter,
+//! };
+//! use nalgebra::{DMatrix, DVector};
+//!
+//! // A 1-D constant-velocity target measured in position.
+//! let model = ConstantVelocityModel::new(1)?;
+//! let points = MerweScaledSigmaPoints::new(2, 0.5, 2.0, 1.0)?;
+//! let mut ukf = UnscentedKalmanFilter::new(model, points)?;
+//! ukf.set_p(DMatrix::identity(2, 2) * 10.0)?;
+//! ukf.set_q(DMatrix::identity(2, 2) * 1e-4)?;
+//! ukf.set_r(DMatrix::identity(1, 1) * 0.01)?;
+//! let zs: Vec<_> = (0..50).map(|k| Some(DVector::from_element(1, 0.5 * k as f64))).collect();
+//! let out = ukf.batch(&BatchInputs::new(1.0, &zs))?;
+//! assert!((out.xs[49][1] - 0.5).abs() < 1e-3); // the velocity
+//! # Ok::<(), autoteach_estimate::EstimateError>(())
+//! ```
+
+mod filter;
+mod linalg;
+mod model;
+mod models;
+mod points;
+mod sqrt;
+mod standard;
+mod transform;
+
+pub use filter::{BatchInputs, BatchResult, NoiseForm, SigmaPointFilter};
+pub use linalg::CovariancePolicy;
+pub use model::UkfModel;
+pub use models::{ConstantVelocityModel, LinearModel};
+pub use points::MerweScaledSigmaPoints;
+pub use sqrt::SquareRootUkf;
+pub use standard::UnscentedKalmanFilter;
+
+#[cfg(test)]
+mod tests;

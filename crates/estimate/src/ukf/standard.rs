@@ -1,0 +1,499 @@
+//! The standard (covariance-form) unscented Kalman filter.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::filter::{NoiseForm, SigmaPointFilter};
+use super::linalg::{self, CovariancePolicy};
+use super::model::UkfModel;
+use super::points::MerweScaledSigmaPoints;
+use super::transform::{self, Offsets, Space, Workspace};
+use crate::{EstimateError, Result};
+
+/// ln(2π).
+const LN_2PI: f64 = 1.837_877_066_409_345_3;
+
+/// The unscented Kalman filter of seed 000_3b1454b2b2194811.txt §5.2 (eqs. (5.1)–(5.2)),
+/// with van der Merwe's scaled sigma points, in the formulation of filterpy's
+/// `UnscentedKalmanFilter` (Wan & van der Merwe 2000):
+///
+/// * predict: sigma points of (x, P) → `f` → `x⁻ = mean`, `P⁻ = Σ Wc (χ ⊖ x⁻)(χ ⊖ x⁻)ᵀ + Q`;
+/// * update: sigma points redrawn from (x⁻, P⁻) → `h` → `ẑ`, `S = Σ Wc dz dzᵀ + R`,
+///   `Pxz = Σ Wc dx dzᵀ`, `K = Pxz S⁻¹`, `x = x⁻ ⊕ K (z ⊖ ẑ)`, `P = P⁻ − K S Kᵀ`.
+///
+/// After every stage the covariance is checked (finite, symmetric, positive definite by
+/// Cholesky); see [`CovariancePolicy`]. Noise is additive or augmented ([`NoiseForm`]).
+#[derive(Debug, Clone)]
+pub struct UnscentedKalmanFilter<M: UkfModel> {
+    model: M,
+    points: MerweScaledSigmaPoints,
+    pred_points: MerweScaledSigmaPoints,
+    upd_points: MerweScaledSigmaPoints,
+    noise: NoiseForm,
+    policy: CovariancePolicy,
+    x: DVector<f64>,
+    p: DMatrix<f64>,
+    /// Lower Cholesky factor of `p` (kept valid at all times).
+    l: DMatrix<f64>,
+    q: DMatrix<f64>,
+    r: DMatrix<f64>,
+    q_sqrt: Option<DMatrix<f64>>,
+    r_sqrt: Option<DMatrix<f64>>,
+    x_prior: DVector<f64>,
+    p_prior: DMatrix<f64>,
+    x_post: DVector<f64>,
+    p_post: DMatrix<f64>,
+    k: DMatrix<f64>,
+    y: DVector<f64>,
+    s: DMatrix<f64>,
+    z_pred: DVector<f64>,
+    log_likelihood: f64,
+    steps: usize,
+    repairs: usize,
+    pred_ws: Workspace,
+    upd_ws: Workspace,
+}
+
+impl<M: UkfModel> UnscentedKalmanFilter<M> {
+    /// A filter for `model` with sigma points `points` (whose `n` must equal
+    /// `model.dim_x()`), additive noise and the strict covariance policy. The state starts
+    /// at zero with P = I, Q = I, R = I (as in filterpy): set them before filtering.
+    pub fn new(model: M, points: MerweScaledSigmaPoints) -> Result<Self> {
+        let n = model.dim_x();
+        let m = model.dim_z();
+        if n == 0 || m == 0 {
+            return Err(EstimateError::DimensionMismatch {
+                what: "model dimensions (dim_x, dim_z)".to_string(),
+                expected: vec![n.max(1), m.max(1)],
+                got: vec![n, m],
+            });
+        }
+        if points.n() != n {
+            return Err(EstimateError::DimensionMismatch {
+                what: "sigma points n (must equal the state dimension)".to_string(),
+                expected: vec![n],
+                got: vec![points.n()],
+            });
+        }
+        let ns = points.num_sigmas();
+        Ok(Self {
+            pred_points: points.clone(),
+            upd_points: points.clone(),
+            pred_ws: Workspace::new(n, 0, n, ns),
+            upd_ws: Workspace::new(n, 0, m, ns),
+            points,
+            noise: NoiseForm::Additive,
+            policy: CovariancePolicy::Strict,
+            x: DVector::zeros(n),
+            p: DMatrix::identity(n, n),
+            l: DMatrix::identity(n, n),
+            q: DMatrix::identity(n, n),
+            r: DMatrix::identity(m, m),
+            q_sqrt: None,
+            r_sqrt: None,
+            x_prior: DVector::zeros(n),
+            p_prior: DMatrix::identity(n, n),
+            x_post: DVector::zeros(n),
+            p_post: DMatrix::identity(n, n),
+            k: DMatrix::zeros(n, m),
+            y: DVector::zeros(m),
+            s: DMatrix::zeros(m, m),
+            z_pred: DVector::zeros(m),
+            log_likelihood: f64::NAN,
+            steps: 0,
+            repairs: 0,
+            model,
+        })
+    }
+
+    /// Chooses how noise enters (Q and R are reset to identities of the new sizes).
+    pub fn with_noise(mut self, noise: NoiseForm) -> Result<Self> {
+        let n = self.model.dim_x();
+        let m = self.model.dim_z();
+        let (qd, rd) = match noise {
+            NoiseForm::Additive => (n, m),
+            NoiseForm::Augmented => (self.model.dim_w(), self.model.dim_v()),
+        };
+        self.noise = noise;
+        let (pp, up) = match noise {
+            NoiseForm::Additive => (self.points.clone(), self.points.clone()),
+            NoiseForm::Augmented => (self.points.with_dim(n + qd)?, self.points.with_dim(n + rd)?),
+        };
+        let (pq, uq) = match noise {
+            NoiseForm::Additive => (0, 0),
+            NoiseForm::Augmented => (qd, rd),
+        };
+        self.pred_ws = Workspace::new(n, pq, n, pp.num_sigmas());
+        self.upd_ws = Workspace::new(n, uq, m, up.num_sigmas());
+        self.pred_points = pp;
+        self.upd_points = up;
+        self.q = DMatrix::identity(qd, qd);
+        self.r = DMatrix::identity(rd, rd);
+        self.q_sqrt = (noise == NoiseForm::Augmented).then(|| self.q.clone());
+        self.r_sqrt = (noise == NoiseForm::Augmented).then(|| self.r.clone());
+        Ok(self)
+    }
+
+    /// Chooses the covariance policy.
+    pub fn with_policy(mut self, policy: CovariancePolicy) -> Self {
+        self.policy = policy;
+        self
+    }
+
+    /// The model.
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
+    /// The model, mutably (e.g. to change its parameters between steps).
+    pub fn model_mut(&mut self) -> &mut M {
+        &mut self.model
+    }
+
+    /// The sigma points (for the state dimension).
+    pub fn points(&self) -> &MerweScaledSigmaPoints {
+        &self.points
+    }
+
+    /// The noise form.
+    pub fn noise(&self) -> NoiseForm {
+        self.noise
+    }
+
+    /// The covariance policy.
+    pub fn policy(&self) -> CovariancePolicy {
+        self.policy
+    }
+
+    /// The predicted measurement ẑ of the last update.
+    pub fn z_pred(&self) -> &DVector<f64> {
+        &self.z_pred
+    }
+
+    /// The sigma points (columns) the last update passed through `h` (filterpy's `sigmas_f`
+    /// after a prediction, state part only).
+    pub fn last_update_sigmas(&self) -> &DMatrix<f64> {
+        &self.upd_ws.sig
+    }
+
+    fn check_u(&self, u: Option<&DVector<f64>>) -> Result<()> {
+        if let Some(u) = u {
+            let du = self.model.dim_u();
+            if du == 0 {
+                return Err(EstimateError::DimensionMismatch {
+                    what: "input u (the model takes no input)".to_string(),
+                    expected: vec![0],
+                    got: vec![u.len()],
+                });
+            }
+            linalg::check_len(u, du, "input u")?;
+            linalg::check_finite_input(u.as_slice(), "input u")?;
+        }
+        Ok(())
+    }
+
+    /// The sigma-point offsets for (x, P): a custom square root of `(n+λ)P` from the model,
+    /// or the cached Cholesky factor.
+    fn custom_offsets(&self, step: usize) -> Result<Option<DMatrix<f64>>> {
+        if self.noise == NoiseForm::Augmented {
+            return Ok(None);
+        }
+        let n = self.x.len();
+        let scaled = &self.p * (n as f64 + self.points.lambda());
+        match self.model.sqrt_cov(&scaled) {
+            None => Ok(None),
+            Some(r) => {
+                let a = r.map_err(|e| transform::at_step(e, step))?;
+                linalg::check_shape(&a, n, n, "custom matrix square root")?;
+                linalg::check_finite_at(a.as_slice(), || "custom matrix square root".into(), step)?;
+                Ok(Some(a))
+            }
+        }
+    }
+}
+
+impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
+    fn dim_x(&self) -> usize {
+        self.model.dim_x()
+    }
+
+    fn dim_z(&self) -> usize {
+        self.model.dim_z()
+    }
+
+    fn x(&self) -> &DVector<f64> {
+        &self.x
+    }
+
+    fn p(&self) -> DMatrix<f64> {
+        self.p.clone()
+    }
+
+    fn set_x(&mut self, x: DVector<f64>) -> Result<()> {
+        linalg::check_len(&x, self.x.len(), "state x")?;
+        linalg::check_finite_input(x.as_slice(), "state x")?;
+        self.x = x;
+        Ok(())
+    }
+
+    fn set_p(&mut self, p: DMatrix<f64>) -> Result<()> {
+        let n = self.x.len();
+        let mut p = linalg::validate_covariance_input(&p, n, "covariance P")?;
+        let l = match linalg::cholesky(&p) {
+            Some(l) => l,
+            None if self.policy == CovariancePolicy::Repair => {
+                let fixed = linalg::clip_eigenvalues(&p).and_then(|f| {
+                    let l = linalg::cholesky(&f)?;
+                    Some((f, l))
+                });
+                match fixed {
+                    Some((f, l)) => {
+                        p = f;
+                        self.repairs += 1;
+                        l
+                    }
+                    None => {
+                        return Err(EstimateError::InvalidCovariance {
+                            what: "covariance P".to_string(),
+                            asymmetry: 0.0,
+                            min_eigenvalue: linalg::min_eigenvalue(&p),
+                        });
+                    }
+                }
+            }
+            None => {
+                return Err(EstimateError::InvalidCovariance {
+                    what: "covariance P (must be positive definite)".to_string(),
+                    asymmetry: 0.0,
+                    min_eigenvalue: linalg::min_eigenvalue(&p),
+                });
+            }
+        };
+        self.p = p;
+        self.l = l;
+        Ok(())
+    }
+
+    fn q(&self) -> &DMatrix<f64> {
+        &self.q
+    }
+
+    fn set_q(&mut self, q: DMatrix<f64>) -> Result<()> {
+        let d = self.q.nrows();
+        let q = linalg::validate_covariance_input(&q, d, "process noise Q")?;
+        let sqrt = linalg::psd_sqrt(&q, "process noise Q")?;
+        if self.noise == NoiseForm::Augmented {
+            self.q_sqrt = Some(sqrt);
+        }
+        self.q = q;
+        Ok(())
+    }
+
+    fn r(&self) -> &DMatrix<f64> {
+        &self.r
+    }
+
+    fn set_r(&mut self, r: DMatrix<f64>) -> Result<()> {
+        let d = self.r.nrows();
+        let r = linalg::validate_covariance_input(&r, d, "measurement noise R")?;
+        let sqrt = linalg::psd_sqrt(&r, "measurement noise R")?;
+        if self.noise == NoiseForm::Augmented {
+            self.r_sqrt = Some(sqrt);
+        }
+        self.r = r;
+        Ok(())
+    }
+
+    fn predict(&mut self, dt: f64, u: Option<&DVector<f64>>) -> Result<()> {
+        let step = self.steps;
+        if !dt.is_finite() {
+            return Err(EstimateError::NonFiniteInput {
+                what: "time step dt".to_string(),
+                index: 0,
+                value: dt,
+            });
+        }
+        self.check_u(u)?;
+        let augmented = self.noise == NoiseForm::Augmented;
+        let custom = self.custom_offsets(step)?;
+        let offsets = match &custom {
+            Some(a) => Offsets::Scaled(a),
+            None => Offsets::Factor(&self.l),
+        };
+        let ws = &mut self.pred_ws;
+        transform::draw(
+            &self.model,
+            &self.pred_points,
+            &self.x,
+            offsets,
+            self.q_sqrt.as_ref().filter(|_| augmented),
+            ws,
+            step,
+        )?;
+        transform::propagate_f(&self.model, augmented, dt, u, ws, step)?;
+        let mut x = DVector::zeros(self.x.len());
+        transform::mean_and_devs(
+            &self.model,
+            Space::State,
+            self.pred_points.wm(),
+            &mut x,
+            ws,
+            step,
+        )?;
+        let mut p = DMatrix::zeros(x.len(), x.len());
+        transform::weighted_gram(&ws.dev_out, self.pred_points.wc(), &mut p);
+        if !augmented {
+            p += &self.q;
+        }
+        let l = linalg::factor_covariance(
+            &mut p,
+            "predicted covariance P_prior",
+            step,
+            self.policy,
+            &mut self.repairs,
+        )?;
+        self.x_prior.copy_from(&x);
+        self.p_prior.copy_from(&p);
+        self.x = x;
+        self.p = p;
+        self.l = l;
+        self.steps += 1;
+        Ok(())
+    }
+
+    fn update(&mut self, z: &DVector<f64>, r: Option<&DMatrix<f64>>) -> Result<()> {
+        let step = self.steps.saturating_sub(1);
+        let m = self.model.dim_z();
+        let n = self.x.len();
+        linalg::check_len(z, m, "measurement z")?;
+        linalg::check_finite_input(z.as_slice(), "measurement z")?;
+        let augmented = self.noise == NoiseForm::Augmented;
+        let r_given = match r {
+            Some(r) => {
+                let rv = linalg::validate_covariance_input(r, self.r.nrows(), "measurement noise R")?;
+                let sqrt = linalg::psd_sqrt(&rv, "measurement noise R")?;
+                Some((rv, sqrt))
+            }
+            None => None,
+        };
+        let (r_mat, r_sqrt) = match &r_given {
+            Some((rv, sq)) => (rv, Some(sq)),
+            None => (&self.r, self.r_sqrt.as_ref()),
+        };
+        let custom = self.custom_offsets(step)?;
+        let offsets = match &custom {
+            Some(a) => Offsets::Scaled(a),
+            None => Offsets::Factor(&self.l),
+        };
+        let ws = &mut self.upd_ws;
+        transform::draw(
+            &self.model,
+            &self.upd_points,
+            &self.x,
+            offsets,
+            r_sqrt.filter(|_| augmented),
+            ws,
+            step,
+        )?;
+        transform::propagate_h(&self.model, augmented, ws, step)?;
+        let mut zp = DVector::zeros(m);
+        let wm = self.upd_points.wm();
+        let wc = self.upd_points.wc();
+        transform::mean_and_devs(&self.model, Space::Measurement, wm, &mut zp, ws, step)?;
+        transform::state_devs(&self.model, &self.x, ws, step)?;
+        let mut s = DMatrix::zeros(m, m);
+        transform::weighted_gram(&ws.dev_out, wc, &mut s);
+        if !augmented {
+            s += r_mat;
+        }
+        let mut pxz = DMatrix::zeros(n, m);
+        transform::weighted_outer(&ws.dev_x, wc, &ws.dev_out, &mut pxz);
+        let ls = linalg::factor_covariance(
+            &mut s,
+            "innovation covariance S",
+            step,
+            self.policy,
+            &mut self.repairs,
+        )?;
+        // K = Pxz S⁻¹  ⇔  S Kᵀ = Pxzᵀ, solved with S = Ls Lsᵀ.
+        let chol = nalgebra::Cholesky::pack_dirty(ls.clone());
+        let k = chol.solve(&pxz.transpose()).transpose();
+        let mut y = DVector::zeros(m);
+        self.model
+            .z_residual(z.column(0), zp.column(0), &mut y)
+            .map_err(|e| transform::at_step(e, step))?;
+        linalg::check_finite_at(y.as_slice(), || "innovation y".into(), step)?;
+        let dx = &k * &y;
+        let mut x = DVector::zeros(n);
+        self.model
+            .x_add(self.x.column(0), dx.column(0), &mut x)
+            .map_err(|e| transform::at_step(e, step))?;
+        linalg::check_finite_at(x.as_slice(), || "updated state x".into(), step)?;
+        let mut p = &self.p - &k * &s * k.transpose();
+        let l = linalg::factor_covariance(
+            &mut p,
+            "updated covariance P",
+            step,
+            self.policy,
+            &mut self.repairs,
+        )?;
+        // log N(y; 0, S) = −½ (yᵀS⁻¹y + ln det S + m ln 2π).
+        let w = ls.solve_lower_triangular(&y).unwrap_or_else(|| DVector::from_element(m, f64::NAN));
+        let log_det: f64 = 2.0 * ls.diagonal().iter().map(|d| d.ln()).sum::<f64>();
+        self.log_likelihood = -0.5 * (w.norm_squared() + log_det + m as f64 * LN_2PI);
+        self.x_post.copy_from(&x);
+        self.p_post.copy_from(&p);
+        self.x = x;
+        self.p = p;
+        self.l = l;
+        self.k = k;
+        self.y = y;
+        self.s = s;
+        self.z_pred = zp;
+        Ok(())
+    }
+
+    fn x_prior(&self) -> &DVector<f64> {
+        &self.x_prior
+    }
+
+    fn p_prior(&self) -> DMatrix<f64> {
+        self.p_prior.clone()
+    }
+
+    fn x_post(&self) -> &DVector<f64> {
+        &self.x_post
+    }
+
+    fn p_post(&self) -> DMatrix<f64> {
+        self.p_post.clone()
+    }
+
+    fn k(&self) -> &DMatrix<f64> {
+        &self.k
+    }
+
+    fn y(&self) -> &DVector<f64> {
+        &self.y
+    }
+
+    fn s(&self) -> DMatrix<f64> {
+        self.s.clone()
+    }
+
+    fn log_likelihood(&self) -> f64 {
+        self.log_likelihood
+    }
+
+    fn step(&self) -> usize {
+        self.steps
+    }
+
+    fn repairs(&self) -> usize {
+        self.repairs
+    }
+
+    fn skip_update(&mut self) {
+        self.x_post.copy_from(&self.x);
+        self.p_post.copy_from(&self.p);
+    }
+}

@@ -1,0 +1,295 @@
+//! The unscented transform shared by the standard and the square-root filter: drawing sigma
+//! points (optionally augmented with noise), pushing them through the model, and their
+//! weighted mean, deviations and covariance.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::linalg;
+use super::model::UkfModel;
+use super::points::MerweScaledSigmaPoints;
+use crate::{EstimateError, Result};
+
+/// Stamps the filter step into errors raised by a model.
+pub(crate) fn at_step(err: EstimateError, step: usize) -> EstimateError {
+    match err {
+        EstimateError::Model {
+            function, message, ..
+        } => EstimateError::Model {
+            function,
+            step,
+            message,
+        },
+        EstimateError::NonFinite {
+            what, index, value, ..
+        } => EstimateError::NonFinite {
+            what,
+            step,
+            index,
+            value,
+        },
+        EstimateError::NotPositiveDefinite {
+            what,
+            min_eigenvalue,
+            ..
+        } => EstimateError::NotPositiveDefinite {
+            what,
+            step,
+            min_eigenvalue,
+        },
+        other => other,
+    }
+}
+
+/// Preallocated matrices of one unscented transform.
+#[derive(Debug, Clone)]
+pub(crate) struct Workspace {
+    /// Sigma points of the state part (`n × N`).
+    pub sig: DMatrix<f64>,
+    /// Noise part of augmented sigma points (`q × N`, `q` may be 0).
+    pub noise: DMatrix<f64>,
+    /// Transformed sigma points (`dim_out × N`).
+    pub out: DMatrix<f64>,
+    /// Deviations of the state sigma points from the state mean (`n × N`).
+    pub dev_x: DMatrix<f64>,
+    /// Deviations of the transformed sigma points from their mean (`dim_out × N`).
+    pub dev_out: DMatrix<f64>,
+    /// Scratch vector of the state size.
+    pub tmp_x: DVector<f64>,
+    /// Scratch vector of the output size.
+    pub tmp_out: DVector<f64>,
+    /// Sigma offsets from the mean (`n × N`).
+    pub off: DMatrix<f64>,
+}
+
+impl Workspace {
+    pub(crate) fn new(n: usize, q: usize, dim_out: usize, num_sigmas: usize) -> Self {
+        Self {
+            sig: DMatrix::zeros(n, num_sigmas),
+            noise: DMatrix::zeros(q, num_sigmas),
+            out: DMatrix::zeros(dim_out, num_sigmas),
+            dev_x: DMatrix::zeros(n, num_sigmas),
+            dev_out: DMatrix::zeros(dim_out, num_sigmas),
+            tmp_x: DVector::zeros(n),
+            tmp_out: DVector::zeros(dim_out),
+            off: DMatrix::zeros(n, num_sigmas),
+        }
+    }
+}
+
+/// Where the state offsets of the sigma points come from.
+pub(crate) enum Offsets<'a> {
+    /// `γ · (column k of L)` with `L Lᵀ = P`, γ = √(n_a + λ).
+    Factor(&'a DMatrix<f64>),
+    /// The columns of a given square root of `(n + λ) P` (a custom `sqrt_cov`).
+    Scaled(&'a DMatrix<f64>),
+}
+
+/// Draws the 2n_a + 1 sigma points of `[x; ν]`, ν ~ N(0, N Nᵀ) (N = `noise_sqrt`, absent for
+/// additive noise), with covariance `blkdiag(P, N Nᵀ)`, into `ws.sig` and `ws.noise`, in
+/// filterpy's order: 0 the mean, k+1 the k-th positive offset, n_a+k+1 the k-th negative.
+pub(crate) fn draw<M: UkfModel + ?Sized>(
+    model: &M,
+    pts: &MerweScaledSigmaPoints,
+    x: &DVector<f64>,
+    offsets: Offsets<'_>,
+    noise_sqrt: Option<&DMatrix<f64>>,
+    ws: &mut Workspace,
+    step: usize,
+) -> Result<()> {
+    let n = x.len();
+    let q = noise_sqrt.map_or(0, |m| m.nrows());
+    let na = pts.n();
+    debug_assert_eq!(na, n + q);
+    let gamma = (na as f64 + pts.lambda()).sqrt();
+    // State offsets: column k+1 is +γLₖ, column na+k+1 is −γLₖ, all others zero.
+    let (src, scale) = match offsets {
+        Offsets::Factor(l) => (l, gamma),
+        Offsets::Scaled(a) => (a, 1.0),
+    };
+    ws.off.fill(0.0);
+    {
+        let off = ws.off.as_mut_slice();
+        for (k, col) in src.as_slice().chunks_exact(n.max(1)).enumerate().take(n) {
+            let (plus, minus) = (k + 1, na + k + 1);
+            for (i, &v) in col.iter().enumerate() {
+                off[plus * n + i] = scale * v;
+                off[minus * n + i] = -scale * v;
+            }
+        }
+    }
+    model
+        .sigma_points(x, &ws.off, &mut ws.sig)
+        .map_err(|e| at_step(e, step))?;
+    check_columns(&ws.sig, "sigma point", step)?;
+    ws.noise.fill(0.0);
+    if let Some(ns) = noise_sqrt {
+        for k in 0..q {
+            for (sign, col) in [(1.0, n + k + 1), (-1.0, na + n + k + 1)] {
+                let mut c = ws.noise.column_mut(col);
+                c.copy_from(&ns.column(k));
+                c *= sign * gamma;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Fails with [`EstimateError::NonFinite`] naming the sigma point (column) of the first
+/// non-finite entry of `m`.
+fn check_columns(m: &DMatrix<f64>, what: &str, step: usize) -> Result<()> {
+    let rows = m.nrows().max(1);
+    linalg::check_finite_at(
+        m.as_slice(),
+        || {
+            let col = linalg::first_non_finite(m.as_slice()).map_or(0, |(i, _)| i / rows);
+            format!("{what} at sigma point {col}")
+        },
+        step,
+    )
+}
+
+/// `ws.out[:, i] = f(ws.sig[:, i], dt, u)` (or `f(sig, noise, dt, u)` when augmented).
+pub(crate) fn propagate_f<M: UkfModel + ?Sized>(
+    model: &M,
+    augmented: bool,
+    dt: f64,
+    u: Option<&DVector<f64>>,
+    ws: &mut Workspace,
+    step: usize,
+) -> Result<()> {
+    if augmented {
+        for i in 0..ws.sig.ncols() {
+            model
+                .fx_noise(ws.sig.column(i), ws.noise.column(i), dt, u, &mut ws.tmp_out)
+                .map_err(|e| at_step(e, step))?;
+            ws.out.set_column(i, &ws.tmp_out);
+        }
+    } else {
+        model
+            .fx_sigmas(&ws.sig, dt, u, &mut ws.out)
+            .map_err(|e| at_step(e, step))?;
+    }
+    check_columns(&ws.out, "fx output", step)
+}
+
+/// `ws.out[:, i] = h(ws.sig[:, i])` (or `h(sig, noise)` when augmented).
+pub(crate) fn propagate_h<M: UkfModel + ?Sized>(
+    model: &M,
+    augmented: bool,
+    ws: &mut Workspace,
+    step: usize,
+) -> Result<()> {
+    if augmented {
+        for i in 0..ws.sig.ncols() {
+            model
+                .hx_noise(ws.sig.column(i), ws.noise.column(i), &mut ws.tmp_out)
+                .map_err(|e| at_step(e, step))?;
+            ws.out.set_column(i, &ws.tmp_out);
+        }
+    } else {
+        model
+            .hx_sigmas(&ws.sig, &mut ws.out)
+            .map_err(|e| at_step(e, step))?;
+    }
+    check_columns(&ws.out, "hx output", step)
+}
+
+/// Which space a set of sigma points lives in (selects the mean/residual hooks).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Space {
+    /// The state: `x_mean`, `x_residual`.
+    State,
+    /// The measurement: `z_mean`, `z_residual`.
+    Measurement,
+}
+
+/// Weighted mean of `ws.out` into `mean`, and the deviations `out_i ⊖ mean` into
+/// `ws.dev_out`.
+pub(crate) fn mean_and_devs<M: UkfModel + ?Sized>(
+    model: &M,
+    space: Space,
+    wm: &DVector<f64>,
+    mean: &mut DVector<f64>,
+    ws: &mut Workspace,
+    step: usize,
+) -> Result<()> {
+    let r = match space {
+        Space::State => model.x_mean(&ws.out, wm, mean),
+        Space::Measurement => model.z_mean(&ws.out, wm, mean),
+    };
+    r.map_err(|e| at_step(e, step))?;
+    let label = match space {
+        Space::State => "x_mean output",
+        Space::Measurement => "z_mean output",
+    };
+    linalg::check_finite_at(mean.as_slice(), || label.to_string(), step)?;
+    let r = match space {
+        Space::State => model.x_residuals(&ws.out, mean, &mut ws.dev_out),
+        Space::Measurement => model.z_residuals(&ws.out, mean, &mut ws.dev_out),
+    };
+    r.map_err(|e| at_step(e, step))?;
+    check_columns(&ws.dev_out, "residual", step)
+}
+
+/// Deviations `sig_i ⊖ x` of the drawn state sigma points into `ws.dev_x`.
+pub(crate) fn state_devs<M: UkfModel + ?Sized>(
+    model: &M,
+    x: &DVector<f64>,
+    ws: &mut Workspace,
+    step: usize,
+) -> Result<()> {
+    model
+        .x_residuals(&ws.sig, x, &mut ws.dev_x)
+        .map_err(|e| at_step(e, step))?;
+    check_columns(&ws.dev_x, "state residual", step)
+}
+
+/// `out = Σᵢ wᵢ aᵢ bᵢᵀ` over the columns of `a` and `b` (on the column-major storage: this
+/// is the inner loop of every covariance).
+pub(crate) fn weighted_outer(
+    a: &DMatrix<f64>,
+    w: &DVector<f64>,
+    b: &DMatrix<f64>,
+    out: &mut DMatrix<f64>,
+) {
+    let ra = a.nrows().max(1);
+    let rb = b.nrows().max(1);
+    out.fill(0.0);
+    let o = out.as_mut_slice();
+    for ((ak, bk), &wk) in a
+        .as_slice()
+        .chunks_exact(ra)
+        .zip(b.as_slice().chunks_exact(rb))
+        .zip(w.iter())
+    {
+        for (oj, &bjk) in o.chunks_exact_mut(ra).zip(bk) {
+            let s = wk * bjk;
+            for (oi, &ai) in oj.iter_mut().zip(ak) {
+                *oi += ai * s;
+            }
+        }
+    }
+}
+
+/// `out = Σᵢ wᵢ aᵢ aᵢᵀ`: the lower triangle accumulated, then mirrored (exactly symmetric).
+pub(crate) fn weighted_gram(a: &DMatrix<f64>, w: &DVector<f64>, out: &mut DMatrix<f64>) {
+    let r = a.nrows();
+    if r == 0 {
+        return;
+    }
+    out.fill(0.0);
+    let o = out.as_mut_slice();
+    for (ak, &wk) in a.as_slice().chunks_exact(r).zip(w.iter()) {
+        for (j, oj) in o.chunks_exact_mut(r).enumerate() {
+            let s = wk * ak[j];
+            for (oi, &ai) in oj[j..].iter_mut().zip(&ak[j..]) {
+                *oi += ai * s;
+            }
+        }
+    }
+    for j in 0..r {
+        for i in (j + 1)..r {
+            o[i * r + j] = o[j * r + i];
+        }
+    }
+}

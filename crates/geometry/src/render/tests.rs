@@ -1,0 +1,330 @@
+//! Tests of the renderer and of the rim ground truth.
+
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3};
+
+use super::*;
+
+/// A plain pinhole camera for the tests.
+struct Pinhole {
+    k: Matrix3<f64>,
+    k_inv: Matrix3<f64>,
+    w: usize,
+    h: usize,
+}
+
+impl Pinhole {
+    fn new(f: f64, w: usize, h: usize) -> Self {
+        let k = Matrix3::new(f, 0.0, (w as f64 - 1.0) / 2.0, 0.0, f, (h as f64 - 1.0) / 2.0, 0.0, 0.0, 1.0);
+        Self { k, k_inv: k.try_inverse().unwrap(), w, h }
+    }
+}
+
+impl RayCamera for Pinhole {
+    fn width(&self) -> usize {
+        self.w
+    }
+    fn height(&self) -> usize {
+        self.h
+    }
+    fn bearing(&self, u: f64, v: f64) -> Option<Vector3<f64>> {
+        Some(self.k_inv * Vector3::new(u, v, 1.0))
+    }
+    fn project(&self, p: &Vector3<f64>) -> Option<Vector2<f64>> {
+        (p.z > 0.0).then(|| {
+            let q = self.k * p;
+            Vector2::new(q.x / q.z, q.y / q.z)
+        })
+    }
+    fn k_matrix(&self) -> Matrix3<f64> {
+        self.k
+    }
+}
+
+/// Camera at `eye` looking along world +x, pitched down by `pitch` radians (image x = world −y).
+fn camera_pose(eye: Vector3<f64>, pitch: f64) -> Isometry3<f64> {
+    let z = Vector3::new(pitch.cos(), 0.0, -pitch.sin());
+    let x = Vector3::new(0.0, -1.0, 0.0);
+    let y = z.cross(&x);
+    let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
+    Isometry3::from_parts(Translation3::from(eye), UnitQuaternion::from_rotation_matrix(&rot))
+}
+
+fn carrier_scene() -> Scene {
+    let c = Carrier::default();
+    let mut wafers: Vec<Isometry3<f64>> = (1..=26).filter(|k| k % 7 != 3).map(|k| c.slot_pose(k)).collect();
+    // One tilted and shifted wafer.
+    wafers[5] = Isometry3::new(Vector3::new(0.004, -0.003, wafers[5].translation.z + 0.001), Vector3::new(0.01, 0.02, 0.3));
+    Scene::new(wafers)
+}
+
+fn write_pgm(path: &str, img: &GrayImage) {
+    let mut bytes = format!("P5\n{} {}\n255\n", img.width, img.height).into_bytes();
+    bytes.extend_from_slice(&img.data);
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+#[ignore = "writes /tmp/render_carrier.pgm for a visual check"]
+fn visual_carrier() {
+    let cam = Pinhole::new(900.0, 1280, 720);
+    let t_wc = camera_pose(Vector3::new(-0.42, 0.0, 0.16), 0.12);
+    let img = render(&carrier_scene(), &cam, &t_wc, &RenderOptions::default()).unwrap();
+    write_pgm("/tmp/render_carrier.pgm", &img);
+}
+
+fn no_noise() -> RenderOptions {
+    RenderOptions { blur_sigma: 0.0, noise_sigma: 0.0, ..RenderOptions::default() }
+}
+
+fn bilinear(img: &GrayImage, p: Vector2<f64>) -> Option<f64> {
+    let (x0, y0) = (p.x.floor(), p.y.floor());
+    if x0 < 0.0 || y0 < 0.0 || x0 + 1.0 >= img.width as f64 || y0 + 1.0 >= img.height as f64 {
+        return None;
+    }
+    let (fx, fy) = (p.x - x0, p.y - y0);
+    let (u, v) = (x0 as usize, y0 as usize);
+    let g = |du: usize, dv: usize| img.get(u + du, v + dv).unwrap() as f64;
+    Some((1.0 - fy) * ((1.0 - fx) * g(0, 0) + fx * g(1, 0)) + fy * ((1.0 - fx) * g(0, 1) + fx * g(1, 1)))
+}
+
+/// Signed distance along `n` (from `p`) of the half-way crossing of the intensity profile
+/// through `p` along `n`, if the profile within ±1.5 px is a clean step.
+fn edge_offset(img: &GrayImage, p: Vector2<f64>, n: Vector2<f64>) -> Option<f64> {
+    let steps = 150;
+    let s: Vec<f64> = (0..=steps).map(|i| -1.5 + 3.0 * i as f64 / steps as f64).collect();
+    let prof: Vec<f64> = s.iter().map(|&t| bilinear(img, p + n * t)).collect::<Option<_>>()?;
+    let lo = prof.iter().cloned().fold(f64::INFINITY, f64::min);
+    let hi = prof.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    if hi - lo < 100.0 {
+        return None;
+    }
+    // The ends must sit on opposite plateaus.
+    let (first, last) = (prof[0], prof[steps]);
+    if (first - last).abs() < 0.8 * (hi - lo) {
+        return None;
+    }
+    let mid = 0.5 * (lo + hi);
+    let mut best: Option<f64> = None;
+    for i in 0..steps {
+        let (a, b) = (prof[i] - mid, prof[i + 1] - mid);
+        if a == 0.0 || a * b < 0.0 {
+            let t = s[i] + (s[i + 1] - s[i]) * a / (a - b);
+            if best.is_none_or(|x: f64| t.abs() < x.abs()) {
+                best = Some(t);
+            }
+        }
+    }
+    best
+}
+
+/// Renders one wafer (no carrier, no blur, no noise) and checks that the image edge lies on
+/// the ground-truth rim ellipse at every visible, side-facing sample.
+fn check_edges(thickness: f64, eye: Vector3<f64>, pitch: f64, pose: Isometry3<f64>) {
+    let cam = Pinhole::new(900.0, 640, 480);
+    let t_wc = camera_pose(eye, pitch);
+    let scene = Scene { wafers: vec![pose], shape: WaferShape { radius: 0.15, thickness }, carrier: None };
+    let img = render(&scene, &cam, &t_wc, &no_noise()).unwrap();
+    let truth = rim_visibility(&scene, &cam, &t_wc, 720).unwrap();
+    let mut candidates = 0;
+    let mut all = Vec::new();
+    for rt in &truth {
+        let e = rt.ellipse.expect("rim in front of the camera");
+        let c = e.conic();
+        let mut signed = Vec::new();
+        for (p, side) in rt.points.iter().zip(&rt.side_facing) {
+            if !side {
+                continue;
+            }
+            candidates += 1;
+            let g = c * Vector3::new(p.x, p.y, 1.0);
+            let n = Vector2::new(g.x, g.y).normalize();
+            signed.extend(edge_offset(&img, *p, n));
+        }
+        // No systematic shift (a half-pixel convention error would show here).
+        let bias = signed.iter().sum::<f64>() / signed.len().max(1) as f64;
+        assert!(bias.abs() < 0.02, "{:?} rim: mean signed offset {bias} px", rt.rim);
+        all.extend(signed.iter().map(|x| x.abs()));
+    }
+    let n = all.len();
+    assert!(n * 2 > candidates && n > 200, "only {n} of {candidates} profiles were clean steps");
+    let max = all.iter().cloned().fold(0.0, f64::max);
+    let mean = all.iter().sum::<f64>() / n as f64;
+    assert!(max < 0.25, "max edge offset {max} px (mean {mean}, {n} points)");
+    assert!(mean < 0.08, "mean edge offset {mean} px");
+}
+
+#[test]
+fn edges_lie_on_the_ground_truth_ellipses() {
+    // A thick band: both rims are clean steps against plateaus.
+    check_edges(0.003, Vector3::new(-0.36, 0.0, 0.09), 0.3, Isometry3::identity());
+    // The default 1 mm wafer, tilted and shifted, seen closer.
+    let pose = Isometry3::new(Vector3::new(0.01, -0.02, 0.005), Vector3::new(0.03, -0.05, 0.4));
+    check_edges(0.001, Vector3::new(-0.3, 0.01, 0.06), 0.25, pose);
+}
+
+#[test]
+fn same_seed_same_bytes_other_seed_other_noise() {
+    let cam = Pinhole::new(500.0, 160, 120);
+    let t_wc = camera_pose(Vector3::new(-0.5, 0.0, 0.15), 0.1);
+    let scene = carrier_scene();
+    let opts = RenderOptions { seed: 7, ..RenderOptions::default() };
+    let a = render(&scene, &cam, &t_wc, &opts).unwrap();
+    let b = render(&scene, &cam, &t_wc, &opts).unwrap();
+    assert_eq!(a, b);
+    let c = render(&scene, &cam, &t_wc, &RenderOptions { seed: 8, ..opts }).unwrap();
+    let differ = a.data.iter().zip(&c.data).filter(|(x, y)| x != y).count();
+    assert!(differ > a.data.len() / 2, "only {differ} pixels differ");
+    // Without noise the seed does not matter.
+    let quiet = RenderOptions { noise_sigma: 0.0, ..opts };
+    let d = render(&scene, &cam, &t_wc, &quiet).unwrap();
+    let e = render(&scene, &cam, &t_wc, &RenderOptions { seed: 8, ..quiet }).unwrap();
+    assert_eq!(d, e);
+}
+
+#[test]
+fn wafer_hidden_behind_another_is_not_visible() {
+    let cam = Pinhole::new(800.0, 640, 480);
+    // Camera exactly in the wafers' plane: the front wafer hides the one behind it.
+    let t_wc = camera_pose(Vector3::new(-0.6, 0.0, 0.0), 0.0);
+    let front = Isometry3::identity();
+    let back = Isometry3::translation(0.5, 0.0, 0.0);
+    let shape = WaferShape::default();
+    let both = Scene { wafers: vec![front, back], shape, carrier: None };
+    let truth = rim_visibility(&both, &cam, &t_wc, 360).unwrap();
+    assert_eq!(truth.len(), 4);
+    for t in &truth[..2] {
+        assert_eq!(t.wafer, 0);
+        assert!(t.fraction > 0.3, "front wafer {:?} fraction {}", t.rim, t.fraction);
+    }
+    for t in &truth[2..] {
+        assert_eq!(t.wafer, 1);
+        assert_eq!(t.fraction, 0.0, "hidden wafer {:?}", t.rim);
+        assert!(t.points.is_empty() && t.intervals.is_empty());
+    }
+    // Alone, the back wafer is visible.
+    let alone = Scene { wafers: vec![back], shape, carrier: None };
+    let truth = rim_visibility(&alone, &cam, &t_wc, 360).unwrap();
+    assert!(truth.iter().all(|t| t.fraction > 0.3));
+}
+
+#[test]
+fn wafer_seen_from_above_shows_whole_upper_rim_and_front_third_of_lower_rim() {
+    let cam = Pinhole::new(400.0, 640, 480);
+    let eye = Vector3::new(-0.3, 0.0, 0.3);
+    // Look at the wafer centre.
+    let t_wc = camera_pose(eye, std::f64::consts::FRAC_PI_4);
+    let scene = Scene { wafers: vec![Isometry3::identity()], shape: WaferShape::default(), carrier: None };
+    let truth = rim_visibility(&scene, &cam, &t_wc, 720).unwrap();
+    let (upper, lower) = (&truth[0], &truth[1]);
+    assert_eq!((upper.rim, lower.rim), (Rim::Upper, Rim::Lower));
+    // The top face faces the camera everywhere: the whole upper rim is visible.
+    assert_eq!(upper.intervals, vec![[0.0, std::f64::consts::TAU]]);
+    assert_eq!(upper.points.len(), 720);
+    // Lower rim: visible where the side face faces the camera, (cos φ, sin φ)·(C − P) > 0,
+    // i.e. −0.3·cos φ > r = 0.15, φ ∈ (2π/3, 4π/3): one third of the circle.
+    assert_eq!(lower.intervals.len(), 1);
+    let [a, b] = lower.intervals[0];
+    let pi = std::f64::consts::PI;
+    assert!((a - 2.0 * pi / 3.0).abs() < 1e-8 && (b - 4.0 * pi / 3.0).abs() < 1e-8, "{a} {b}");
+    assert!((lower.fraction - 1.0 / 3.0).abs() < 1e-8);
+    assert!(lower.side_facing.iter().all(|&s| s));
+    // The visible points lie on the ground-truth ellipse and are the projections of the rim.
+    for rt in &truth {
+        let e = rt.ellipse.unwrap();
+        for (p, phi) in rt.points.iter().zip(&rt.angles) {
+            assert!(e.orthogonal_distance(p).abs() < 1e-6);
+            let h = if rt.rim == Rim::Upper { 0.0005 } else { -0.0005 };
+            let pc = t_wc.inverse() * nalgebra::Point3::new(0.15 * phi.cos(), 0.15 * phi.sin(), h);
+            assert!((cam.project(&pc.coords).unwrap() - p).norm() < 1e-9);
+        }
+    }
+}
+
+#[test]
+fn points_behind_the_camera_are_excluded() {
+    let cam = Pinhole::new(300.0, 640, 480);
+    // Camera over the wafer centre, looking horizontally along +x: half the rim is behind.
+    let t_wc = camera_pose(Vector3::new(0.0, 0.0, 0.05), 0.0);
+    let scene = Scene { wafers: vec![Isometry3::identity()], shape: WaferShape::default(), carrier: None };
+    let truth = rim_visibility(&scene, &cam, &t_wc, 720).unwrap();
+    for rt in &truth {
+        assert!(rt.ellipse.is_none(), "the circle crosses the principal plane");
+        assert!(rt.angles.iter().all(|phi| phi.cos() > 0.0));
+    }
+    assert!(truth[0].fraction > 0.2 && truth[0].fraction < 0.5);
+}
+
+#[test]
+fn bad_inputs_are_errors() {
+    let cam = Pinhole::new(300.0, 64, 48);
+    let t_wc = camera_pose(Vector3::new(-0.5, 0.0, 0.05), 0.0);
+    let ok = Scene { wafers: vec![Isometry3::identity()], shape: WaferShape::default(), carrier: None };
+    let opts = RenderOptions::default();
+    assert!(render(&ok, &cam, &t_wc, &opts).is_ok());
+    for shape in [
+        WaferShape { radius: 0.0, thickness: 0.001 },
+        WaferShape { radius: -0.1, thickness: 0.001 },
+        WaferShape { radius: 0.15, thickness: 0.0 },
+        WaferShape { radius: f64::NAN, thickness: 0.001 },
+    ] {
+        let s = Scene { shape, ..ok.clone() };
+        assert!(render(&s, &cam, &t_wc, &opts).is_err());
+        assert!(rim_visibility(&s, &cam, &t_wc, 100).is_err());
+    }
+    let mut nan = Isometry3::identity();
+    nan.translation.x = f64::NAN;
+    let s = Scene { wafers: vec![nan], ..ok.clone() };
+    assert!(matches!(render(&s, &cam, &t_wc, &opts), Err(GeometryError::AtIndex { index: 0, .. })));
+    assert!(render(&ok, &cam, &nan, &opts).is_err());
+    assert!(rim_visibility(&ok, &cam, &nan, 100).is_err());
+    for (w, h) in [(0, 48), (64, 0)] {
+        let c = Pinhole { w, h, ..Pinhole::new(300.0, 64, 48) };
+        assert!(render(&ok, &c, &t_wc, &opts).is_err());
+        assert!(rim_visibility(&ok, &c, &t_wc, 100).is_err());
+    }
+    assert!(rim_visibility(&ok, &cam, &t_wc, 2).is_err());
+    for bad in [
+        RenderOptions { supersample: 0, ..opts },
+        RenderOptions { noise_sigma: -1.0, ..opts },
+        RenderOptions { gain: f64::NAN, ..opts },
+        RenderOptions { blur_sigma: f64::INFINITY, ..opts },
+    ] {
+        assert!(render(&ok, &cam, &t_wc, &bad).is_err());
+    }
+    let bad_carrier = Scene { carrier: Some(Carrier { pitch: 0.0, ..Carrier::default() }), ..ok.clone() };
+    assert!(render(&bad_carrier, &cam, &t_wc, &opts).is_err());
+    assert!(rim_points_visible(&ok, &cam, &t_wc, 1, Rim::Upper, &[0.0]).is_err());
+    assert!(rim_points_visible(&ok, &cam, &t_wc, 0, Rim::Upper, &[f64::NAN]).is_err());
+}
+
+#[test]
+#[ignore]
+fn stats() {
+    let cam = Pinhole::new(1000.0, 1280, 720);
+    let t_wc = camera_pose(Vector3::new(-0.38, 0.03, 0.13), 0.08);
+    for refl in [0.3, 0.0, 0.3, 0.0] {
+        let t = std::time::Instant::now();
+        let opts = RenderOptions { shading: Shading { reflectivity: refl, ..Shading::default() }, ..RenderOptions::default() };
+        let img = render(&carrier_scene(), &cam, &t_wc, &opts).unwrap();
+        eprintln!("time {:?} refl {refl}", t.elapsed());
+    }
+    let img = 0;
+    let _ = img;
+}
+
+#[test]
+#[ignore]
+fn tile_stats() {
+    let cam = Pinhole::new(1000.0, 1280, 720);
+    let t_wc = camera_pose(Vector3::new(-0.38, 0.03, 0.13), 0.08);
+    let scene = carrier_scene();
+    let prep = trace::Prepared::new(&scene, &t_wc, Shading::default());
+    let tiles = raster::Tiles::new(&prep, &cam, &t_wc);
+    let n: usize = tiles.lists.iter().map(|l| l.len()).sum();
+    eprintln!("prims {} tiles {} mean list {:.1}", prep.prims.len(), tiles.lists.len(), n as f64 / tiles.lists.len() as f64);
+    let m: usize = prep.mirror.iter().map(|l| l[0].len() + l[1].len()).sum();
+    eprintln!("mirror lists mean {:.1}", m as f64 / (2 * prep.mirror.len()) as f64);
+    for l in tiles.lists.iter().step_by(397).take(8) {
+        eprintln!("{:?}", l.iter().map(|c| (c.prim, (c.dmin * 1000.0) as i32)).collect::<Vec<_>>());
+    }
+}

@@ -1,0 +1,347 @@
+"""Type stubs of the compiled module ``autoteach._core`` (Rust, PyO3).
+
+The compiled functions take float64 NumPy arrays only (the friendly wrappers in
+:mod:`autoteach.geometry` and the other submodules convert lists and other dtypes first) and
+validate shapes and finiteness, raising :class:`InvalidInputError` naming the argument.
+Each section below belongs to one binding module of ``crates/py/src``.
+"""
+
+from collections.abc import Mapping
+from typing import Literal, TypeAlias
+
+import numpy as np
+from numpy.typing import NDArray
+
+F64Array: TypeAlias = NDArray[np.float64]
+
+__version__: str
+
+# --- errors ---
+
+class AutoteachError(Exception):
+    """Base class of every error raised by autoteach."""
+
+class InvalidInputError(AutoteachError, ValueError):
+    """An input has the wrong shape, dtype, a NaN/inf, or an invalid value."""
+
+class DegenerateGeometryError(AutoteachError, ValueError):
+    """The data are geometrically degenerate (collinear points, a degenerate conic, ...)."""
+
+class UnreachablePoseError(AutoteachError, ValueError):
+    """A requested robot pose cannot be reached."""
+
+class ConvergenceError(AutoteachError, RuntimeError):
+    """An iterative computation did not converge."""
+
+class InternalError(AutoteachError, RuntimeError):
+    """A bug inside autoteach (a Rust panic caught at the Python boundary)."""
+
+# --- geometry ---
+
+def so3_exp(omega: F64Array) -> F64Array:
+    """Rotation matrices ``Exp(omega)``: ``(..., 3)`` -> ``(..., 3, 3)``."""
+
+def so3_log(R: F64Array) -> F64Array:
+    """Rotation vectors ``Log(R)``: ``(..., 3, 3)`` -> ``(..., 3)``."""
+
+def se3_exp(xi: F64Array) -> F64Array:
+    """Poses ``Exp(xi)``, ``xi = [omega; rho]``: ``(..., 6)`` -> ``(..., 4, 4)``."""
+
+def se3_log(T: F64Array) -> F64Array:
+    """Twists ``Log(T)``: ``(..., 4, 4)`` -> ``(..., 6)``."""
+
+def se3_plus(T: F64Array, xi: F64Array) -> F64Array:
+    """``T ⊕ xi = T·Exp(xi)``; equal leading shapes: ``(..., 4, 4)``, ``(..., 6)`` -> ``(..., 4, 4)``."""
+
+def se3_minus(Y: F64Array, X: F64Array) -> F64Array:
+    """``Y ⊖ X = Log(X⁻¹·Y)``; equal leading shapes: ``(..., 4, 4)`` x2 -> ``(..., 6)``."""
+
+def quat_to_matrix(q: F64Array) -> F64Array:
+    """Rotation matrices of quaternions ``(w, x, y, z)``: ``(..., 4)`` -> ``(..., 3, 3)``."""
+
+def matrix_to_quat(R: F64Array) -> F64Array:
+    """Quaternions ``(w, x, y, z)`` with ``w >= 0``: ``(..., 3, 3)`` -> ``(..., 4)``."""
+
+def euler_zyx_to_matrix(angles: F64Array) -> F64Array:
+    """``Rz(yaw)·Ry(pitch)·Rx(roll)`` of ``(yaw, pitch, roll)``: ``(..., 3)`` -> ``(..., 3, 3)``."""
+
+def matrix_to_euler_zyx(R: F64Array) -> F64Array:
+    """``(yaw, pitch, roll)`` of rotation matrices: ``(..., 3, 3)`` -> ``(..., 3)``."""
+
+def euler_xyz_to_matrix(angles: F64Array) -> F64Array:
+    """``Rx(a)·Ry(b)·Rz(c)`` of ``(a, b, c)``: ``(..., 3)`` -> ``(..., 3, 3)``."""
+
+def matrix_to_euler_xyz(R: F64Array) -> F64Array:
+    """Return ``(a, b, c)`` of rotation matrices ``Rx(a)·Ry(b)·Rz(c)``: ``(..., 3, 3)`` -> ``(..., 3)``."""
+
+def joints_from_encoders(q_enc: F64Array, offsets: F64Array) -> F64Array:
+    """Return the true joints ``q_enc - offsets``: ``(..., 5)``, ``(5,)`` -> ``(..., 5)``."""
+
+class WaferRobot:
+    """The compiled wafer-handling robot; see :class:`autoteach.geometry.WaferRobot`."""
+
+    def __new__(cls, params: Mapping[str, float] | None = None, base: F64Array | None = None) -> WaferRobot: ...
+    @staticmethod
+    def default_params() -> dict[str, float]:
+        """Return the default parameters ``{name: value}``."""
+
+    @property
+    def params(self) -> dict[str, float]:
+        """The parameters ``{name: value}``."""
+
+    @property
+    def base(self) -> F64Array:
+        """The base pose ``T_wb`` (4x4)."""
+
+    def camera_mount(self) -> F64Array:
+        """Return the camera mount ``T_e2c`` (4x4)."""
+
+    def blade_pose(self, q: F64Array, blade: int) -> F64Array:
+        """Blade poses ``T_be`` in the base frame: ``(..., 5)`` -> ``(..., 4, 4)``."""
+
+    def camera_pose(self, q: F64Array) -> F64Array:
+        """World camera poses ``T_wc``: ``(..., 5)`` -> ``(..., 4, 4)``."""
+
+    def camera_pose_in_base(self, q: F64Array) -> F64Array:
+        """Camera poses in the base ``T_bc``: ``(..., 5)`` -> ``(..., 4, 4)``."""
+
+    def jacobian(self, q: F64Array, blade: int) -> F64Array:
+        """Blade Jacobians: ``(..., 5)`` -> ``(..., 4, 5)``."""
+
+    def camera_jacobian(self, q: F64Array) -> F64Array:
+        """Camera-pose Jacobians (right-perturbation twists): ``(..., 5)`` -> ``(..., 6, 5)``."""
+
+    def acceleration(self, q: F64Array, qd: F64Array, qdd: F64Array, blade: int) -> F64Array:
+        """Blade accelerations; equal leading shapes: ``(..., 5)`` x3 -> ``(..., 4)``."""
+
+    def inverse_kinematics(self, T: F64Array, blade: int, other_blade_angle: float) -> F64Array:
+        """All joint vectors reaching the blade pose ``T`` (base frame): ``(k, 5)``."""
+
+    def inverse_kinematics_camera(self, T_wc: F64Array, theta3: float) -> F64Array:
+        """All joint vectors reaching the world camera pose ``T_wc``: ``(k, 5)``."""
+
+class Camera:
+    """The compiled camera model; see :class:`autoteach.geometry.Camera`."""
+
+    def __new__(cls, model: str, params: F64Array, width: int, height: int) -> Camera: ...
+    @property
+    def model(self) -> str:
+        """Canonical model name."""
+
+    @property
+    def params(self) -> F64Array:
+        """Parameters (a copy), ``(n,)``."""
+
+    @property
+    def param_names(self) -> list[str]:
+        """Names of the parameters."""
+
+    @property
+    def width(self) -> int:
+        """Image width (pixels)."""
+
+    @property
+    def height(self) -> int:
+        """Image height (pixels)."""
+
+    @property
+    def K(self) -> F64Array:
+        """Camera matrix (3x3)."""
+
+    def project(self, points: F64Array) -> F64Array:
+        """Pixels of camera-frame points: ``(..., 3)`` -> ``(..., 2)``."""
+
+    def project_jacobians(self, points: F64Array) -> tuple[F64Array, F64Array, F64Array]:
+        """Pixels ``(..., 2)`` and their Jacobians ``(..., 2, 3)`` (point), ``(..., 2, n)`` (params)."""
+
+    def unproject(self, pixels: F64Array) -> F64Array:
+        """Return the unit bearings of pixels: ``(..., 2)`` -> ``(..., 3)``."""
+
+    def in_image(self, pixels: F64Array) -> NDArray[np.bool_]:
+        """Whether pixels lie on the image: ``(..., 2)`` -> ``(...)``; NaN pixels are outside."""
+
+class Ellipse:
+    """The compiled ellipse; see :class:`autoteach.geometry.Ellipse`."""
+
+    def __new__(cls, cx: float, cy: float, a: float, b: float, theta: float) -> Ellipse: ...
+    @staticmethod
+    def from_conic(C: F64Array) -> Ellipse:
+        """Build the ellipse of a 3x3 conic matrix (any scale and sign)."""
+
+    @property
+    def cx(self) -> float:
+        """Centre x."""
+
+    @property
+    def cy(self) -> float:
+        """Centre y."""
+
+    @property
+    def a(self) -> float:
+        """Semi-major axis."""
+
+    @property
+    def b(self) -> float:
+        """Semi-minor axis."""
+
+    @property
+    def theta(self) -> float:
+        """Orientation of the major axis, in ``(-pi/2, pi/2]``."""
+
+    @property
+    def area(self) -> float:
+        """Area ``pi·a·b``."""
+
+    @property
+    def perimeter(self) -> float:
+        """Perimeter."""
+
+    def conic(self) -> F64Array:
+        """Conic matrix (3x3), value -1 at the centre."""
+
+    def conic_coefficients(self) -> F64Array:
+        """Return ``(A, B, C, D, E, F)``, unit norm."""
+
+    def point_at(self, t: F64Array) -> F64Array:
+        """Points at eccentric angles: ``(...)`` -> ``(..., 2)``."""
+
+    def sample(self, n: int, t0: float, t1: float) -> F64Array:
+        """``n >= 2`` points from ``t0`` to ``t1``: ``(n, 2)``."""
+
+    def distance(self, points: F64Array, kind: Literal["orthogonal", "sampson", "algebraic"]) -> F64Array:
+        """Distances of points: ``(..., 2)`` -> ``(...)``."""
+
+    def closest_point(self, points: F64Array) -> F64Array:
+        """Closest points on the ellipse: ``(..., 2)`` -> ``(..., 2)``."""
+
+def circle_image_conic(K: F64Array, T_co: F64Array, radius: float) -> F64Array:
+    """Unit-norm image conic (3x3) of a circle in the object frame's ``z = 0`` plane."""
+
+def project_circle(K: F64Array, T_cw: F64Array, center: F64Array, normal: F64Array, radius: float) -> Ellipse:
+    """Project a world circle to its image ellipse."""
+
+def project_circle_jacobian(K: F64Array, T_co: F64Array, radius: float) -> tuple[Ellipse, F64Array]:
+    """Ellipse of an object-frame circle and its 5x6 Jacobian w.r.t. the right perturbation of ``T_co``."""
+
+# --- render (sim) ---
+# Ray-cast renderer of the simulated wafer carrier and ground truth of the visible rims
+# (crates/geometry/src/render, bindings in crates/py/src/sim.rs). World = carrier frame (z up,
+# opening toward -x, slot k's nominal wafer centre at (0, 0, (k - 1) * 0.010)); poses are 4x4
+# float64 homogeneous matrices; wafer_poses[i] is T_w,wafer (wafer disc between z = +-t/2 of its
+# frame); t_wc is the camera pose (camera -> world; camera z forward, x right, y down). Pixel
+# (u, v) is centred at image position (u, v) (OpenCV convention).
+
+def render_frame(
+    wafer_poses: F64Array,
+    camera_model: str,
+    camera_params: F64Array,
+    width: int,
+    height: int,
+    t_wc: F64Array,
+    *,
+    wafer_radius: float = 0.15,
+    wafer_thickness: float = 0.001,
+    carrier: bool = True,
+    gain: float = 1.0,
+    gradient: tuple[float, float] = (0.0, 0.0),
+    blur_sigma: float = 0.8,
+    noise_sigma: float = 2.0,
+    supersample: int = 4,
+    seed: int = 0,
+) -> NDArray[np.uint8]:
+    """Render one grayscale frame: a ``(height, width)`` uint8 array.
+
+    ``wafer_poses`` is ``(N, 4, 4)``. Bright anti-aliased rim bands (side faces), dark mirror-like
+    top/bottom faces reflecting their neighbours (one bounce), the carrier's walls and slot ridges
+    (``carrier=True``) as clutter. Lighting factor ``gain * (1 + gx * x + gy * y)`` with ``x, y``
+    from -1 (left/top) to 1 (right/bottom), then Gaussian blur ``blur_sigma`` (px), additive
+    Gaussian noise ``noise_sigma`` (grey levels) seeded by ``seed`` (``0 <= seed < 2**64``; same
+    seed, same bytes), rounding. ``supersample`` in 1..16 (s x s rays per edge pixel).
+    Raises InvalidInputError for bad shapes, NaN/inf, non-rigid poses, non-positive sizes.
+    """
+
+def rim_visibility(
+    wafer_poses: F64Array,
+    camera_model: str,
+    camera_params: F64Array,
+    width: int,
+    height: int,
+    t_wc: F64Array,
+    *,
+    wafer_radius: float = 0.15,
+    wafer_thickness: float = 0.001,
+    carrier: bool = True,
+    n_samples: int = 720,
+) -> list[dict[str, object]]:
+    """Ground truth of the visible rims: for each wafer, a dict for its upper then its lower rim.
+
+    Keys: ``wafer`` (int index), ``rim`` (``"upper"``/``"lower"``), ``ellipse`` ((5,) ``[cx, cy, a, b,
+    theta]`` of the whole rim circle under the camera's pinhole part ``K``, or ``None`` if its image
+    is not an ellipse), ``intervals`` ((k, 2) visible circle-angle intervals ``[phi0, phi1]``, radians,
+    wafer frame, ``0 <= phi0 < 2*pi``, ``phi0 < phi1 <= phi0 + 2*pi``; ends refined to 1e-9 rad),
+    ``fraction`` (visible length / 2*pi), ``points`` ((m, 2) pixel positions of the visible samples
+    ``phi_j = 2*pi*j/n_samples``), ``angles`` ((m,) their phi), ``side_facing`` ((m,) bool: the
+    bright side face faces the camera there; where False the rim is only the low-contrast silhouette
+    of the dark top/bottom face).
+
+    A rim point is visible iff it is in front of the camera, projects inside the image, one of its
+    two adjacent faces faces the camera, and nothing (other wafers, carrier, the wafer itself) lies
+    on the segment from the camera centre to it.
+    """
+
+def rim_points_visible(
+    wafer_poses: F64Array,
+    camera_model: str,
+    camera_params: F64Array,
+    width: int,
+    height: int,
+    t_wc: F64Array,
+    wafer: int,
+    rim: Literal["upper", "lower"],
+    angles: F64Array,
+    *,
+    wafer_radius: float = 0.15,
+    wafer_thickness: float = 0.001,
+    carrier: bool = True,
+) -> NDArray[np.bool_]:
+    """Visibility (the test of :func:`rim_visibility`) of the rim points at circle angles ``angles`` (n,)."""
+
+# --- detect ---
+
+class EllipseFit:
+    """The compiled ellipse fit; see :class:`autoteach.detect.EllipseFit`."""
+
+    @property
+    def ellipse(self) -> Ellipse:
+        """The fitted ellipse."""
+
+    @property
+    def residual(self) -> float:
+        """Mean absolute orthogonal distance (pixels)."""
+
+    @property
+    def rms(self) -> float:
+        """RMS orthogonal distance (pixels)."""
+
+    @property
+    def covariance(self) -> F64Array | None:
+        """Covariance of ``(cx, cy, a, b, theta)``, (5, 5), or ``None`` for exactly 5 points."""
+
+    @property
+    def iterations(self) -> int:
+        """Levenberg–Marquardt iterations (0 for the direct fit)."""
+
+    @property
+    def converged(self) -> bool:
+        """Whether the iteration met its tolerance."""
+
+def fit_ellipse(points: F64Array, method: Literal["direct", "geometric"] = "geometric") -> EllipseFit:
+    """Fit an ellipse to points (N, 2); see :func:`autoteach.detect.fit_ellipse`."""
+
+def linear_sum_assignment(cost: F64Array, maximize: bool = False) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Linear assignment (rows, cols); see :func:`autoteach.detect.linear_sum_assignment`."""
+
+def assign_with_unassigned(
+    cost: F64Array, row_unassigned_cost: F64Array, col_unassigned_cost: F64Array
+) -> tuple[NDArray[np.intp], NDArray[np.intp], float]:
+    """Assignment with non-assignment costs; see :func:`autoteach.detect.assign_with_unassigned`."""

@@ -1,0 +1,211 @@
+"""The ``autoteach`` command line.
+
+Commands::
+
+    autoteach simulate --seed 7 --frames 200 --out session.mcap   # simulate and write a log
+    autoteach demo [--seed N] [--frames N] [--out DIR] [--json]  # simulate, write, summarise
+    autoteach info LOG.mcap [--json]                              # describe a log
+
+User errors (bad arguments, unreadable logs, invalid configurations) print one line to stderr
+and exit with status 2; progress bars go to stderr and are off when it is not a terminal or with
+``--quiet``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from autoteach.errors import AutoteachError, InternalError
+
+EXIT_USER_ERROR = 2
+
+
+def _progress_enabled(args: argparse.Namespace) -> bool:
+    return not args.quiet and sys.stderr.isatty()
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {value}")
+    return value
+
+
+def _frames(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"frames must be a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"frames must be a positive integer, got {value}")
+    return value
+
+
+def _parser() -> argparse.ArgumentParser:
+    from autoteach import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="autoteach",
+        description="Robust perception and self-calibration for camera-carrying robots (hand-eye auto-teaching).",
+    )
+    parser.add_argument("--version", action="version", version=f"autoteach {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    common.add_argument("--quiet", "-q", action="store_true", help="no progress bars")
+
+    sim = sub.add_parser("simulate", parents=[common], help="simulate a robot session and write it to an MCAP log")
+    sim.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
+    sim.add_argument("--frames", type=_frames, default=200, help="number of frames (default 200)")
+    sim.add_argument("--out", type=Path, required=True, help="output MCAP file")
+    sim.add_argument(
+        "--compression", choices=("zstd", "lz4", "none"), default="zstd", help="chunk compression (default zstd)"
+    )
+
+    demo = sub.add_parser(
+        "demo", parents=[common], help="simulate a session, write it to the report folder and print a summary"
+    )
+    demo.add_argument("--seed", type=_seed, default=7, help="random seed (default 7)")
+    demo.add_argument("--frames", type=_frames, default=200, help="number of frames (default 200)")
+    demo.add_argument(
+        "--out", type=Path, default=Path("autoteach-report"), help="report folder (default ./autoteach-report)"
+    )
+
+    info = sub.add_parser("info", parents=[common], help="describe an MCAP session log")
+    info.add_argument("log", type=Path, help="the MCAP file")
+    return parser
+
+
+def _simulate_and_write(args: argparse.Namespace, out: Path) -> tuple[Any, dict[str, Any]]:
+    from autoteach.io import write_log
+    from autoteach.sim import simulate_session
+
+    progress = _progress_enabled(args)
+    session = simulate_session(seed=args.seed, frames=args.frames, progress=progress)
+    t0 = time.perf_counter()
+    compression = getattr(args, "compression", "zstd")
+    write_log(session, out, compression=None if compression == "none" else compression, progress=progress)
+    session.timings["write_s"] = time.perf_counter() - t0
+    summary = session.summary()
+    summary["log"] = str(out)
+    summary["log_bytes"] = out.stat().st_size
+    return session, summary
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    _, summary = _simulate_and_write(args, args.out)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(
+            f"wrote {summary['log']}: {summary['frames']} frames, {summary.get('wafers', 0)} wafers, "
+            f"{summary['log_bytes'] / 1e6:.1f} MB in {sum(summary['timings_s'].values()):.1f} s"
+        )
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    args.out.mkdir(parents=True, exist_ok=True)
+    out = args.out / f"session_seed{args.seed}.mcap"
+    _, summary = _simulate_and_write(args, out)
+    summary_path = args.out / f"session_seed{args.seed}.json"
+    summary_path.write_text(json.dumps(summary, indent=2) + "\n")
+    summary["summary_file"] = str(summary_path)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(format_summary(summary))
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from autoteach.io import log_info
+
+    info = log_info(args.log)
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    lines = [f"{info['path']}: {info['bytes'] / 1e6:.1f} MB, {info['messages']} messages", "", "channels:"]
+    width = max(len(c["topic"]) for c in info["channels"])
+    for c in info["channels"]:
+        lines.append(f"  {c['topic']:<{width}}  {c['messages']:>6} msgs  {c['schema']} ({c['message_encoding']})")
+    lines.append("")
+    lines.append(format_summary(info))
+    print("\n".join(lines))
+    return 0
+
+
+def format_summary(s: dict[str, Any]) -> str:
+    """Format a :meth:`Session.summary` dict as a human-readable table."""
+    w, h = s["image_size"]
+    rate = s.get("frame_rate_hz")
+    lines = [
+        f"session: {s['frames']} frames of {w}x{h} over {s['duration_s']:.1f} s"
+        + (f" at {rate:g} Hz" if rate else "")
+        + (f", seed {s['seed']}" if s.get("seed") is not None else ""),
+        f"camera:  {s['camera']['model']} {', '.join(f'{p:g}' for p in s['camera']['params'])}",
+    ]
+    if "log" in s:
+        lines.append(f"log:     {s['log']} ({s['log_bytes'] / 1e6:.1f} MB)")
+    if not s.get("ground_truth"):
+        lines.append("ground truth: none (a real robot log)")
+        return "\n".join(lines)
+    cal = s.get("calibration")
+    if cal:
+        offs = ", ".join(f"{v:+.3f}" for v in cal["joint_offsets_deg"])
+        pos = ", ".join(f"{v:+.4f}" for v in cal["base_position_m"])
+        rpy = ", ".join(f"{v:+.3f}" for v in cal["base_rpy_deg"])
+        lines += [
+            "true calibration:",
+            f"  joint zero offsets θ1..θ4 [deg]: {offs}; lift offset {cal['lift_offset_m'] * 1e3:+.3f} mm",
+            f"  base position [m]: ({pos}); roll, pitch, yaw [deg]: ({rpy})",
+        ]
+    vis = s.get("visibility", [])
+    tilts = s.get("wafer_tilt_deg", [])
+    if vis:
+        lines += ["wafers:", "  slot  tilt[deg]  frames visible  mean visible fraction upper / lower"]
+        for v in vis:
+            tilt = tilts[v["wafer"]] if v["wafer"] < len(tilts) else math.nan
+            share = v["frames_visible"] / max(s["frames"], 1)
+            lines.append(
+                f"  {v['slot']:>4}  {tilt:>9.3f}  {v['frames_visible']:>6} ({share:>4.0%})"
+                f"   {v['mean_fraction_upper']:.2f} / {v['mean_fraction_lower']:.2f}"
+            )
+    timings = s.get("timings_s")
+    if timings:
+        lines.append("timing [s]: " + ", ".join(f"{k.removesuffix('_s')} {v:.2f}" for k, v in timings.items()))
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status (0 ok, 2 user error, 1 internal error)."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    commands = {"simulate": _cmd_simulate, "demo": _cmd_demo, "info": _cmd_info}
+    try:
+        return commands[args.command](args)
+    except InternalError as exc:
+        print(f"autoteach: internal error (please report): {exc}", file=sys.stderr)
+        return 1
+    except (AutoteachError, OSError) as exc:
+        print(f"autoteach: error: {exc}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print("autoteach: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,866 @@
+"""MCAP session logs: :func:`write_log` stores a :class:`~autoteach.sim.Session`, :func:`read_log` reads it back.
+
+Channels (all schemas open in Foxglove):
+
+=============================  ==========================  =========  =====================================
+topic                          schema                      encoding   content
+=============================  ==========================  =========  =====================================
+``/session``                   ``autoteach.Session``       json       once: camera intrinsics, joint names,
+                                                                      frame rate, number of frames
+``/camera/image``              ``sensor_msgs/msg/Image``   cdr        per frame: ``mono8`` image
+``/joint_states``              ``sensor_msgs/msg/JointState`` cdr     per frame: encoder readings
+``/ground_truth/scene``        ``autoteach.GroundTruthScene`` json    once: seed, config, wafer poses and
+                                                                      slots, calibration
+``/ground_truth/joint_states`` ``sensor_msgs/msg/JointState`` cdr     per frame: true joints
+``/ground_truth/camera_pose``  ``foxglove.PoseInFrame``    json       per frame: ``T_wc`` (plus the exact
+                                                                      row-major matrix in ``matrix``)
+``/ground_truth/rims``         ``autoteach.VisibleRims``   json       per frame: visible rim records
+=============================  ==========================  =========  =====================================
+
+The ``/session``, ``/camera/image`` and ``/joint_states`` channels are required; logs of a real robot
+have no ``/ground_truth/*`` channels and read back with ``None`` ground truth. Values round-trip
+bit-exactly: images and joints are raw bytes in the CDR messages, JSON floats are written with
+``repr`` precision and arrays of rim points as base64 of little-endian float64.
+
+The ROS 2 messages are encoded by hand (little-endian plain CDR with the 4-byte encapsulation
+header; primitives aligned to their size relative to the end of that header), so no ROS
+installation is needed.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import struct
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from autoteach.errors import InvalidInputError, LogReadError
+from autoteach.sim.config import SimConfig
+from autoteach.sim.session import Calibration, CameraInfo, Session
+
+__all__ = ["FORMAT_VERSION", "TOPICS", "LogReadError", "Session", "log_info", "read_log", "write_log"]
+
+#: Version of the autoteach log layout written into the ``/session`` message.
+FORMAT_VERSION = 1
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+TOPIC_SESSION = "/session"
+TOPIC_IMAGE = "/camera/image"
+TOPIC_JOINTS = "/joint_states"
+TOPIC_SCENE = "/ground_truth/scene"
+TOPIC_JOINTS_TRUE = "/ground_truth/joint_states"
+TOPIC_CAMERA_POSE = "/ground_truth/camera_pose"
+TOPIC_RIMS = "/ground_truth/rims"
+
+#: Every topic of a session log with its (schema name, schema encoding, message encoding).
+TOPICS: dict[str, tuple[str, str, str]] = {
+    TOPIC_SESSION: ("autoteach.Session", "jsonschema", "json"),
+    TOPIC_IMAGE: ("sensor_msgs/msg/Image", "ros2msg", "cdr"),
+    TOPIC_JOINTS: ("sensor_msgs/msg/JointState", "ros2msg", "cdr"),
+    TOPIC_SCENE: ("autoteach.GroundTruthScene", "jsonschema", "json"),
+    TOPIC_JOINTS_TRUE: ("sensor_msgs/msg/JointState", "ros2msg", "cdr"),
+    TOPIC_CAMERA_POSE: ("foxglove.PoseInFrame", "jsonschema", "json"),
+    TOPIC_RIMS: ("autoteach.VisibleRims", "jsonschema", "json"),
+}
+REQUIRED_TOPICS = (TOPIC_SESSION, TOPIC_IMAGE, TOPIC_JOINTS)
+GROUND_TRUTH_FRAME_TOPICS = (TOPIC_JOINTS_TRUE, TOPIC_CAMERA_POSE, TOPIC_RIMS)
+
+_SEP = "=" * 80
+_TIME_MSG = "int32 sec\nuint32 nanosec\n"
+_HEADER_MSG = "builtin_interfaces/Time stamp\nstring frame_id\n"
+_ROS2_DEPS = f"\n{_SEP}\nMSG: std_msgs/Header\n{_HEADER_MSG}\n{_SEP}\nMSG: builtin_interfaces/Time\n{_TIME_MSG}"
+_IMAGE_MSG = (
+    "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\n"
+    "uint8[] data\n" + _ROS2_DEPS
+)
+_JOINT_STATE_MSG = (
+    "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n" + _ROS2_DEPS
+)
+_TIME_SCHEMA = {
+    "type": "object",
+    "title": "time",
+    "properties": {
+        "sec": {"type": "integer", "minimum": 0},
+        "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
+    },
+}
+_VEC3 = {"type": "object", "properties": {k: {"type": "number"} for k in "xyz"}}
+_POSE_SCHEMA = {
+    "title": "foxglove.PoseInFrame",
+    "description": "Ground-truth camera pose T_wc in the world (carrier) frame.",
+    "type": "object",
+    "properties": {
+        "timestamp": _TIME_SCHEMA,
+        "frame_id": {"type": "string"},
+        "pose": {
+            "title": "foxglove.Pose",
+            "type": "object",
+            "properties": {
+                "position": {"title": "foxglove.Vector3", **_VEC3},
+                "orientation": {
+                    "title": "foxglove.Quaternion",
+                    "type": "object",
+                    "properties": {k: {"type": "number"} for k in "xyzw"},
+                },
+            },
+        },
+        "matrix": {
+            "description": "The exact 4x4 T_wc, row-major",
+            "type": "array",
+            "items": {"type": "number"},
+            "minItems": 16,
+            "maxItems": 16,
+        },
+    },
+}
+_ARRAY_SCHEMA = {
+    "type": "object",
+    "description": "An array: base64 of its raw bytes (dtype '<f8' or '|b1'), with its shape",
+    "properties": {"dtype": {"type": "string"}, "shape": {"type": "array"}, "data": {"type": "string"}},
+}
+_RIMS_SCHEMA = {
+    "title": "autoteach.VisibleRims",
+    "description": "Ground truth: the visible part of every wafer rim ellipse in one image.",
+    "type": "object",
+    "properties": {
+        "timestamp": _TIME_SCHEMA,
+        "frame": {"type": "integer"},
+        "rims": {
+            "type": "array",
+            "items": {
+                "type": "object",
+                "properties": {
+                    "wafer": {"type": "integer"},
+                    "slot": {"type": "integer"},
+                    "rim": {"type": "string", "enum": ["upper", "lower"]},
+                    "ellipse": {
+                        "description": "cx, cy, a, b, theta of the full projected rim (pixels, radians)",
+                        "type": ["array", "null"],
+                        "items": {"type": "number"},
+                    },
+                    "intervals": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}},
+                    "fraction": {"type": "number"},
+                    "points": {**_ARRAY_SCHEMA, "description": "(m, 2) pixel positions of the visible rim samples"},
+                    "angles": {**_ARRAY_SCHEMA, "description": "(m,) circle angles of the visible samples (rad)"},
+                    "side_facing": {
+                        **_ARRAY_SCHEMA,
+                        "description": "(m,) whether the bright side face faces the camera at each sample",
+                    },
+                },
+            },
+        },
+    },
+}
+_SESSION_SCHEMA = {
+    "title": "autoteach.Session",
+    "description": "Session metadata: camera intrinsics, joint names, frame rate and frame count.",
+    "type": "object",
+    "properties": {
+        "format": {"type": "string", "const": "autoteach.session"},
+        "version": {"type": "integer"},
+        "camera": {"type": "object"},
+        "joint_names": {"type": "array", "items": {"type": "string"}},
+        "frame_rate_hz": {"type": ["number", "null"]},
+        "frames": {"type": "integer"},
+    },
+}
+_SCENE_SCHEMA = {
+    "title": "autoteach.GroundTruthScene",
+    "description": "Ground truth: seed, simulation config, wafer poses and slots, calibration parameters.",
+    "type": "object",
+    "properties": {
+        "seed": {"type": ["integer", "null"]},
+        "config": {"type": ["object", "null"]},
+        "wafer_slots": {"type": "array", "items": {"type": "integer"}},
+        "wafer_poses": {"type": "array"},
+        "calibration": {"type": ["object", "null"]},
+    },
+}
+_SCHEMA_DATA: dict[str, bytes] = {
+    "autoteach.Session": json.dumps(_SESSION_SCHEMA).encode(),
+    "sensor_msgs/msg/Image": _IMAGE_MSG.encode(),
+    "sensor_msgs/msg/JointState": _JOINT_STATE_MSG.encode(),
+    "autoteach.GroundTruthScene": json.dumps(_SCENE_SCHEMA).encode(),
+    "foxglove.PoseInFrame": json.dumps(_POSE_SCHEMA).encode(),
+    "autoteach.VisibleRims": json.dumps(_RIMS_SCHEMA).encode(),
+}
+
+_COMPRESSION = ("zstd", "lz4", None, "none")
+
+# Chunks of about one frame: a log cut short (a crash while recording) loses only its last frames
+# when read with ``allow_truncated=True``, and a reader can seek to any frame.
+_CHUNK_SIZE = 128 * 1024
+
+
+# --------------------------------------------------------------------------------------------
+# CDR (little-endian, plain CDR as used by ROS 2)
+# --------------------------------------------------------------------------------------------
+
+
+class _CdrError(ValueError):
+    """A CDR message that cannot be decoded."""
+
+
+class _CdrWriter:
+    def __init__(self) -> None:
+        self.buf = bytearray(b"\x00\x01\x00\x00")  # encapsulation: CDR_LE, options 0
+
+    def _align(self, n: int) -> None:
+        self.buf += b"\x00" * ((-(len(self.buf) - 4)) % n)
+
+    def u8(self, v: int) -> None:
+        self.buf += struct.pack("<B", v)
+
+    def u32(self, v: int) -> None:
+        self._align(4)
+        self.buf += struct.pack("<I", v)
+
+    def time(self, t_ns: int) -> None:
+        sec, nsec = divmod(int(t_ns), 1_000_000_000)
+        self._align(4)
+        self.buf += struct.pack("<iI", sec, nsec)
+
+    def string(self, s: str) -> None:
+        b = s.encode("utf-8") + b"\x00"
+        self.u32(len(b))
+        self.buf += b
+
+    def strings(self, items: tuple[str, ...] | list[str]) -> None:
+        self.u32(len(items))
+        for s in items:
+            self.string(s)
+
+    def f64s(self, values: np.ndarray) -> None:
+        a = np.ascontiguousarray(values, dtype="<f8")
+        self.u32(a.size)
+        if a.size:
+            self._align(8)
+            self.buf += a.tobytes()
+
+    def u8s(self, data: bytes | memoryview) -> None:
+        self.u32(len(data))
+        self.buf += data
+
+
+class _CdrReader:
+    def __init__(self, data: bytes | memoryview) -> None:
+        self.data = memoryview(data)
+        if len(self.data) < 4:
+            raise _CdrError(f"message of {len(self.data)} bytes is shorter than the CDR encapsulation header")
+        kind = bytes(self.data[:2])
+        if kind != b"\x00\x01":
+            raise _CdrError(f"unsupported CDR encapsulation {kind.hex()} (only little-endian plain CDR 0001 is read)")
+        self.pos = 4
+
+    def _align(self, n: int) -> None:
+        self.pos += (-(self.pos - 4)) % n
+
+    def _take(self, n: int) -> memoryview:
+        if n < 0 or self.pos + n > len(self.data):
+            raise _CdrError(f"message ends at byte {len(self.data)} but {n} more bytes are needed at byte {self.pos}")
+        out = self.data[self.pos : self.pos + n]
+        self.pos += n
+        return out
+
+    def u8(self) -> int:
+        return self._take(1)[0]
+
+    def u32(self) -> int:
+        self._align(4)
+        return struct.unpack("<I", self._take(4))[0]
+
+    def time(self) -> int:
+        self._align(4)
+        sec, nsec = struct.unpack("<iI", self._take(8))
+        return sec * 1_000_000_000 + nsec
+
+    def string(self) -> str:
+        n = self.u32()
+        raw = bytes(self._take(n))
+        if n == 0 or raw[-1] != 0:
+            raise _CdrError("CDR string is not NUL-terminated")
+        return raw[:-1].decode("utf-8")
+
+    def strings(self) -> list[str]:
+        return [self.string() for _ in range(self._count(4))]
+
+    def _count(self, min_size: int) -> int:
+        n = self.u32()
+        if n * min_size > len(self.data) - self.pos:
+            raise _CdrError(f"sequence of {n} elements does not fit in the remaining {len(self.data) - self.pos} bytes")
+        return n
+
+    def f64s(self) -> np.ndarray:
+        n = self._count(8)
+        if n:
+            self._align(8)
+        return np.frombuffer(self._take(8 * n), dtype="<f8").astype(np.float64)
+
+    def u8s(self) -> memoryview:
+        return self._take(self._count(1))
+
+
+def _encode_image(t_ns: int, image: np.ndarray) -> bytes:
+    h, w = image.shape
+    c = _CdrWriter()
+    c.time(t_ns)
+    c.string("camera")
+    c.u32(h)
+    c.u32(w)
+    c.string("mono8")
+    c.u8(0)
+    c.u32(w)
+    c.u8s(np.ascontiguousarray(image, dtype=np.uint8).data.cast("B"))
+    return bytes(c.buf)
+
+
+def _decode_image(data: bytes) -> np.ndarray:
+    r = _CdrReader(data)
+    r.time()
+    r.string()
+    h, w = r.u32(), r.u32()
+    enc = r.string()
+    r.u8()
+    step = r.u32()
+    pixels = r.u8s()
+    if enc not in ("mono8", "8UC1"):
+        raise _CdrError(f"image encoding {enc!r} is not supported (need mono8)")
+    if step < w or len(pixels) != h * step:
+        raise _CdrError(f"image of {h}x{w} with step {step} cannot hold {len(pixels)} bytes")
+    return np.frombuffer(pixels, dtype=np.uint8).reshape(h, step)[:, :w]
+
+
+def _encode_joint_state(t_ns: int, names: tuple[str, ...], position: np.ndarray) -> bytes:
+    c = _CdrWriter()
+    c.time(t_ns)
+    c.string("base")
+    c.strings(names)
+    c.f64s(position)
+    c.f64s(np.zeros(0))
+    c.f64s(np.zeros(0))
+    return bytes(c.buf)
+
+
+def _decode_joint_state(data: bytes) -> tuple[list[str], np.ndarray]:
+    r = _CdrReader(data)
+    r.time()
+    r.string()
+    names = r.strings()
+    position = r.f64s()
+    if len(position) != len(names):
+        raise _CdrError(f"JointState has {len(names)} names but {len(position)} positions")
+    return names, position
+
+
+# --------------------------------------------------------------------------------------------
+# JSON helpers
+# --------------------------------------------------------------------------------------------
+
+
+def _stamp(t_ns: int) -> dict[str, int]:
+    sec, nsec = divmod(int(t_ns), 1_000_000_000)
+    return {"sec": sec, "nsec": nsec}
+
+
+_JSON_ARRAY_DTYPES = {"<f8": np.float64, "|b1": np.bool_}
+
+
+def _array_to_json(a: np.ndarray) -> dict[str, Any]:
+    dtype = "|b1" if np.asarray(a).dtype == np.bool_ else "<f8"
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return {"dtype": dtype, "shape": list(a.shape), "data": base64.b64encode(a.tobytes()).decode("ascii")}
+
+
+def _array_from_json(d: dict[str, Any]) -> np.ndarray:
+    dtype = d.get("dtype")
+    if dtype not in _JSON_ARRAY_DTYPES:
+        raise ValueError(f"array dtype must be one of {sorted(_JSON_ARRAY_DTYPES)}, got {dtype!r}")
+    raw = base64.b64decode(d["data"], validate=True)
+    shape = tuple(int(s) for s in d["shape"])
+    itemsize = np.dtype(dtype).itemsize
+    if int(np.prod(shape)) * itemsize != len(raw):
+        raise ValueError(f"array of shape {shape} and dtype {dtype} cannot hold {len(raw)} bytes")
+    return np.frombuffer(raw, dtype=dtype).astype(_JSON_ARRAY_DTYPES[dtype]).reshape(shape)
+
+
+def _quaternion(r: np.ndarray) -> tuple[float, float, float, float]:
+    """Return the unit quaternion (x, y, z, w) of a rotation matrix (Shepperd's method)."""
+    tr = float(np.trace(r))
+    if tr > 0.0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k])
+        v = [0.0, 0.0, 0.0]
+        v[i] = 0.25 * s
+        v[j] = (r[j, i] + r[i, j]) / s
+        v[k] = (r[k, i] + r[i, k]) / s
+        q = v[0], v[1], v[2], (r[k, j] - r[j, k]) / s
+    return tuple(float(x) for x in q)  # type: ignore[return-value]
+
+
+def _pose_json(t_ns: int, t_wc: np.ndarray) -> bytes:
+    qx, qy, qz, qw = _quaternion(t_wc[:3, :3])
+    msg = {
+        "timestamp": _stamp(t_ns),
+        "frame_id": "world",
+        "pose": {
+            "position": {"x": float(t_wc[0, 3]), "y": float(t_wc[1, 3]), "z": float(t_wc[2, 3])},
+            "orientation": {"x": qx, "y": qy, "z": qz, "w": qw},
+        },
+        "matrix": [float(v) for v in t_wc.reshape(16)],
+    }
+    return json.dumps(msg, allow_nan=False).encode()
+
+
+def _rim_to_json(r: dict[str, Any]) -> dict[str, Any]:
+    ell = r["ellipse"]
+    return {
+        "wafer": int(r["wafer"]),
+        "slot": int(r["slot"]),
+        "rim": str(r["rim"]),
+        "ellipse": None if ell is None else [float(v) for v in np.asarray(ell).reshape(5)],
+        "intervals": np.asarray(r["intervals"], dtype=np.float64).reshape(-1, 2).tolist(),
+        "fraction": float(r["fraction"]),
+        "points": _array_to_json(np.asarray(r["points"], dtype=np.float64).reshape(-1, 2)),
+        "angles": _array_to_json(np.asarray(r["angles"], dtype=np.float64).reshape(-1)),
+        "side_facing": _array_to_json(np.asarray(r["side_facing"], dtype=np.bool_).reshape(-1)),
+    }
+
+
+def _rim_from_json(d: dict[str, Any]) -> dict[str, Any]:
+    ell = d["ellipse"]
+    rim = str(d["rim"])
+    if rim not in ("upper", "lower"):
+        raise ValueError(f"rim must be 'upper' or 'lower', got {rim!r}")
+    return {
+        "wafer": int(d["wafer"]),
+        "slot": int(d["slot"]),
+        "rim": rim,
+        "ellipse": None if ell is None else np.asarray(ell, dtype=np.float64).reshape(5),
+        "intervals": np.asarray(d["intervals"], dtype=np.float64).reshape(-1, 2),
+        "fraction": float(d["fraction"]),
+        "points": _array_from_json(d["points"]).reshape(-1, 2),
+        "angles": _array_from_json(d["angles"]).reshape(-1),
+        "side_facing": _array_from_json(d["side_facing"]).reshape(-1),
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------------------------
+
+
+def write_log(
+    session: Session,
+    path: str | os.PathLike[str],
+    compression: str | None = "zstd",
+    *,
+    progress: bool = False,
+) -> Path:
+    """Write ``session`` to an MCAP log at ``path`` (the channels of the module docstring).
+
+    Ground-truth channels are written when the session has ground truth. The file is written to
+    ``<path>.part`` and renamed when complete, so an interrupted write never leaves a log that
+    looks finished.
+
+    Args:
+        session: the session to store.
+        path: output file.
+        compression: chunk compression, ``"zstd"`` (default), ``"lz4"`` or ``None``.
+        progress: show a progress bar on stderr.
+
+    Returns:
+        The path written.
+
+    Raises:
+        InvalidInputError: unknown compression or a session that fails :meth:`Session.validate`.
+        OSError: the file cannot be written.
+
+    """
+    from mcap.writer import CompressionType, Writer
+    from tqdm import tqdm
+
+    if compression not in _COMPRESSION:
+        raise InvalidInputError(f"compression must be 'zstd', 'lz4' or None, got {compression!r}")
+    if not isinstance(session, Session):
+        raise InvalidInputError(f"session must be a Session, got {type(session).__name__}")
+    session.validate()
+    if session.n_frames and session.timestamps[0] < 0:
+        raise InvalidInputError("timestamps must be non-negative nanoseconds for MCAP")
+    ctype = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}.get(compression or "", CompressionType.NONE)
+    path = Path(path)
+    part = path.with_name(path.name + ".part")
+    gt = session.has_ground_truth
+    topics = list(REQUIRED_TOPICS) + ([TOPIC_SCENE, *GROUND_TRUTH_FRAME_TOPICS] if gt else [])
+    try:
+        with open(part, "wb") as f:
+            writer = Writer(f, chunk_size=_CHUNK_SIZE, compression=ctype, enable_data_crcs=True)
+            from autoteach import __version__
+
+            writer.start(profile="", library=f"autoteach {__version__}")
+            schema_ids: dict[str, int] = {}
+            channel: dict[str, int] = {}
+            for topic in topics:
+                name, schema_enc, msg_enc = TOPICS[topic]
+                if name not in schema_ids:
+                    schema_ids[name] = writer.register_schema(name=name, encoding=schema_enc, data=_SCHEMA_DATA[name])
+                channel[topic] = writer.register_channel(
+                    topic=topic, message_encoding=msg_enc, schema_id=schema_ids[name]
+                )
+            seq: dict[str, int] = defaultdict(int)
+
+            def add(topic: str, t_ns: int, data: bytes) -> None:
+                writer.add_message(
+                    channel_id=channel[topic], log_time=t_ns, publish_time=t_ns, data=data, sequence=seq[topic]
+                )
+                seq[topic] += 1
+
+            t0 = int(session.timestamps[0]) if session.n_frames else 0
+            meta = {
+                "format": "autoteach.session",
+                "version": FORMAT_VERSION,
+                "camera": session.camera.to_dict(),
+                "joint_names": list(session.joint_names),
+                "frame_rate_hz": session.frame_rate_hz,
+                "frames": session.n_frames,
+            }
+            add(TOPIC_SESSION, t0, json.dumps(meta, allow_nan=False).encode())
+            if gt:
+                scene = {
+                    "seed": session.seed,
+                    "config": None if session.config is None else session.config.to_dict(),
+                    "wafer_slots": [] if session.wafer_slots is None else [int(s) for s in session.wafer_slots],
+                    "wafer_poses": [] if session.wafer_poses is None else session.wafer_poses.tolist(),
+                    "calibration": None if session.calibration is None else session.calibration.to_dict(),
+                }
+                add(TOPIC_SCENE, t0, json.dumps(scene, allow_nan=False).encode())
+            names = tuple(session.joint_names)
+            for i in tqdm(range(session.n_frames), desc="writing", unit="frame", disable=not progress, leave=False):
+                t = int(session.timestamps[i])
+                add(TOPIC_IMAGE, t, _encode_image(t, session.images[i]))
+                add(TOPIC_JOINTS, t, _encode_joint_state(t, names, session.joints_encoder[i]))
+                if not gt:
+                    continue
+                if session.joints_true is not None:
+                    add(TOPIC_JOINTS_TRUE, t, _encode_joint_state(t, names, session.joints_true[i]))
+                add(TOPIC_CAMERA_POSE, t, _pose_json(t, np.asarray(session.camera_poses[i], dtype=np.float64)))
+                if session.rims is not None:
+                    msg = {"timestamp": _stamp(t), "frame": i, "rims": [_rim_to_json(r) for r in session.rims[i]]}
+                    add(TOPIC_RIMS, t, json.dumps(msg, allow_nan=False).encode())
+            writer.finish()
+        os.replace(part, path)
+    except BaseException:
+        part.unlink(missing_ok=True)
+        raise
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
+
+
+class _Scan:
+    """Schemas, channels and messages collected from one pass over an MCAP file."""
+
+    def __init__(self) -> None:
+        self.schemas: dict[int, Any] = {}
+        self.channels: dict[int, Any] = {}
+        self.messages: dict[str, list[tuple[int, bytes]]] = defaultdict(list)
+        self.n_messages = 0
+        self.complete = False
+        self.error: str | None = None
+        self.size = 0
+
+    def topics(self) -> dict[str, tuple[str, str, str]]:
+        out = {}
+        for ch in self.channels.values():
+            schema = self.schemas.get(ch.schema_id)
+            out[ch.topic] = (
+                schema.name if schema else "",
+                schema.encoding if schema else "",
+                ch.message_encoding,
+            )
+        return out
+
+
+def _scan(path: Path) -> _Scan:
+    """Read every record of an MCAP file; record (not raise) where and why reading stopped."""
+    import io
+
+    from mcap.exceptions import EndOfFile, RecordLengthLimitExceeded
+    from mcap.records import Channel, DataEnd, Footer, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise LogReadError(f"cannot read log {path}: {exc.strerror or exc}") from exc
+    scan = _Scan()
+    scan.size = len(data)
+    if data[: len(MCAP_MAGIC)] != MCAP_MAGIC:
+        raise LogReadError(
+            f"{path} is not an MCAP file: it does not start with the MCAP magic bytes "
+            f"(first bytes: {data[:8]!r}, file size {len(data)} bytes)"
+        )
+    buf = io.BytesIO(data)
+    reader = StreamReader(buf, validate_crcs=True, record_size_limit=max(len(data), 1))
+    good = len(MCAP_MAGIC)  # end of the last record read completely = start of the next one
+    data_end = False
+    try:
+        for rec in reader.records:
+            if isinstance(rec, Schema):
+                scan.schemas[rec.id] = rec
+            elif isinstance(rec, Channel):
+                scan.channels[rec.id] = rec
+            elif isinstance(rec, Message):
+                ch = scan.channels.get(rec.channel_id)
+                if ch is None:
+                    raise ValueError(f"message on unknown channel id {rec.channel_id}")
+                scan.messages[ch.topic].append((rec.log_time, rec.data))
+                scan.n_messages += 1
+            elif isinstance(rec, DataEnd):
+                data_end = True
+            elif isinstance(rec, Footer):
+                scan.complete = True
+            good = buf.tell()
+    # The pure-Python MCAP decoder raises many exception types on damaged input (its own errors,
+    # struct.error, zstd/lz4 errors, UnicodeDecodeError, ...); every one of them means the same
+    # thing to the caller -- the log cannot be read past this point -- so all are recorded here.
+    except Exception as exc:  # noqa: BLE001
+        # The record-size limit is the file size: a longer record runs past the end of the file.
+        truncated = isinstance(exc, (EndOfFile, RecordLengthLimitExceeded)) or buf.tell() >= len(data)
+        detail = type(exc).__name__ + (f": {exc}" if str(exc) and str(exc) != type(exc).__name__ else "")
+        section = " in the summary section (every message was read)" if data_end else ""
+        if truncated and good >= len(data):
+            cut = f"the file ends at byte {len(data)}, after the last complete record{section}"
+        elif truncated:
+            cut = f"the file ends at byte {len(data)} inside the record starting at byte offset {good}{section}"
+        if truncated:
+            scan.error = (
+                f"MCAP log {path} is truncated: {cut}; reading stopped after {scan.n_messages} messages ({detail})"
+            )
+        else:
+            scan.error = (
+                f"MCAP log {path} is corrupt: reading stopped at the record starting at byte offset {good} "
+                f"of {len(data)}{section} after {scan.n_messages} messages ({detail})"
+            )
+        scan.complete = False
+    if not scan.complete and scan.error is None:
+        scan.error = (
+            f"MCAP log {path} is truncated: reading stopped at byte offset {good} of {len(data)} after "
+            f"{scan.n_messages} messages without reaching the footer"
+        )
+    return scan
+
+
+def _decode_json(path: Path, topic: str, index: int, data: bytes) -> Any:
+    try:
+        return json.loads(data)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise LogReadError(f"{path}: message {index} on {topic} is not valid JSON: {exc}") from exc
+
+
+def read_log(path: str | os.PathLike[str], *, allow_truncated: bool = False) -> Session:
+    """Read a session log written by :func:`write_log` (or a real robot's log with the same channels).
+
+    Args:
+        path: the MCAP file.
+        allow_truncated: return the complete frames before the point where a truncated or
+            corrupt file stops, instead of raising.
+
+    Returns:
+        The :class:`Session`; its ground-truth fields are ``None`` when the log has no
+        ``/ground_truth/*`` channels.
+
+    Raises:
+        LogReadError: the file cannot be opened, is not MCAP, is truncated or corrupt (the
+            message names the file, the byte offset where reading stopped and the number of
+            messages read), lacks a required channel (named in the message), or holds messages
+            that do not decode.
+
+    """
+    session, _ = _read(Path(path), allow_truncated)
+    return session
+
+
+def log_info(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Describe a log: channels, message counts and the session summary (what ``autoteach info`` prints).
+
+    Raises:
+        LogReadError: as :func:`read_log`.
+
+    """
+    session, scan = _read(Path(path), allow_truncated=False)
+    channels = []
+    for topic, (schema, schema_enc, msg_enc) in sorted(scan.topics().items()):
+        msgs = scan.messages.get(topic, [])
+        channels.append(
+            {
+                "topic": topic,
+                "schema": schema,
+                "schema_encoding": schema_enc,
+                "message_encoding": msg_enc,
+                "messages": len(msgs),
+            }
+        )
+    return {
+        "path": str(path),
+        "bytes": scan.size,
+        "messages": scan.n_messages,
+        "channels": channels,
+        **session.summary(),
+    }
+
+
+def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
+    scan = _scan(path)
+    if scan.error is not None and not allow_truncated:
+        raise LogReadError(scan.error)
+    topics = scan.topics()
+    missing = [t for t in REQUIRED_TOPICS if t not in topics]
+    if missing:
+        want = ", ".join(f"{t} ({TOPICS[t][0]})" for t in missing)
+        found = ", ".join(sorted(topics)) or "none"
+        prefix = f"{scan.error}; before that point the" if scan.error else f"{path} is an MCAP file but the"
+        raise LogReadError(f"{prefix} log lacks the autoteach session channel(s) {want}; found channels: {found}")
+    for topic, (schema, schema_enc, msg_enc) in topics.items():
+        if topic in TOPICS and (schema, schema_enc, msg_enc) != TOPICS[topic]:
+            raise LogReadError(
+                f"{path}: channel {topic} has schema {schema!r} ({schema_enc}) with {msg_enc} messages; "
+                f"expected {TOPICS[topic][0]!r} ({TOPICS[topic][1]}) with {TOPICS[topic][2]} messages"
+            )
+
+    if not scan.messages.get(TOPIC_SESSION):
+        raise LogReadError(scan.error or f"{path}: the {TOPIC_SESSION} channel has no message")
+    meta = _decode_json(path, TOPIC_SESSION, 0, scan.messages[TOPIC_SESSION][0][1])
+    try:
+        if meta.get("format") != "autoteach.session":
+            raise ValueError(f"format is {meta.get('format')!r}, expected 'autoteach.session'")
+        if int(meta["version"]) > FORMAT_VERSION:
+            raise ValueError(f"log format version {meta['version']} is newer than this autoteach ({FORMAT_VERSION})")
+        camera = CameraInfo.from_dict(meta["camera"])
+        joint_names = tuple(str(n) for n in meta["joint_names"])
+        rate = meta.get("frame_rate_hz")
+        frame_rate = None if rate is None else float(rate)
+        n_expected = int(meta["frames"])
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise LogReadError(f"{path}: the {TOPIC_SESSION} message is invalid: {exc}") from exc
+
+    # Ground truth present?
+    scene = None
+    if TOPIC_SCENE in topics and scan.messages.get(TOPIC_SCENE):
+        scene = _decode_json(path, TOPIC_SCENE, 0, scan.messages[TOPIC_SCENE][0][1])
+
+    def by_time(topic: str) -> dict[int, tuple[int, bytes]]:
+        out: dict[int, tuple[int, bytes]] = {}
+        for idx, (t, data) in enumerate(scan.messages.get(topic, [])):
+            if t in out:
+                raise LogReadError(f"{path}: two messages on {topic} have the same log time {t} ns")
+            out[t] = (idx, data)
+        return out
+
+    images_t = by_time(TOPIC_IMAGE)
+    joints_t = by_time(TOPIC_JOINTS)
+    gt_t = {topic: by_time(topic) for topic in GROUND_TRUTH_FRAME_TOPICS} if scene is not None else {}
+    times = sorted(images_t)
+    keep: list[int] = []
+    for t in times:
+        lacking = [TOPIC_JOINTS] if t not in joints_t else []
+        lacking += [topic for topic, m in gt_t.items() if t not in m]
+        if lacking:
+            if allow_truncated and scan.error is not None:
+                break
+            raise LogReadError(
+                f"{path}: the image at log time {t} ns (frame {len(keep)}) has no message on {', '.join(lacking)}"
+            )
+        keep.append(t)
+    if scan.error is None and len(keep) != n_expected:
+        raise LogReadError(
+            f"{path}: the log holds {len(keep)} frames but its {TOPIC_SESSION} message announces {n_expected}"
+        )
+
+    images = np.empty((len(keep), camera.height, camera.width), dtype=np.uint8)
+    joints = np.empty((len(keep), len(joint_names)), dtype=np.float64)
+    joints_true = np.empty_like(joints) if scene is not None else None
+    poses = np.empty((len(keep), 4, 4)) if scene is not None else None
+    rims: list[list[dict[str, Any]]] | None = [] if scene is not None else None
+    n_ok = 0
+    for i, t in enumerate(keep):
+        topic, idx = TOPIC_IMAGE, images_t[t][0]
+        try:
+            img = _decode_image(images_t[t][1])
+            if img.shape != images.shape[1:]:
+                raise ValueError(
+                    f"image is {img.shape[1]}x{img.shape[0]}, the camera is {camera.width}x{camera.height}"
+                )
+            images[i] = img
+            topic, idx = TOPIC_JOINTS, joints_t[t][0]
+            joints[i] = _joint_positions(joint_names, *_decode_joint_state(joints_t[t][1]))
+            if scene is not None:
+                topic, idx = TOPIC_JOINTS_TRUE, gt_t[TOPIC_JOINTS_TRUE][t][0]
+                joints_true[i] = _joint_positions(joint_names, *_decode_joint_state(gt_t[TOPIC_JOINTS_TRUE][t][1]))
+                topic, idx = TOPIC_CAMERA_POSE, gt_t[TOPIC_CAMERA_POSE][t][0]
+                pose = json.loads(gt_t[TOPIC_CAMERA_POSE][t][1])
+                poses[i] = np.asarray(pose["matrix"], dtype=np.float64).reshape(4, 4)
+                topic, idx = TOPIC_RIMS, gt_t[TOPIC_RIMS][t][0]
+                msg = json.loads(gt_t[TOPIC_RIMS][t][1])
+                rims.append([_rim_from_json(r) for r in msg["rims"]])
+        except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
+            if allow_truncated and scan.error is not None:
+                break
+            raise LogReadError(f"{path}: message {idx} on {topic} (log time {t} ns) cannot be decoded: {exc}") from exc
+        n_ok += 1
+
+    session_kw: dict[str, Any] = {}
+    if scene is not None:
+        try:
+            cfg = scene.get("config")
+            cal = scene.get("calibration")
+            slots = np.asarray(scene["wafer_slots"], dtype=np.int64)
+            session_kw = {
+                "seed": None if scene.get("seed") is None else int(scene["seed"]),
+                "config": None if cfg is None else SimConfig.from_dict(cfg),
+                "wafer_slots": slots,
+                "wafer_poses": np.asarray(scene["wafer_poses"], dtype=np.float64).reshape(len(slots), 4, 4),
+                "calibration": None if cal is None else Calibration.from_dict(cal),
+                "joints_true": joints_true[:n_ok],
+                "camera_poses": poses[:n_ok],
+                "rims": rims[:n_ok],
+            }
+        except (KeyError, TypeError, ValueError) as exc:
+            raise LogReadError(f"{path}: the {TOPIC_SCENE} message is invalid: {exc}") from exc
+    try:
+        session = Session(
+            timestamps=np.asarray(keep[:n_ok], dtype=np.int64),
+            joints_encoder=joints[:n_ok],
+            images=images[:n_ok],
+            camera=camera,
+            joint_names=joint_names,
+            frame_rate_hz=frame_rate,
+            source=str(path),
+            **session_kw,
+        )
+    except InvalidInputError as exc:
+        raise LogReadError(f"{path}: the log does not form a valid session: {exc}") from exc
+    return session, scan
+
+
+def _joint_positions(expected: tuple[str, ...], names: list[str], position: np.ndarray) -> np.ndarray:
+    """Positions in the order of ``expected`` (the session's joint names)."""
+    if tuple(names) == expected:
+        return position
+    index = {n: i for i, n in enumerate(names)}
+    missing = [n for n in expected if n not in index]
+    if missing:
+        raise ValueError(f"JointState lacks joints {missing} (has {names})")
+    return position[[index[n] for n in expected]]
