@@ -2,40 +2,14 @@
 //! empty, one tilted wafer) with the default options (4×4 adaptive anti-aliasing, blur, noise),
 //! and the rim ground truth of the same frame.
 
-use autoteach_geometry::render::{self, RayCamera, RenderOptions, Scene};
+use autoteach_geometry::camera::Camera;
+use autoteach_geometry::render::{self, RenderOptions, Scene};
 use criterion::{Criterion, criterion_group, criterion_main};
-use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use std::hint::black_box;
 
-struct Pinhole {
-    k: Matrix3<f64>,
-    k_inv: Matrix3<f64>,
-}
-
-impl RayCamera for Pinhole {
-    fn width(&self) -> usize {
-        1280
-    }
-    fn height(&self) -> usize {
-        720
-    }
-    fn bearing(&self, u: f64, v: f64) -> Option<Vector3<f64>> {
-        Some(self.k_inv * Vector3::new(u, v, 1.0))
-    }
-    fn project(&self, p: &Vector3<f64>) -> Option<Vector2<f64>> {
-        (p.z > 0.0).then(|| {
-            let q = self.k * p;
-            Vector2::new(q.x / q.z, q.y / q.z)
-        })
-    }
-    fn k_matrix(&self) -> Matrix3<f64> {
-        self.k
-    }
-}
-
-fn setup() -> (Scene, Pinhole, Isometry3<f64>) {
-    let k = Matrix3::new(1000.0, 0.0, 639.5, 0.0, 1000.0, 359.5, 0.0, 0.0, 1.0);
-    let cam = Pinhole { k, k_inv: k.try_inverse().expect("invertible K") };
+fn setup() -> (Scene, Camera, Isometry3<f64>) {
+    let cam = Camera::pinhole(1000.0, 1000.0, 639.5, 359.5, 1280, 720).expect("valid camera");
     let carrier = render::Carrier::default();
     let mut wafers: Vec<Isometry3<f64>> = (1..=26).filter(|k| *k != 5 && *k != 12).map(|k| carrier.slot_pose(k)).collect();
     wafers[7] = Isometry3::new(Vector3::new(0.003, -0.002, 0.085), Vector3::new(0.01, -0.015, 0.2));

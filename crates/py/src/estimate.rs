@@ -526,14 +526,19 @@ impl UkfModel for PyModel {
         }
     }
 
-    fn sqrt_cov(&self, m: &DMatrix<f64>) -> Option<autoteach_estimate::Result<DMatrix<f64>>> {
+    fn sqrt_cov(
+        &self,
+        p: &DMatrix<f64>,
+        scale: f64,
+    ) -> Option<autoteach_estimate::Result<DMatrix<f64>>> {
         let f = self.hooks.sqrt.as_ref()?;
-        let n = m.nrows();
+        let n = p.nrows();
+        let m = p * scale;
         let mut flat = DVector::zeros(n * n);
         let r = self.call(
             "sqrt_method",
             f,
-            |py| PyTuple::new(py, [mat_out(py, m)?]),
+            |py| PyTuple::new(py, [mat_out(py, &m)?]),
             None,
             &mut flat,
         );
@@ -926,12 +931,23 @@ impl PyUkf {
             convert::detached(py, || Ok(inner.batch(&inputs)))?
         };
         let out = result.map_err(|e| self.error(e))?;
-        let flat_v = |vs: &[DVector<f64>]| vs.iter().flat_map(|v| v.iter().copied()).collect::<Vec<_>>();
-        // Covariances are symmetric up to rounding; write them row-major all the same.
+        let flat_v = |vs: &[DVector<f64>]| {
+            let mut out = Vec::with_capacity(vs.len() * n);
+            for v in vs {
+                out.extend_from_slice(v.as_slice());
+            }
+            out
+        };
+        // Row-major output: entry (i, j) of each matrix from its column-major storage.
         let flat_m = |ms: &[DMatrix<f64>]| {
-            ms.iter()
-                .flat_map(|p| p.transpose().as_slice().to_vec())
-                .collect::<Vec<_>>()
+            let mut out = Vec::with_capacity(ms.len() * n * n);
+            for p in ms {
+                let data = p.as_slice();
+                for i in 0..n {
+                    out.extend((0..n).map(|j| data[i + j * n]));
+                }
+            }
+            out
         };
         let d = PyDict::new(py);
         d.set_item("xs", to_numpy(py, flat_v(&out.xs), &[steps, n])?)?;

@@ -5,8 +5,9 @@
 //! runs one core function without the GIL (through [`convert::detached`]) and converts the
 //! result.
 
+use autoteach_geometry::camera::{Camera, CameraModel};
 use autoteach_geometry::render::{self, Carrier, RenderOptions, Rim, RimTruth, Scene, WaferShape};
-use nalgebra::{Isometry3, Matrix3, Vector2, Vector3};
+use nalgebra::Isometry3;
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
@@ -23,52 +24,18 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     Ok(())
 }
 
-/// Pinhole camera `(fx, fy, cx, cy)` used until `autoteach_geometry::camera` lands.
-struct ParamPinhole {
-    k: Matrix3<f64>,
-    k_inv: Matrix3<f64>,
-    w: usize,
-    h: usize,
-}
-
-impl render::RayCamera for ParamPinhole {
-    fn width(&self) -> usize {
-        self.w
-    }
-    fn height(&self) -> usize {
-        self.h
-    }
-    fn bearing(&self, u: f64, v: f64) -> Option<Vector3<f64>> {
-        Some(self.k_inv * Vector3::new(u, v, 1.0))
-    }
-    fn project(&self, p: &Vector3<f64>) -> Option<Vector2<f64>> {
-        (p.z > 0.0).then(|| {
-            let q = self.k * p;
-            Vector2::new(q.x / q.z, q.y / q.z)
-        })
-    }
-    fn k_matrix(&self) -> Matrix3<f64> {
-        self.k
-    }
-}
-
-/// Reads the camera arguments.
-fn camera(model: &str, params: &Bound<'_, PyAny>, width: i64, height: i64) -> PyResult<ParamPinhole> {
+/// Reads the camera arguments (model name as accepted by `CameraModel::from_str`).
+fn camera(model: &str, params: &Bound<'_, PyAny>, width: i64, height: i64) -> PyResult<Camera> {
     let p = convert::finite_array(params, "camera_params")?.vector()?;
-    if width <= 0 || height <= 0 {
-        return Err(errors::invalid_input(format!("image size must be positive, got {width}x{height}")));
-    }
-    if model != "pinhole" {
-        return Err(errors::invalid_input(format!("camera model {model:?} is not supported by the renderer yet")));
-    }
-    if p.len() != 4 || p[0] <= 0.0 || p[1] <= 0.0 {
-        return Err(errors::invalid_input(format!(
-            "pinhole camera_params must be (fx, fy, cx, cy) with positive focal lengths, got {p:?}"
-        )));
-    }
-    let k = Matrix3::new(p[0], 0.0, p[2], 0.0, p[1], p[3], 0.0, 0.0, 1.0);
-    let k_inv = k.try_inverse().ok_or_else(|| errors::invalid_input("singular K"))?;
-    Ok(ParamPinhole { k, k_inv, w: width as usize, h: height as usize })
+    let size = |n: i64, what: &str| {
+        u32::try_from(n)
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| errors::invalid_input(format!("{what} must be a positive 32-bit integer, got {n}")))
+    };
+    let (w, h) = (size(width, "width")?, size(height, "height")?);
+    let model: CameraModel = model.parse().map_err(errors::geometry)?;
+    Camera::new(model, &p, w, h).map_err(errors::geometry)
 }
 
 /// Reads the wafer poses `(N, 4, 4)` and builds the scene.

@@ -29,6 +29,8 @@ impl Default for GeometricFitOptions {
 const LAMBDA_START: f64 = 1e-3;
 /// Damping beyond which no decrease is possible: the cost is at its minimum to rounding.
 const LAMBDA_MAX: f64 = 1e16;
+/// Relative tolerance of the Sampson phase of [`levenberg_marquardt`].
+const SAMPSON_TOLERANCE: f64 = 1e-6;
 
 /// Geometric ellipse fit (000_3b1454b2b2194811.txt §3.2 `FitEllipse`, ellipse of eq. 3.1/3.2):
 /// Levenberg–Marquardt minimisation of `Σ dᵢ²` over `(cx, cy, a, b, θ)`, with `dᵢ` the signed
@@ -111,6 +113,11 @@ pub fn fit_ellipse_geometric(
 /// through the arc), whereas in `(cx, cy, a, b, θ)` they form a curved valley along which
 /// Gauss–Newton steps overshoot and Levenberg–Marquardt crawls. The scale of `q` is fixed by a
 /// gauge term `‖JᵀJ‖·qqᵀ` (no step along `q`) and renormalisation after each step.
+///
+/// Two phases: first the Sampson distance `f/‖∇f‖` (the first-order orthogonal distance, no
+/// foot points, a few times cheaper) to a loose tolerance, then the exact orthogonal distance
+/// from there to `options.tolerance`; the second phase only has to cover the small difference
+/// between the two optima, usually in one or two steps.
 fn levenberg_marquardt(
     prep: &Prepared,
     start: Ellipse,
@@ -120,25 +127,45 @@ fn levenberg_marquardt(
     let inv = 1.0 / s;
     let points: Vec<Vector2<f64>> = prep.centred.iter().map(|p| p * inv).collect();
     let to_pixels = |e: Ellipse| Ellipse { cx: e.cx * s, cy: e.cy * s, a: e.a * s, b: e.b * s, theta: e.theta };
-    let tol = options.tolerance;
     // Sum of squares that counts as an exact fit (rounding level of the input coordinates).
     let exact = points.len() as f64 * (1e-15 * (1.0 + prep.centroid.abs().max() * inv)).powi(2);
     let mut e = Ellipse { cx: start.cx * inv, cy: start.cy * inv, a: start.a * inv, b: start.b * inv, theta: start.theta };
     let mut q = oriented(e.conic_coefficients());
     // Foot angles on the current ellipse (Newton starts for the next evaluation) and on the
-    // candidate.
+    // candidate; empty during the Sampson phase.
     let mut angles = Vec::with_capacity(points.len());
     let mut next_angles = Vec::with_capacity(points.len());
-    let (mut jtj, mut jtr, mut ssr) = residual::accumulate_conic(&e, &q, &points, &[], &mut angles);
-    if ssr <= exact {
-        return (to_pixels(e), 0, true, angles);
-    }
+    let mut orthogonal = false;
+    let mut tol = SAMPSON_TOLERANCE.max(options.tolerance);
+    let (mut jtj, mut jtr, mut ssr) = residual::accumulate_sampson(&q, &points);
     let mut lambda = LAMBDA_START;
-    for iteration in 1..=options.max_iterations {
+    let mut iteration = 0;
+    let mut phase_end = false;
+    loop {
+        if phase_end || ssr <= exact || iteration >= options.max_iterations {
+            if orthogonal {
+                return (to_pixels(e), iteration, phase_end || ssr <= exact, angles);
+            }
+            // Hand over from the Sampson to the orthogonal distance.
+            orthogonal = true;
+            phase_end = false;
+            tol = options.tolerance;
+            // Close to the optimum already: start with nearly Gauss–Newton steps.
+            lambda = LAMBDA_START * 1e-3;
+            (jtj, jtr, ssr) = residual::accumulate_conic(&e, &q, &points, &[], &mut angles);
+            if ssr <= exact {
+                return (to_pixels(e), iteration, true, angles);
+            }
+            if iteration >= options.max_iterations {
+                return (to_pixels(e), iteration, false, angles);
+            }
+        }
+        iteration += 1;
         let diag = jtj.diagonal();
         let dmax = diag.max();
         let qv = Vector6::from(q);
         let damped_base = jtj + qv * qv.transpose() * dmax;
+        let mut finished = false;
         loop {
             let mut a = damped_base;
             for k in 0..6 {
@@ -153,7 +180,8 @@ fn levenberg_marquardt(
             let Some((delta, next_q, next)) = candidate else {
                 lambda *= 10.0;
                 if lambda > LAMBDA_MAX {
-                    return (to_pixels(e), iteration, true, angles);
+                    finished = true;
+                    break;
                 }
                 continue;
             };
@@ -161,32 +189,31 @@ fn levenberg_marquardt(
             // by less than `tol` of it, ‖r + Jδ‖² − ‖r‖² = 2δᵀJᵀr + δᵀJᵀJδ: no need to
             // evaluate it.
             let predicted = -(2.0 * delta.dot(&jtr) + delta.dot(&(jtj * delta)));
-            if std::env::var_os("LM_TRACE").is_some() {
-                eprintln!("it {iteration} lambda {lambda:.0e} ssr {ssr:.15e} predicted {predicted:.3e} step {:.3e}", delta.amax());
-            }
             if lambda <= LAMBDA_START && (predicted <= tol * ssr || delta.amax() <= tol) {
-                return (to_pixels(e), iteration, true, angles);
+                finished = true;
+                break;
             }
-            let (next_jtj, next_jtr, next_ssr) =
-                residual::accumulate_conic(&next, &next_q, &points, &angles, &mut next_angles);
+            let (next_jtj, next_jtr, next_ssr) = if orthogonal {
+                residual::accumulate_conic(&next, &next_q, &points, &angles, &mut next_angles)
+            } else {
+                residual::accumulate_sampson(&next_q, &points)
+            };
             if next_ssr < ssr {
-                let small_step = delta.amax() <= tol;
                 let small_gain = ssr - next_ssr <= tol * ssr;
                 (e, q, jtj, jtr, ssr) = (next, next_q, next_jtj, next_jtr, next_ssr);
                 std::mem::swap(&mut angles, &mut next_angles);
                 lambda = (lambda * 0.1).max(1e-15);
-                if small_step || small_gain || ssr <= exact {
-                    return (to_pixels(e), iteration, true, angles);
-                }
+                finished = small_gain || delta.amax() <= tol;
                 break;
             }
             lambda *= 10.0;
             if lambda > LAMBDA_MAX {
-                return (to_pixels(e), iteration, true, angles);
+                finished = true;
+                break;
             }
         }
+        phase_end = finished;
     }
-    (to_pixels(e), options.max_iterations, false, angles)
 }
 
 /// The sign of eq. (3.3): `f < 0` inside, i.e. `A + C > 0`.

@@ -33,6 +33,14 @@ pub(crate) struct Foot {
 /// Most Newton passes over all points in [`foot_angles`] before the certifying step.
 const MAX_NEWTON_PASSES: usize = 8;
 
+impl Foot {
+    /// `(sin t, cos t)` of the foot point.
+    #[cfg(test)]
+    pub fn st_ct(&self) -> (f64, f64) {
+        (self.st, self.ct)
+    }
+}
+
 /// The [`Foot`] of `p` on `e` (`sc = (sin θ, cos θ)` of `e`), for a single point.
 pub(crate) fn foot(e: &Ellipse, sc: (f64, f64), p: &Vector2<f64>) -> Foot {
     let mut angles = Vec::with_capacity(1);
@@ -90,28 +98,32 @@ pub(crate) fn foot_angles(
     let (a, b) = (e.a, e.b);
     let k = (a - b) * (a + b);
     let reach = a.min(b).powi(2) / a.max(b);
-    let local: Vec<(f64, f64)> = points
-        .iter()
-        .map(|p| {
-            let (dx, dy) = (p.x - e.cx, p.y - e.cy);
-            (cth * dx + sth * dy, -sth * dx + cth * dy)
-        })
-        .collect();
-    angles.clear();
-    angles.extend(local.iter().enumerate().map(|(i, &(u, v))| {
+    // Structure of arrays, so that the passes below compile to vector code.
+    let n = points.len();
+    let mut us = Vec::with_capacity(n);
+    let mut vs = Vec::with_capacity(n);
+    for p in points {
+        let (dx, dy) = (p.x - e.cx, p.y - e.cy);
+        us.push(cth * dx + sth * dy);
+        vs.push(-sth * dx + cth * dy);
+    }
+    let mut ss = Vec::with_capacity(n);
+    let mut cs = Vec::with_capacity(n);
+    for (i, (&u, &v)) in us.iter().zip(&vs).enumerate() {
         let (s, c) = start.get(i).copied().unwrap_or((v / b, u / a));
         // A zero vector gives NaN here, which the certificate below sends to the general solver.
         let inv = 1.0 / (c * c + s * s).sqrt();
-        (s * inv, c * inv)
-    }));
+        ss.push(s * inv);
+        cs.push(c * inv);
+    }
     // Newton passes over all points until every step is small; the certifying pass below
     // then takes one more, quadratically convergent, step.
     for _ in 0..MAX_NEWTON_PASSES {
-        let mut largest: f64 = 0.0;
-        for ((s, c), &(u, v)) in angles.iter_mut().zip(&local) {
+        let mut pending = 0usize;
+        for (((s, c), &u), &v) in ss.iter_mut().zip(cs.iter_mut()).zip(&us).zip(&vs) {
             let g = -a * u * *s + b * v * *c + k * *s * *c;
             let dg = -a * u * *c - b * v * *s + k * (*c - *s) * (*c + *s);
-            let delta = (-g / dg).clamp(-0.5, 0.5);
+            let delta = (-g / dg).max(-0.5).min(0.5);
             // Rotate by about delta and bring the norm back toward 1 without a square root
             // (one Newton step for 1/√n², exact to O((n² − 1)²)).
             let (cd, sd) = (1.0 - 0.5 * delta * delta, delta);
@@ -119,18 +131,17 @@ pub(crate) fn foot_angles(
             let inv = 0.5 * (3.0 - (nc * nc + ns * ns));
             *c = nc * inv;
             *s = ns * inv;
-            // Only points headed for a minimum count (others go to the general solver anyway);
-            // NaN (a point at the centre) is ignored by `max` and caught by the certificate.
-            if dg < 0.0 {
-                largest = largest.max(delta.abs());
-            }
+            // Only points headed for a minimum count (the others go to the general solver).
+            pending += usize::from(dg < 0.0 && delta.abs() > 1e-6);
         }
-        if largest <= 1e-6 {
+        if pending == 0 {
             break;
         }
     }
+    angles.clear();
+    angles.extend(ss.iter().zip(&cs).map(|(&s, &c)| (s, c)));
     let mut general = 0;
-    for (i, ((s, c), &(u, v))) in angles.iter_mut().zip(&local).enumerate() {
+    for (i, (((s, c), &u), &v)) in angles.iter_mut().zip(&us).zip(&vs).enumerate() {
         let g = -a * u * *s + b * v * *c + k * *s * *c;
         let dg = -a * u * *c - b * v * *s + k * (*c - *s) * (*c + *s);
         let delta = -g / dg;
@@ -193,6 +204,48 @@ pub(crate) fn distance_and_conic_gradient(
     (f.r, Vector6::new(x * x * g, x * y * g, y * y * g, x * g, y * g, g))
 }
 
+/// Running normal equations `(JᵀJ, Jᵀr, Σ r²)` for `K` parameters, the upper triangle of `JᵀJ`
+/// packed in a flat array so that the per-point update compiles to straight-line code.
+struct NormalAcc<const K: usize, const P: usize> {
+    packed: [f64; P],
+    jtr: [f64; K],
+    ssr: f64,
+}
+
+impl<const K: usize, const P: usize> NormalAcc<K, P> {
+    fn new() -> Self {
+        NormalAcc { packed: [0.0; P], jtr: [0.0; K], ssr: 0.0 }
+    }
+
+    /// Adds one residual `r` with gradient `g`.
+    #[inline(always)]
+    fn add(&mut self, g: &[f64; K], r: f64) {
+        let mut k = 0;
+        for j in 0..K {
+            for i in 0..=j {
+                self.packed[k] += g[i] * g[j];
+                k += 1;
+            }
+            self.jtr[j] += g[j] * r;
+        }
+        self.ssr += r * r;
+    }
+
+    /// The full symmetric `JᵀJ`.
+    fn jtj(&self) -> nalgebra::SMatrix<f64, K, K> {
+        let mut m = nalgebra::SMatrix::<f64, K, K>::zeros();
+        let mut k = 0;
+        for j in 0..K {
+            for i in 0..=j {
+                m[(i, j)] = self.packed[k];
+                m[(j, i)] = self.packed[k];
+                k += 1;
+            }
+        }
+        m
+    }
+}
+
 /// Gauss–Newton normal equations of the orthogonal distances of `points` to `e`.
 pub(crate) struct Normal {
     /// `JᵀJ`.
@@ -219,23 +272,17 @@ pub(crate) fn accumulate(e: &Ellipse, points: &[Vector2<f64>], known: Option<&[(
             &computed
         }
     };
+    let mut acc = NormalAcc::<5, 15>::new();
+    let mut sum_abs = 0.0;
     for (p, &t) in points.iter().zip(angles) {
         let (r, g) = gradient_at(e, &foot_at(e, sc, p, t));
-        // Upper triangle only; mirrored below.
-        for j in 0..5 {
-            for i in 0..=j {
-                out.jtj[(i, j)] += g[i] * g[j];
-            }
-        }
-        out.jtr += g * r;
-        out.ssr += r * r;
-        out.sum_abs += r.abs();
+        acc.add(&g.into(), r);
+        sum_abs += r.abs();
     }
-    for j in 0..5 {
-        for i in 0..j {
-            out.jtj[(j, i)] = out.jtj[(i, j)];
-        }
-    }
+    out.jtj = acc.jtj();
+    out.jtr = Vector5::from(acc.jtr);
+    out.ssr = acc.ssr;
+    out.sum_abs = sum_abs;
     out
 }
 
@@ -251,26 +298,46 @@ pub(crate) fn accumulate_conic(
     angles: &mut Vec<(f64, f64)>,
 ) -> (Matrix6<f64>, Vector6<f64>, f64) {
     let sc = e.theta.sin_cos();
-    let mut jtj = Matrix6::zeros();
-    let mut jtr = Vector6::zeros();
-    let mut ssr = 0.0;
     foot_angles(e, points, start, angles);
+    let mut acc = NormalAcc::<6, 21>::new();
     for (p, &t) in points.iter().zip(angles.iter()) {
         let (r, g) = distance_and_conic_gradient(e, sc, q, p, t);
-        for j in 0..6 {
-            for i in 0..=j {
-                jtj[(i, j)] += g[i] * g[j];
-            }
-        }
-        jtr += g * r;
-        ssr += r * r;
+        acc.add(&g.into(), r);
     }
-    for j in 0..6 {
-        for i in 0..j {
-            jtj[(j, i)] = jtj[(i, j)];
+    (acc.jtj(), Vector6::from(acc.jtr), acc.ssr)
+}
+
+/// Normal equations of the Sampson distances `rᵢ = f(xᵢ)/‖∇f(xᵢ)‖` (the first-order
+/// approximation of the signed orthogonal distance, eq. 3.3 written out as
+/// `f = q·m(x)`, `m = [x², xy, y², x, y, 1]`) with respect to `q`: `(JᵀJ, Jᵀr, Σ r²)` with
+/// `∂r/∂q = m/‖∇f‖ − f·(∇f·∂∇f/∂q)/‖∇f‖³`.
+pub(crate) fn accumulate_sampson(q: &[f64; 6], points: &[Vector2<f64>]) -> (Matrix6<f64>, Vector6<f64>, f64) {
+    let grad = |p: &Vector2<f64>| (2.0 * q[0] * p.x + q[1] * p.y + q[3], q[1] * p.x + 2.0 * q[2] * p.y + q[4]);
+    // 1/‖∇f‖ in a separate, vectorisable pass (square roots and divisions dominate otherwise).
+    let inv_norms: Vec<f64> = points
+        .iter()
+        .map(|p| {
+            let (gx, gy) = grad(p);
+            1.0 / (gx * gx + gy * gy).sqrt()
+        })
+        .collect();
+    let mut acc = NormalAcc::<6, 21>::new();
+    for (p, &w) in points.iter().zip(&inv_norms) {
+        if !w.is_finite() {
+            // ∇f = 0 only at the centre, far from any point an iteration would accept.
+            continue;
         }
+        let (x, y) = (p.x, p.y);
+        let (gx, gy) = grad(p);
+        let m = [x * x, x * y, y * y, x, y, 1.0];
+        let f = q[0] * m[0] + q[1] * m[1] + q[2] * m[2] + q[3] * x + q[4] * y + q[5];
+        let h = [2.0 * x * gx, y * gx + x * gy, 2.0 * y * gy, gx, gy, 0.0];
+        let r = f * w;
+        let fw3 = r * w * w;
+        let g: [f64; 6] = std::array::from_fn(|k| m[k] * w - h[k] * fw3);
+        acc.add(&g, r);
     }
-    (jtj, jtr, ssr)
+    (acc.jtj(), Vector6::from(acc.jtr), acc.ssr)
 }
 
 /// Mean and RMS absolute orthogonal residual and the covariance of `(cx, cy, a, b, θ)` of the
@@ -296,21 +363,33 @@ pub(crate) fn evaluate(
     let diag = a.diagonal();
     let dmax = diag.max();
     let names = ["cx", "cy", "a", "b", "theta"];
-    if let Some(k) = (0..4).find(|&k| !(diag[k] > RANK_TOL * dmax)) {
+    if let Some(k) = (0..4).find(|&k| !(diag[k] > 0.0)) {
         return Err(DetectError::RankDeficient {
             reason: format!("the points do not constrain {} (JᵀJ diagonal {:?})", names[k], diag.as_slice()),
         });
     }
+    let spread = (points.iter().map(|p| (p - Vector2::new(e.cx, e.cy)).norm_squared()).sum::<f64>() / n as f64).sqrt();
+    let shape = format!(
+        "ellipse a = {:.4e}, b = {:.4e} px, {n} points within {spread:.4e} px of its centre{}",
+        e.a,
+        e.b,
+        if e.a > 20.0 * spread.max(e.b) {
+            "; the fit degenerates toward a parabola: the arc is too short or too noisy to determine an ellipse"
+        } else {
+            ""
+        }
+    );
     // θ is undefined for a circle to rounding: its Jacobian column vanishes.
-    let circular = !(diag[4] > RANK_TOL * dmax);
+    let d4max = diag.iter().take(4).copied().fold(0.0, f64::max);
+    let circular = !(diag[4] > RANK_TOL * d4max);
     if !circular {
-        let cov = scaled_inverse(&a, false, "(cx, cy, a, b, theta)")? * sigma2;
+        let cov = scaled_inverse(&a, false, &shape)? * sigma2;
         if cov[(4, 4)] <= THETA_UNIFORM_VAR {
             return Ok((mean, rms, Some(cov)));
         }
     }
     // θ not determined by the data: hold it fixed for the others, report a uniform variance.
-    let mut cov = scaled_inverse(&a, true, "(cx, cy, a, b) of a near-circle")? * sigma2;
+    let mut cov = scaled_inverse(&a, true, &shape)? * sigma2;
     cov[(4, 4)] = THETA_UNIFORM_VAR;
     Ok((mean, rms, Some(cov)))
 }
@@ -318,7 +397,7 @@ pub(crate) fn evaluate(
 /// Inverse of the symmetric positive semi-definite `a` through its correlation form
 /// `D⁻¹AD⁻¹` (unit diagonal), rejecting it when that form is singular to `RANK_TOL`. With
 /// `without_theta`, the `θ` row and column are ignored (the result's are zero): the inverse of
-/// the 4×4 block of the other parameters.
+/// the 4×4 block of the other parameters. `what` describes the fit for the error message.
 fn scaled_inverse(a: &Matrix5<f64>, without_theta: bool, what: &str) -> Result<Matrix5<f64>> {
     let keep = |i: usize| !(without_theta && i == 4);
     let d = Vector5::from_fn(|i, _| if keep(i) { 1.0 / a[(i, i)].sqrt() } else { 0.0 });
@@ -339,8 +418,8 @@ fn scaled_inverse(a: &Matrix5<f64>, without_theta: bool, what: &str) -> Result<M
         let v = eig.eigenvectors.column(kmin);
         return Err(DetectError::RankDeficient {
             reason: format!(
-                "the Jacobian of {what} is rank deficient: smallest eigenvalue {lmin:.3e} of the \
-                 normalised JᵀJ, along (cx, cy, a, b, theta) = {:?}",
+                "the orthogonal-distance Jacobian is rank deficient (smallest eigenvalue {lmin:.3e} of \
+                 the normalised JᵀJ, along (cx, cy, a, b, theta) = {:?}): {what}",
                 v.iter().map(|x| (x * 1e3).round() / 1e3).collect::<Vec<_>>()
             ),
         });

@@ -4,6 +4,7 @@
 
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
+use super::kernels;
 use crate::{EstimateError, Result};
 
 /// Relative asymmetry above which a computed covariance is reported (or repaired) rather than
@@ -55,6 +56,9 @@ pub(crate) fn check_shape(m: &DMatrix<f64>, r: usize, c: usize, what: &str) -> R
 
 /// The first non-finite element (flat column-major index and value).
 pub(crate) fn first_non_finite(data: &[f64]) -> Option<(usize, f64)> {
+    if kernels::all_finite(data) {
+        return None;
+    }
     data.iter()
         .copied()
         .enumerate()
@@ -89,11 +93,12 @@ pub(crate) fn check_finite_at(data: &[f64], what: impl Fn() -> String, step: usi
 /// max |Aᵢⱼ − Aⱼᵢ| / max(max |Aᵢⱼ|, tiny).
 pub(crate) fn asymmetry(m: &DMatrix<f64>) -> f64 {
     let n = m.nrows();
-    let scale = m.amax().max(f64::MIN_POSITIVE);
+    let a = m.as_slice();
+    let scale = a.iter().fold(0.0f64, |acc, v| acc.max(v.abs())).max(f64::MIN_POSITIVE);
     let mut worst: f64 = 0.0;
     for j in 0..n {
         for i in (j + 1)..n {
-            worst = worst.max((m[(i, j)] - m[(j, i)]).abs());
+            worst = worst.max((a[i + j * n] - a[j + i * n]).abs());
         }
     }
     worst / scale
@@ -102,11 +107,12 @@ pub(crate) fn asymmetry(m: &DMatrix<f64>) -> f64 {
 /// Replaces `m` by (m + mᵀ)/2.
 pub(crate) fn symmetrise(m: &mut DMatrix<f64>) {
     let n = m.nrows();
+    let a = m.as_mut_slice();
     for j in 0..n {
         for i in (j + 1)..n {
-            let v = 0.5 * (m[(i, j)] + m[(j, i)]);
-            m[(i, j)] = v;
-            m[(j, i)] = v;
+            let v = 0.5 * (a[i + j * n] + a[j + i * n]);
+            a[i + j * n] = v;
+            a[j + i * n] = v;
         }
     }
 }
@@ -121,7 +127,9 @@ pub(crate) fn min_eigenvalue(m: &DMatrix<f64>) -> f64 {
 
 /// Lower Cholesky factor of a symmetric matrix, `None` unless positive definite.
 pub(crate) fn cholesky(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
-    nalgebra::Cholesky::new(m.clone()).map(|c| c.unpack())
+    let n = m.nrows();
+    let mut l = DMatrix::zeros(n, n);
+    kernels::cholesky(n, m.as_slice(), l.as_mut_slice()).then_some(l)
 }
 
 /// `V · max(Λ, floor) · Vᵀ` with `floor = REPAIR_FLOOR · λ_max`; `None` if no eigenvalue is
@@ -184,6 +192,24 @@ pub(crate) fn factor_covariance(
     *p = fixed;
     *repairs += 1;
     Ok(l)
+}
+
+/// [`factor_covariance`] for a matrix that is symmetric by construction (a weighted Gram
+/// matrix plus a validated Q or R): the symmetry test is skipped when the factorisation
+/// succeeds.
+pub(crate) fn factor_symmetric(
+    p: &mut DMatrix<f64>,
+    what: &str,
+    step: usize,
+    policy: CovariancePolicy,
+    repairs: &mut usize,
+) -> Result<DMatrix<f64>> {
+    if kernels::all_finite(p.as_slice())
+        && let Some(l) = cholesky(p)
+    {
+        return Ok(l);
+    }
+    factor_covariance(p, what, step, policy, repairs)
 }
 
 /// Validates a covariance given as input (`n × n`, finite, symmetric to [`SYMMETRY_TOL`]) and

@@ -31,6 +31,7 @@
 //! ```
 
 mod filter;
+mod kernels;
 mod linalg;
 mod model;
 mod models;

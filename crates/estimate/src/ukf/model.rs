@@ -2,6 +2,7 @@
 
 use nalgebra::{DMatrix, DVector, DVectorView};
 
+use super::kernels;
 use crate::Result;
 
 /// A state-space model for the unscented Kalman filter: the process function `f`, the
@@ -174,7 +175,7 @@ pub trait UkfModel {
         wm: &DVector<f64>,
         out: &mut DVector<f64>,
     ) -> Result<()> {
-        out.gemv(1.0, sigmas, wm, 0.0);
+        kernels::weighted_sum(sigmas.nrows(), sigmas.as_slice(), wm.as_slice(), out.as_mut_slice());
         Ok(())
     }
 
@@ -185,7 +186,7 @@ pub trait UkfModel {
         wm: &DVector<f64>,
         out: &mut DVector<f64>,
     ) -> Result<()> {
-        out.gemv(1.0, sigmas, wm, 0.0);
+        kernels::weighted_sum(sigmas.nrows(), sigmas.as_slice(), wm.as_slice(), out.as_mut_slice());
         Ok(())
     }
 
@@ -254,12 +255,12 @@ pub trait UkfModel {
         Ok(())
     }
 
-    /// An optional custom matrix square root: `Some(A)` with `A Aᵀ = m` whose COLUMNS are
-    /// the sigma offsets (filterpy's `sqrt_method` returns a matrix whose rows are the
-    /// offsets: pass its transpose). `None` (the default) uses the Cholesky factor. Only the
-    /// standard filter with additive noise calls it.
-    fn sqrt_cov(&self, m: &DMatrix<f64>) -> Option<Result<DMatrix<f64>>> {
-        let _ = m;
+    /// An optional custom matrix square root: `Some(A)` with `A Aᵀ = scale · p` whose
+    /// COLUMNS are the sigma offsets (filterpy's `sqrt_method` returns a matrix whose rows are
+    /// the offsets: pass its transpose). `None` (the default) uses the Cholesky factor. Only
+    /// the standard filter with additive noise calls it.
+    fn sqrt_cov(&self, p: &DMatrix<f64>, scale: f64) -> Option<Result<DMatrix<f64>>> {
+        let _ = (p, scale);
         None
     }
 }
@@ -317,8 +318,8 @@ macro_rules! forward_model {
             fn sigma_points(&self, x: &DVector<f64>, offsets: &DMatrix<f64>, out: &mut DMatrix<f64>) -> Result<()> {
                 (**self).sigma_points(x, offsets, out)
             }
-            fn sqrt_cov(&self, m: &DMatrix<f64>) -> Option<Result<DMatrix<f64>>> {
-                (**self).sqrt_cov(m)
+            fn sqrt_cov(&self, p: &DMatrix<f64>, scale: f64) -> Option<Result<DMatrix<f64>>> {
+                (**self).sqrt_cov(p, scale)
             }
         }
     )*};

@@ -2,37 +2,20 @@
 
 use nalgebra::{DMatrix, DVector, DVectorView};
 
+use super::kernels;
 use super::linalg;
-
-/// `out[:, i] = x + offsets[:, i]` on the column-major storage.
-fn vector_sigma_points(x: &DVector<f64>, offsets: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-    let n = x.len().max(1);
-    for (o, d) in out
-        .as_mut_slice()
-        .chunks_exact_mut(n)
-        .zip(offsets.as_slice().chunks_exact(n))
-    {
-        for ((oi, di), xi) in o.iter_mut().zip(d).zip(x.iter()) {
-            *oi = xi + di;
-        }
-    }
-}
-
-/// `out[:, i] = sigmas[:, i] − mean` on the column-major storage.
-fn vector_residuals(sigmas: &DMatrix<f64>, mean: &DVector<f64>, out: &mut DMatrix<f64>) {
-    let n = mean.len().max(1);
-    for (o, s) in out
-        .as_mut_slice()
-        .chunks_exact_mut(n)
-        .zip(sigmas.as_slice().chunks_exact(n))
-    {
-        for ((oi, si), mi) in o.iter_mut().zip(s).zip(mean.iter()) {
-            *oi = si - mi;
-        }
-    }
-}
 use super::model::UkfModel;
 use crate::{EstimateError, Result};
+
+/// `out[:, i] = x + offsets[:, i]`.
+fn vector_sigma_points(x: &DVector<f64>, offsets: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+    kernels::add_columns(x.len(), x.as_slice(), offsets.as_slice(), out.as_mut_slice());
+}
+
+/// `out[:, i] = sigmas[:, i] − mean`.
+fn vector_residuals(sigmas: &DMatrix<f64>, mean: &DVector<f64>, out: &mut DMatrix<f64>) {
+    kernels::sub_columns(mean.len(), sigmas.as_slice(), mean.as_slice(), out.as_mut_slice());
+}
 
 /// The linear model `x' = F x + B u`, `z = H x` (noise additive). With it the UKF reproduces
 /// the Kalman filter exactly (the unscented transform is exact for linear maps), which is the
@@ -41,6 +24,8 @@ use crate::{EstimateError, Result};
 pub struct LinearModel {
     f: DMatrix<f64>,
     h: DMatrix<f64>,
+    /// Hᵀ, for the sigma-point products (contiguous rows of H).
+    ht: DMatrix<f64>,
     b: Option<DMatrix<f64>>,
 }
 
@@ -75,7 +60,8 @@ impl LinearModel {
             }
             linalg::check_finite_input(b.as_slice(), "input matrix B")?;
         }
-        Ok(Self { f, h, b })
+        let ht = h.transpose();
+        Ok(Self { f, h, ht, b })
     }
 
     /// F.
@@ -133,18 +119,23 @@ impl UkfModel for LinearModel {
         u: Option<&DVector<f64>>,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
-        out.gemm(1.0, &self.f, sigmas, 0.0);
+        let n = self.f.nrows();
+        let ns = sigmas.ncols();
+        kernels::product(n, n, ns, self.f.as_slice(), sigmas.as_slice(), out.as_mut_slice());
         if let (Some(b), Some(u)) = (&self.b, u) {
             let bu = b * u;
-            for mut c in out.column_iter_mut() {
-                c += &bu;
+            for c in out.as_mut_slice().chunks_exact_mut(n) {
+                for (ci, bi) in c.iter_mut().zip(bu.as_slice()) {
+                    *ci += bi;
+                }
             }
         }
         Ok(())
     }
 
     fn hx_sigmas(&self, sigmas: &DMatrix<f64>, out: &mut DMatrix<f64>) -> Result<()> {
-        out.gemm(1.0, &self.h, sigmas, 0.0);
+        let (m, n) = self.h.shape();
+        kernels::gemm_tn(m, n, sigmas.ncols(), self.ht.as_slice(), sigmas.as_slice(), out.as_mut_slice());
         Ok(())
     }
 

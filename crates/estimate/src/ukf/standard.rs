@@ -3,6 +3,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::filter::{NoiseForm, SigmaPointFilter};
+use super::kernels;
 use super::linalg::{self, CovariancePolicy};
 use super::model::UkfModel;
 use super::points::MerweScaledSigmaPoints;
@@ -198,8 +199,7 @@ impl<M: UkfModel> UnscentedKalmanFilter<M> {
             return Ok(None);
         }
         let n = self.x.len();
-        let scaled = &self.p * (n as f64 + self.points.lambda());
-        match self.model.sqrt_cov(&scaled) {
+        match self.model.sqrt_cov(&self.p, n as f64 + self.points.lambda()) {
             None => Ok(None),
             Some(r) => {
                 let a = r.map_err(|e| transform::at_step(e, step))?;
@@ -340,11 +340,11 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
             step,
         )?;
         let mut p = DMatrix::zeros(x.len(), x.len());
-        transform::weighted_gram(&ws.dev_out, self.pred_points.wc(), &mut p);
+        transform::weighted_gram(&ws.dev_out, self.pred_points.wc(), &mut ws.scratch, &mut p);
         if !augmented {
             p += &self.q;
         }
-        let l = linalg::factor_covariance(
+        let l = linalg::factor_symmetric(
             &mut p,
             "predicted covariance P_prior",
             step,
@@ -401,13 +401,13 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
         transform::mean_and_devs(&self.model, Space::Measurement, wm, &mut zp, ws, step)?;
         transform::state_devs(&self.model, &self.x, ws, step)?;
         let mut s = DMatrix::zeros(m, m);
-        transform::weighted_gram(&ws.dev_out, wc, &mut s);
+        transform::weighted_gram(&ws.dev_out, wc, &mut ws.scratch, &mut s);
         if !augmented {
             s += r_mat;
         }
         let mut pxz = DMatrix::zeros(n, m);
         transform::weighted_outer(&ws.dev_x, wc, &ws.dev_out, &mut pxz);
-        let ls = linalg::factor_covariance(
+        let ls = linalg::factor_symmetric(
             &mut s,
             "innovation covariance S",
             step,
@@ -415,21 +415,28 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
             &mut self.repairs,
         )?;
         // K = Pxz S⁻¹  ⇔  S Kᵀ = Pxzᵀ, solved with S = Ls Lsᵀ.
-        let chol = nalgebra::Cholesky::pack_dirty(ls.clone());
-        let k = chol.solve(&pxz.transpose()).transpose();
+        let mut kt = DMatrix::zeros(m, n);
+        kernels::transpose(n, m, pxz.as_slice(), kt.as_mut_slice());
+        kernels::solve_lower(m, ls.as_slice(), kt.as_mut_slice());
+        kernels::solve_lower_transposed(m, ls.as_slice(), kt.as_mut_slice());
+        let mut k = DMatrix::zeros(n, m);
+        kernels::transpose(m, n, kt.as_slice(), k.as_mut_slice());
         let mut y = DVector::zeros(m);
         self.model
             .z_residual(z.column(0), zp.column(0), &mut y)
             .map_err(|e| transform::at_step(e, step))?;
         linalg::check_finite_at(y.as_slice(), || "innovation y".into(), step)?;
-        let dx = &k * &y;
+        let mut dx = DVector::zeros(n);
+        kernels::gemm(n, m, 1, k.as_slice(), y.as_slice(), dx.as_mut_slice());
         let mut x = DVector::zeros(n);
         self.model
             .x_add(self.x.column(0), dx.column(0), &mut x)
             .map_err(|e| transform::at_step(e, step))?;
         linalg::check_finite_at(x.as_slice(), || "updated state x".into(), step)?;
-        let mut p = &self.p - &k * &s * k.transpose();
-        let l = linalg::factor_covariance(
+        // P = P⁻ − K S Kᵀ = P⁻ − K Pxzᵀ, on the lower triangle (exactly symmetric).
+        let mut p = self.p.clone();
+        kernels::sub_lower_abt(n, m, k.as_slice(), pxz.as_slice(), p.as_mut_slice());
+        let l = linalg::factor_symmetric(
             &mut p,
             "updated covariance P",
             step,
@@ -437,7 +444,8 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
             &mut self.repairs,
         )?;
         // log N(y; 0, S) = −½ (yᵀS⁻¹y + ln det S + m ln 2π).
-        let w = ls.solve_lower_triangular(&y).unwrap_or_else(|| DVector::from_element(m, f64::NAN));
+        let mut w = y.clone();
+        kernels::solve_lower(m, ls.as_slice(), w.as_mut_slice());
         let log_det: f64 = 2.0 * ls.diagonal().iter().map(|d| d.ln()).sum::<f64>();
         self.log_likelihood = -0.5 * (w.norm_squared() + log_det + m as f64 * LN_2PI);
         self.x_post.copy_from(&x);

@@ -4,6 +4,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::kernels;
 use super::linalg;
 use super::model::UkfModel;
 use super::points::MerweScaledSigmaPoints;
@@ -53,12 +54,12 @@ pub(crate) struct Workspace {
     pub dev_x: DMatrix<f64>,
     /// Deviations of the transformed sigma points from their mean (`dim_out × N`).
     pub dev_out: DMatrix<f64>,
-    /// Scratch vector of the state size.
-    pub tmp_x: DVector<f64>,
     /// Scratch vector of the output size.
     pub tmp_out: DVector<f64>,
     /// Sigma offsets from the mean (`n × N`).
     pub off: DMatrix<f64>,
+    /// Scratch of the output size (`dim_out × N`).
+    pub scratch: DMatrix<f64>,
 }
 
 impl Workspace {
@@ -69,9 +70,9 @@ impl Workspace {
             out: DMatrix::zeros(dim_out, num_sigmas),
             dev_x: DMatrix::zeros(n, num_sigmas),
             dev_out: DMatrix::zeros(dim_out, num_sigmas),
-            tmp_x: DVector::zeros(n),
             tmp_out: DVector::zeros(dim_out),
             off: DMatrix::zeros(n, num_sigmas),
+            scratch: DMatrix::zeros(dim_out, num_sigmas),
         }
     }
 }
@@ -106,22 +107,24 @@ pub(crate) fn draw<M: UkfModel + ?Sized>(
         Offsets::Factor(l) => (l, gamma),
         Offsets::Scaled(a) => (a, 1.0),
     };
-    ws.off.fill(0.0);
+    // Only the state-offset columns are written: the others (the mean, and the noise columns
+    // of an augmented state) stay zero from the workspace's creation.
     {
         let off = ws.off.as_mut_slice();
-        for (k, col) in src.as_slice().chunks_exact(n.max(1)).enumerate().take(n) {
-            let (plus, minus) = (k + 1, na + k + 1);
-            for (i, &v) in col.iter().enumerate() {
-                off[plus * n + i] = scale * v;
-                off[minus * n + i] = -scale * v;
-            }
+        let src = &src.as_slice()[..n * n];
+        let (_, tail) = off.split_at_mut(n);
+        let (plus, rest) = tail.split_at_mut(n * n);
+        let minus = &mut rest[(na - n) * n..(na - n) * n + n * n];
+        for ((p, m), &v) in plus.iter_mut().zip(minus.iter_mut()).zip(src) {
+            *p = scale * v;
+            *m = -scale * v;
         }
     }
     model
         .sigma_points(x, &ws.off, &mut ws.sig)
         .map_err(|e| at_step(e, step))?;
     check_columns(&ws.sig, "sigma point", step)?;
-    ws.noise.fill(0.0);
+    // Likewise only the noise-offset columns of `ws.noise` are written.
     if let Some(ns) = noise_sqrt {
         for k in 0..q {
             for (sign, col) in [(1.0, n + k + 1), (-1.0, na + n + k + 1)] {
@@ -244,52 +247,36 @@ pub(crate) fn state_devs<M: UkfModel + ?Sized>(
     check_columns(&ws.dev_x, "state residual", step)
 }
 
-/// `out = Σᵢ wᵢ aᵢ bᵢᵀ` over the columns of `a` and `b` (on the column-major storage: this
-/// is the inner loop of every covariance).
+/// `out = Σᵢ wᵢ aᵢ bᵢᵀ` over the columns of `a` and `b`.
 pub(crate) fn weighted_outer(
     a: &DMatrix<f64>,
     w: &DVector<f64>,
     b: &DMatrix<f64>,
     out: &mut DMatrix<f64>,
 ) {
-    let ra = a.nrows().max(1);
-    let rb = b.nrows().max(1);
-    out.fill(0.0);
-    let o = out.as_mut_slice();
-    for ((ak, bk), &wk) in a
-        .as_slice()
-        .chunks_exact(ra)
-        .zip(b.as_slice().chunks_exact(rb))
-        .zip(w.iter())
-    {
-        for (oj, &bjk) in o.chunks_exact_mut(ra).zip(bk) {
-            let s = wk * bjk;
-            for (oi, &ai) in oj.iter_mut().zip(ak) {
-                *oi += ai * s;
-            }
-        }
-    }
+    kernels::weighted_outer(
+        a.nrows(),
+        b.nrows(),
+        a.as_slice(),
+        w.as_slice(),
+        b.as_slice(),
+        out.as_mut_slice(),
+    );
 }
 
-/// `out = Σᵢ wᵢ aᵢ aᵢᵀ`: the lower triangle accumulated, then mirrored (exactly symmetric).
-pub(crate) fn weighted_gram(a: &DMatrix<f64>, w: &DVector<f64>, out: &mut DMatrix<f64>) {
-    let r = a.nrows();
-    if r == 0 {
-        return;
-    }
-    out.fill(0.0);
-    let o = out.as_mut_slice();
-    for (ak, &wk) in a.as_slice().chunks_exact(r).zip(w.iter()) {
-        for (j, oj) in o.chunks_exact_mut(r).enumerate() {
-            let s = wk * ak[j];
-            for (oi, &ai) in oj[j..].iter_mut().zip(&ak[j..]) {
-                *oi += ai * s;
-            }
-        }
-    }
-    for j in 0..r {
-        for i in (j + 1)..r {
-            o[i * r + j] = o[j * r + i];
-        }
-    }
+/// `out = Σᵢ wᵢ aᵢ aᵢᵀ` (exactly symmetric); `scratch` is `a`-sized.
+pub(crate) fn weighted_gram(
+    a: &DMatrix<f64>,
+    w: &DVector<f64>,
+    scratch: &mut DMatrix<f64>,
+    out: &mut DMatrix<f64>,
+) {
+    kernels::weighted_gram_auto(
+        a.nrows(),
+        a.ncols(),
+        a.as_slice(),
+        w.as_slice(),
+        scratch.as_mut_slice(),
+        out.as_mut_slice(),
+    );
 }

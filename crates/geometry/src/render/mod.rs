@@ -23,6 +23,7 @@
 
 mod post;
 mod raster;
+mod rays;
 mod scene;
 mod trace;
 mod truth;
@@ -32,13 +33,14 @@ pub use truth::{Rim, RimTruth, rim_points_visible, rim_visibility};
 
 use nalgebra::{Isometry3, Matrix3, Vector2, Vector3};
 
+use crate::camera::Camera;
 use crate::error::check_finite;
 use crate::{GeometryError, Result};
 
 /// What the renderer needs from a camera model: the ray of a pixel position and the projection
-/// of a point. Implemented by [`crate::camera::Camera`]; positions follow the OpenCV convention
-/// (pixel `(u, v)` is centred at `(u, v)`), the camera frame has z forward, x right, y down.
-pub trait RayCamera: Sync {
+/// of a point. Positions follow the OpenCV convention (pixel `(u, v)` is centred at `(u, v)`),
+/// the camera frame has z forward, x right, y down.
+pub(crate) trait RayCamera: Sync {
     /// Image width in pixels.
     fn width(&self) -> usize;
     /// Image height in pixels.
@@ -228,7 +230,31 @@ fn validate_inputs<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f64>) 
 ///
 /// # Errors
 /// As [`render`].
-pub fn render_float<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f64>, opts: &RenderOptions) -> Result<Vec<f32>> {
+pub fn render_float(scene: &Scene, camera: &Camera, t_wc: &Isometry3<f64>, opts: &RenderOptions) -> Result<Vec<f32>> {
+    render_float_with(scene, &rays::Rays::new(camera), t_wc, opts)
+}
+
+/// Renders the 8-bit grayscale frame of `scene` seen by `camera` at pose `t_wc` (camera →
+/// world): see the module documentation for the image formation.
+///
+/// Deterministic: the same inputs and `opts.seed` give identical bytes on any number of
+/// threads. Runs in parallel over image rows (rayon). For the distortion models the first frame
+/// of a camera also computes its table of pixel bearings (kept for the next frames).
+///
+/// # Errors
+/// [`GeometryError::InvalidParameter`] for a non-positive wafer size, an invalid carrier or
+/// option; [`GeometryError::NonFinite`] for NaN/inf values; [`GeometryError::AtIndex`] naming
+/// the first invalid wafer pose.
+pub fn render(scene: &Scene, camera: &Camera, t_wc: &Isometry3<f64>, opts: &RenderOptions) -> Result<GrayImage> {
+    render_with(scene, &rays::Rays::new(camera), t_wc, opts)
+}
+
+fn render_float_with<C: RayCamera>(
+    scene: &Scene,
+    cam: &C,
+    t_wc: &Isometry3<f64>,
+    opts: &RenderOptions,
+) -> Result<Vec<f32>> {
     validate_inputs(scene, cam, t_wc)?;
     opts.validate()?;
     let mut img = raster::radiance(scene, cam, t_wc, opts);
@@ -238,19 +264,34 @@ pub fn render_float<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f64>,
     Ok(img)
 }
 
-/// Renders the 8-bit grayscale frame of `scene` seen by `cam` at pose `t_wc` (camera → world).
-///
-/// Deterministic: the same inputs and `opts.seed` give identical bytes on any number of
-/// threads. Runs in parallel over image rows (rayon).
-///
-/// # Errors
-/// [`GeometryError::InvalidParameter`] for an empty image, a non-positive wafer size, an
-/// invalid carrier or option; [`GeometryError::NonFinite`] for NaN/inf values;
-/// [`GeometryError::AtIndex`] naming the first invalid wafer pose.
-pub fn render<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f64>, opts: &RenderOptions) -> Result<GrayImage> {
-    let img = render_float(scene, cam, t_wc, opts)?;
+fn render_with<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f64>, opts: &RenderOptions) -> Result<GrayImage> {
+    let img = render_float_with(scene, cam, t_wc, opts)?;
     let data = post::noise_quantise(&img, cam.width(), opts.noise_sigma, opts.seed);
     Ok(GrayImage { width: cam.width(), height: cam.height(), data })
+}
+
+/// The camera itself: exact unprojection for every ray (the renderer wraps it in
+/// [`rays::Rays`], which is faster for the distortion models).
+impl RayCamera for Camera {
+    fn width(&self) -> usize {
+        Camera::width(self) as usize
+    }
+
+    fn height(&self) -> usize {
+        Camera::height(self) as usize
+    }
+
+    fn bearing(&self, u: f64, v: f64) -> Option<Vector3<f64>> {
+        self.unproject(&Vector2::new(u, v)).ok()
+    }
+
+    fn project(&self, p: &Vector3<f64>) -> Option<Vector2<f64>> {
+        Camera::project(self, p).ok()
+    }
+
+    fn k_matrix(&self) -> Matrix3<f64> {
+        Camera::k_matrix(self)
+    }
 }
 
 #[cfg(test)]

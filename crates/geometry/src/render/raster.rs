@@ -1,12 +1,15 @@
 //! The pixel pipeline: which rays to cast for which pixel, and how to combine them.
 //!
-//! 1. Coarse pass: the centres of the pixels with even `u` and `v` (and the last row/column).
-//! 2. Fill: a pixel inside a 2×2 cell whose four coarse corners see the same surface (and the
-//!    same surface in the mirror) takes the bilinear interpolation of the corners' radiance,
-//!    which varies smoothly over one surface; every other pixel centre is traced. A feature
-//!    that crosses a cell without changing the surface seen at its corners would have to be
-//!    thinner than the cell and bounded by the same surface on both sides, which the scene
-//!    produces only when a wafer is seen exactly edge-on against a uniform backdrop.
+//! 1. Coarse pass: the centres of the pixels whose `u` and `v` are multiples of 4 (and of the
+//!    last row/column).
+//! 2. Refinement to every second pixel, then to every pixel: a sample inside a cell whose four
+//!    corners see the same surface (and the same surface in the mirror) takes the bilinear
+//!    interpolation of the corners' radiance, which varies smoothly over one surface; every
+//!    other sample is traced, and so are the 4-px cells that a carrier box edge crosses. A
+//!    feature that crosses a cell without changing the surface seen at its corners would have
+//!    to be thinner than the cell and bounded by the same surface on both sides: a slot ridge
+//!    against its wall (hence the box-edge marks), a wafer seen exactly edge-on against a
+//!    uniform backdrop, or a sub-pixel detail of the mirror images.
 //! 3. Edge flags: for every pair of 8-neighbours whose centres see different surfaces, one ray
 //!    at the midpoint of the two centres (for a diagonal pair, the shared pixel corner) tells on
 //!    which side the boundary passes; for a single straight edge this flags exactly the pixels
@@ -18,7 +21,7 @@
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
 
-use super::trace::{self, KEY_BACKGROUND, KEY_NO_RAY, KEY_NONE, Prepared, TileCand, key2};
+use super::trace::{self, Bundle, KEY_BACKGROUND, KEY_NO_RAY, KEY_NONE, Prepared, TileCand, key2};
 use super::{RayCamera, RenderOptions, Scene};
 
 /// Secondary-only (mirror) surface changes with a radiance step below this are not
@@ -32,23 +35,25 @@ const FLAG_MIRROR: u8 = 1;
 
 /// The primary half of a surface key.
 #[inline]
-fn primary(k: u64) -> u32 {
-    (k >> 32) as u32
+fn primary(k: u32) -> u32 {
+    k >> 16
 }
 
 /// The mirror half of a surface key.
 #[inline]
-fn mirror(k: u64) -> u32 {
-    k as u32
+fn mirror(k: u32) -> u32 {
+    k & 0xFFFF
 }
 
-/// Sets of primitives for tracing a ray against the surfaces its neighbours see.
+/// The surfaces that the centres around a sub-sample see: their primitives (to trace the
+/// sub-ray against), and each distinct surface key with its radiance.
 #[derive(Default)]
 struct Subset {
     prims: Vec<u32>,
     mirrors: Vec<u32>,
     open_primary: bool,
     open_mirror: bool,
+    seen: Vec<(u32, f64)>,
 }
 
 impl Subset {
@@ -57,9 +62,28 @@ impl Subset {
         self.mirrors.clear();
         self.open_primary = false;
         self.open_mirror = false;
+        self.seen.clear();
     }
 
-    fn add(&mut self, k: u64) {
+    /// The radiance seen with primary key `p` if exactly one full key has it.
+    #[inline]
+    fn unique(&self, p: u32) -> Option<(u32, f64)> {
+        let mut found = None;
+        for &(k, l) in &self.seen {
+            if primary(k) == p {
+                if found.is_some() {
+                    return None;
+                }
+                found = Some((k, l));
+            }
+        }
+        found
+    }
+
+    fn add(&mut self, k: u32, l: f64) {
+        if !self.seen.iter().any(|e| e.0 == k) {
+            self.seen.push((k, l));
+        }
         match primary(k) {
             KEY_BACKGROUND | KEY_NO_RAY => self.open_primary = true,
             p if !self.prims.contains(&(p / 8)) => self.prims.push(p / 8),
@@ -82,17 +106,16 @@ struct Caster<'a, C: RayCamera> {
 }
 
 impl<C: RayCamera> Caster<'_, C> {
-    /// Unit world direction of the ray through image position `(u, v)`.
+    /// World direction (not normalised) of the ray through image position `(u, v)`.
     #[inline]
     fn ray(&self, u: f64, v: f64) -> Option<Vector3<f64>> {
         let d = self.prep.r_wc * self.cam.bearing(u, v)?;
-        let n = d.norm();
-        (n > 0.0 && n.is_finite()).then(|| d / n)
+        (d.iter().all(|x| x.is_finite()) && d != Vector3::zeros()).then_some(d)
     }
 
     /// Radiance and surface key at `(u, v)`, traced against the whole tile of pixel `(pu, pv)`.
     #[inline]
-    fn sample(&self, u: f64, v: f64, pu: usize, pv: usize) -> (f64, u64) {
+    fn sample(&self, u: f64, v: f64, pu: usize, pv: usize) -> (f64, u32) {
         match self.ray(u, v) {
             Some(d) => {
                 let hit = self.prep.trace_primary(&d, self.tiles.get(pu, pv), u as f32, v as f32);
@@ -103,9 +126,12 @@ impl<C: RayCamera> Caster<'_, C> {
     }
 
     /// As [`Self::sample`], but traced against the surfaces in `sub` first, falling back to
-    /// the tile when the ray misses them and they do not include the background.
+    /// the tile when the ray misses them and they do not include the background. When the
+    /// surface hit is one that `sub` saw with a single radiance (radiance varies smoothly over
+    /// one surface, and the sub-sample is within a pixel of where it was seen), that radiance
+    /// is reused instead of shading again (which would trace the mirrored ray).
     #[inline]
-    fn sample_subset(&self, u: f64, v: f64, pu: usize, pv: usize, sub: &Subset) -> (f64, u64) {
+    fn sample_subset(&self, u: f64, v: f64, pu: usize, pv: usize, sub: &Subset) -> (f64, u32) {
         match self.ray(u, v) {
             Some(d) => {
                 let hit = match self.prep.trace_primary_subset(&d, &sub.prims) {
@@ -114,6 +140,10 @@ impl<C: RayCamera> Caster<'_, C> {
                     }
                     found => found,
                 };
+                let p = hit.map_or(KEY_BACKGROUND, |h| h.key());
+                if let Some((k, l)) = sub.unique(p) {
+                    return (l, k);
+                }
                 self.prep.shade(&self.prep.cam_center, &d, hit, Some((&sub.mirrors, sub.open_mirror)))
             }
             None => (self.prep.shading.background, key2(KEY_NO_RAY, KEY_NO_RAY)),
@@ -121,10 +151,45 @@ impl<C: RayCamera> Caster<'_, C> {
     }
 }
 
+impl<C: RayCamera> Caster<'_, C> {
+    /// Mean radiance over pixel `(u, v)` of the sub-samples at `offsets`, traced against the
+    /// surfaces in `sub` (see [`Self::sample_subset`]). Over one pixel the ray direction is
+    /// taken affine in the sub-pixel offset, from the rays at the centre and half a pixel to
+    /// the right and below: exact for the pinhole model, and within ~1e-4 px for the
+    /// distortion models, whose unprojection is smooth.
+    fn pixel_mean(&self, u: usize, v: usize, offsets: &[(f64, f64)], sub: &Subset, bundle: &mut Bundle) -> f64 {
+        let (uf, vf) = (u as f64, v as f64);
+        let frame = (|| Some([self.ray(uf, vf)?, self.ray(uf + 0.5, vf)?, self.ray(uf, vf + 0.5)?]))();
+        let Some([d0, d1, d2]) = frame else {
+            let sum: f64 = offsets.iter().map(|(dx, dy)| self.sample_subset(uf + dx, vf + dy, u, v, sub).0).sum();
+            return sum / offsets.len() as f64;
+        };
+        self.prep.bundle([d0, (d1 - d0) * 2.0, (d2 - d0) * 2.0], &sub.prims, bundle);
+        let mut sum = 0.0;
+        for &(dx, dy) in offsets {
+            let d = bundle.d[0] + bundle.d[1] * dx + bundle.d[2] * dy;
+            let hit = match self.prep.trace_bundle(bundle, dx, dy, &d) {
+                None if !sub.open_primary => {
+                    self.prep.trace_primary(&d, self.tiles.get(u, v), (uf + dx) as f32, (vf + dy) as f32)
+                }
+                found => found,
+            };
+            let p = hit.map_or(KEY_BACKGROUND, |h| h.key());
+            sum += match sub.unique(p) {
+                Some((_, l)) => l,
+                None => {
+                    self.prep.shade(&self.prep.cam_center, &d, hit, Some((&sub.mirrors, sub.open_mirror))).0
+                }
+            };
+        }
+        sum / offsets.len() as f64
+    }
+}
+
 /// Does the surface `k` at radiance `l` differ from `ka` at `la` enough to matter: another
 /// primary surface, or another mirrored surface with a visible radiance step? Returns the flag.
 #[inline]
-fn differs(k: u64, l: f64, ka: u64, la: f64) -> u8 {
+fn differs(k: u32, l: f64, ka: u32, la: f64) -> u8 {
     if primary(k) != primary(ka) {
         FLAG_PRIMARY
     } else if k != ka && (l - la).abs() > MIRROR_CONTRAST {
@@ -134,19 +199,140 @@ fn differs(k: u64, l: f64, ka: u64, la: f64) -> u8 {
     }
 }
 
-/// Coarse sample coordinates along an axis of `n` pixels: 0, 2, 4, … and `n − 1`.
-fn coarse_axis(n: usize) -> Vec<usize> {
-    let mut c: Vec<usize> = (0..n).step_by(2).collect();
-    if (n - 1) % 2 == 1 {
+/// Sample coordinates along an axis of `n` pixels with spacing `step`: 0, step, 2·step, … and
+/// `n − 1`.
+fn grid_axis(n: usize, step: usize) -> Vec<usize> {
+    let mut c: Vec<usize> = (0..n).step_by(step).collect();
+    if (n - 1) % step != 0 {
         c.push(n - 1);
     }
     c
 }
 
-/// Index of the coarse cell (left/upper corner index into `coarse_axis`) holding pixel `x`.
-#[inline]
-fn cell_of(x: usize, n_coarse: usize) -> usize {
-    (x / 2).min(n_coarse.saturating_sub(2))
+/// Pixel-centre samples (radiance and surface key) on a grid of spacing `step`.
+struct Grid {
+    step: usize,
+    u: Vec<usize>,
+    v: Vec<usize>,
+    keys: Vec<u32>,
+    rad: Vec<f32>,
+}
+
+impl Grid {
+    /// Traces every sample of the grid of spacing `step` over a `w×h` image.
+    fn trace<C: RayCamera>(caster: &Caster<'_, C>, w: usize, h: usize, step: usize) -> Self {
+        let (u, v) = (grid_axis(w, step), grid_axis(h, step));
+        let n = u.len();
+        let mut keys = vec![0u32; n * v.len()];
+        let mut rad = vec![0f32; n * v.len()];
+        keys.par_chunks_mut(n).zip(rad.par_chunks_mut(n)).enumerate().for_each(|(j, (krow, rrow))| {
+            for (i, &x) in u.iter().enumerate() {
+                let (l, k) = caster.sample(x as f64, v[j] as f64, x, v[j]);
+                krow[i] = k;
+                rrow[i] = l as f32;
+            }
+        });
+        Self { step, u, v, keys, rad }
+    }
+
+    /// Index of the cell (its lower corner in the axis) holding coordinate `x`.
+    #[inline]
+    fn cell(&self, x: usize, axis_len: usize) -> usize {
+        (x / self.step).min(axis_len.saturating_sub(2))
+    }
+
+    /// The grid of spacing `step` (dividing this grid's spacing): samples of this grid are
+    /// copied; the others are interpolated bilinearly where the four corners of their cell
+    /// see the same surface, traced otherwise.
+    ///
+    /// `marks`, indexed like the samples by the cell's lower corner, forces tracing in the
+    /// marked cells.
+    fn refine<C: RayCamera>(&self, caster: &Caster<'_, C>, step: usize, marks: Option<&[bool]>) -> Self {
+        let (w, h) = (self.u[self.u.len() - 1] + 1, self.v[self.v.len() - 1] + 1);
+        let (fu, fv) = (grid_axis(w, step), grid_axis(h, step));
+        let (ncu, ncv) = (self.u.len(), self.v.len());
+        let n = fu.len();
+        let mut keys = vec![0u32; n * fv.len()];
+        let mut rad = vec![0f32; n * fv.len()];
+        keys.par_chunks_mut(n).zip(rad.par_chunks_mut(n)).enumerate().for_each(|(jf, (krow, rrow))| {
+            let y = fv[jf];
+            let j = self.cell(y, ncv);
+            let j1 = (j + 1).min(ncv - 1);
+            let (v0, v1) = (self.v[j], self.v[j1]);
+            let fy = if v1 > v0 { (y - v0) as f32 / (v1 - v0) as f32 } else { 0.0 };
+            for (ifine, &x) in fu.iter().enumerate() {
+                let i = self.cell(x, ncu);
+                let i1 = (i + 1).min(ncu - 1);
+                let (u0, u1) = (self.u[i], self.u[i1]);
+                let c = [j * ncu + i, j * ncu + i1, j1 * ncu + i, j1 * ncu + i1];
+                if (x == u0 || x == u1) && (y == v0 || y == v1) {
+                    let idx = c[usize::from(x != u0) + 2 * usize::from(y != v0)];
+                    krow[ifine] = self.keys[idx];
+                    rrow[ifine] = self.rad[idx];
+                    continue;
+                }
+                let k = self.keys[c[0]];
+                let marked = marks.is_some_and(|m| m[c[0]]);
+                if !marked && c.iter().all(|&ci| self.keys[ci] == k) {
+                    let fx = if u1 > u0 { (x - u0) as f32 / (u1 - u0) as f32 } else { 0.0 };
+                    let top = self.rad[c[0]] * (1.0 - fx) + self.rad[c[1]] * fx;
+                    let bottom = self.rad[c[2]] * (1.0 - fx) + self.rad[c[3]] * fx;
+                    krow[ifine] = k;
+                    rrow[ifine] = top * (1.0 - fy) + bottom * fy;
+                } else {
+                    let (l, k) = caster.sample(x as f64, y as f64, x, y);
+                    krow[ifine] = k;
+                    rrow[ifine] = l as f32;
+                }
+            }
+        });
+        Self { step, u: fu, v: fv, keys, rad }
+    }
+}
+
+/// Marks the cells of `grid` (indexed by their lower corner) that an edge of a carrier box
+/// crosses (within 1.5 px): slot ridges are only a few pixels tall and seen against the wall
+/// they are attached to, so a coarse cell could otherwise hold a whole ridge between corners
+/// that all see the wall.
+fn edge_marks<C: RayCamera>(prep: &Prepared, cam: &C, t_wc: &Isometry3<f64>, grid: &Grid) -> Vec<bool> {
+    let (ncu, ncv) = (grid.u.len(), grid.v.len());
+    let mut marks = vec![false; ncu * ncv];
+    let t_cw = t_wc.inverse();
+    let project = |x: &Vector3<f64>| cam.project(&(t_cw * nalgebra::Point3::from(*x)).coords);
+    let (wf, hf) = (grid.u[ncu - 1] as f64, grid.v[ncv - 1] as f64);
+    for p in &prep.prims {
+        if !matches!(p.shape, trace::Shape::Box(_)) {
+            continue;
+        }
+        let c = p.aabb.corners();
+        for i in 0..8usize {
+            for bit in [1usize, 2, 4] {
+                if i & bit != 0 {
+                    continue;
+                }
+                let (a, b) = (c[i], c[i | bit]);
+                // Samples at most ~1 px apart in the image (many if an end is not projectable).
+                let n = match (project(&a), project(&b)) {
+                    (Some(qa), Some(qb)) => ((qa - qb).norm().ceil() as usize).clamp(2, 8192),
+                    _ => 4096,
+                };
+                for k in 0..=n {
+                    let x = a + (b - a) * (k as f64 / n as f64);
+                    let Some(q) = project(&x) else { continue };
+                    if !(q.x > -2.0 && q.y > -2.0 && q.x < wf + 2.0 && q.y < hf + 2.0) {
+                        continue;
+                    }
+                    for y in [q.y - 1.5, q.y + 1.5] {
+                        for xx in [q.x - 1.5, q.x + 1.5] {
+                            let (xc, yc) = (xx.clamp(0.0, wf) as usize, y.clamp(0.0, hf) as usize);
+                            marks[grid.cell(yc, ncv) * ncu + grid.cell(xc, ncu)] = true;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    marks
 }
 
 /// Linear radiance per pixel after anti-aliasing (before lighting, blur and noise). Inputs must
@@ -159,56 +345,15 @@ pub(crate) fn radiance<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f6
     let tiles = Tiles::new(&prep, cam, t_wc);
     let caster = Caster { prep: &prep, cam, tiles };
 
-    // 1. Coarse pass.
-    let cu = coarse_axis(w);
-    let cv = coarse_axis(h);
-    let (ncu, ncv) = (cu.len(), cv.len());
-    let mut ckeys = vec![0u64; ncu * ncv];
-    let mut crad = vec![0f64; ncu * ncv];
-    ckeys.par_chunks_mut(ncu).zip(crad.par_chunks_mut(ncu)).enumerate().for_each(|(j, (krow, rrow))| {
-        let v = cv[j];
-        for (i, &u) in cu.iter().enumerate() {
-            let (l, k) = caster.sample(u as f64, v as f64, u, v);
-            krow[i] = k;
-            rrow[i] = l;
-        }
-    });
-
+    // 1. Coarse pass on every fourth row and column, 2. refinement to every second, then to
+    //    every pixel.
+    let coarse = Grid::trace(&caster, w, h, 4);
+    let marks = edge_marks(&prep, cam, t_wc, &coarse);
     dbg("coarse");
-    // 2. Fill.
-    let mut keys = vec![0u64; w * h];
-    let mut rad = vec![0f32; w * h];
-    keys.par_chunks_mut(w).zip(rad.par_chunks_mut(w)).enumerate().for_each(|(v, (krow, rrow))| {
-        let j = cell_of(v, ncv);
-        let (v0, v1) = (cv[j], cv[(j + 1).min(ncv - 1)]);
-        let fy = if v1 > v0 { (v - v0) as f64 / (v1 - v0) as f64 } else { 0.0 };
-        for u in 0..w {
-            let i = cell_of(u, ncu);
-            let (u0, u1) = (cu[i], cu[(i + 1).min(ncu - 1)]);
-            let (i1, j1) = ((i + 1).min(ncu - 1), (j + 1).min(ncv - 1));
-            let c = [j * ncu + i, j * ncu + i1, j1 * ncu + i, j1 * ncu + i1];
-            if (u == u0 || u == u1) && (v == v0 || v == v1) {
-                // A coarse sample itself.
-                let idx = if u == u0 { 0 } else { 1 } + if v == v0 { 0 } else { 2 };
-                krow[u] = ckeys[c[idx]];
-                rrow[u] = crad[c[idx]] as f32;
-                continue;
-            }
-            let k = ckeys[c[0]];
-            if c.iter().all(|&ci| ckeys[ci] == k) {
-                let fx = if u1 > u0 { (u - u0) as f64 / (u1 - u0) as f64 } else { 0.0 };
-                let top = crad[c[0]] * (1.0 - fx) + crad[c[1]] * fx;
-                let bottom = crad[c[2]] * (1.0 - fx) + crad[c[3]] * fx;
-                krow[u] = k;
-                rrow[u] = (top * (1.0 - fy) + bottom * fy) as f32;
-            } else {
-                let (l, k) = caster.sample(u as f64, v as f64, u, v);
-                krow[u] = k;
-                rrow[u] = l as f32;
-            }
-        }
-    });
+    let mid = coarse.refine(&caster, 2, Some(&marks));
+    let Grid { keys, rad, .. } = mid.refine(&caster, 1, None);
     dbg("fill");
+    let mut rad = rad;
     let s = opts.supersample;
     if s == 1 {
         return rad;
@@ -236,8 +381,8 @@ pub(crate) fn radiance<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f6
                     continue;
                 }
                 sub.clear();
-                sub.add(ka);
-                sub.add(kn);
+                sub.add(ka, la);
+                sub.add(kn, ln);
                 let (um, vm) = (u as f64 + 0.5 * *du as f64, v as f64 + 0.5 * *dv as f64);
                 let (lm, km) = caster.sample_subset(um, vm, u, v, &sub);
                 orow[u] = orow[u].max(differs(km, lm, ka, la));
@@ -272,8 +417,10 @@ pub(crate) fn radiance<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f6
     //    sampling resolves anyway), falling back to the tile when the sub-ray misses them.
     let full = n_rooks(s);
     let light = n_rooks(s.min(2));
+    let base = rad.clone();
     rad.par_chunks_mut(w).enumerate().for_each(|(v, rrow)| {
         let mut sub = Subset::default();
+        let mut bundle = Bundle::default();
         for (u, px) in rrow.iter_mut().enumerate() {
             let offsets = match flags[v * w + u] {
                 FLAG_PRIMARY => &full,
@@ -283,14 +430,10 @@ pub(crate) fn radiance<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f6
             sub.clear();
             for nv in v.saturating_sub(1)..(v + 2).min(h) {
                 for nu in u.saturating_sub(1)..(u + 2).min(w) {
-                    sub.add(keys[nv * w + nu]);
+                    sub.add(keys[nv * w + nu], base[nv * w + nu] as f64);
                 }
             }
-            let sum: f64 = offsets
-                .iter()
-                .map(|(dx, dy)| caster.sample_subset(u as f64 + dx, v as f64 + dy, u, v, &sub).0)
-                .sum();
-            *px = (sum / offsets.len() as f64) as f32;
+            *px = caster.pixel_mean(u, v, offsets, &sub, &mut bundle) as f32;
         }
     });
     dbg("aa");

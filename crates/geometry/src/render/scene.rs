@@ -10,6 +10,9 @@ use nalgebra::{Isometry3, Translation3, Vector3};
 use crate::error::check_finite;
 use crate::{GeometryError, Result};
 
+/// Most wafers a scene may hold.
+pub const MAX_WAFERS: usize = 7900;
+
 /// Size of a wafer: a disc (slab) of `radius` and `thickness` lying between `z = ±thickness/2`
 /// of its own frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -95,11 +98,11 @@ impl Carrier {
     /// Fails unless every length is finite and positive (or, for `x_front`, finite) and the
     /// layout is consistent (`x_front < x_rear ≤ back_wall_x`, `ridge_inset < r`).
     pub fn validate(&self, wafer: &WaferShape) -> Result<()> {
-        if self.slots == 0 {
+        if self.slots == 0 || self.slots > 100 {
             return Err(GeometryError::InvalidParameter {
                 what: "carrier slots",
-                value: 0.0,
-                reason: "must be at least 1",
+                value: self.slots as f64,
+                reason: "must be in 1..=100",
             });
         }
         positive("carrier pitch", self.pitch)?;
@@ -213,6 +216,13 @@ impl Scene {
     /// Fails on a non-positive wafer size, an invalid carrier, or a non-finite pose.
     pub fn validate(&self) -> Result<()> {
         self.shape.validate()?;
+        if self.wafers.len() > MAX_WAFERS {
+            return Err(GeometryError::InvalidParameter {
+                what: "number of wafers",
+                value: self.wafers.len() as f64,
+                reason: "at most 7900 wafers per scene",
+            });
+        }
         if let Some(c) = &self.carrier {
             c.validate(&self.shape)?;
         }

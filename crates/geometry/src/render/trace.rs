@@ -5,14 +5,19 @@ use nalgebra::{Isometry3, Matrix3, Vector3};
 
 use super::scene::{Aabb, Material, Scene};
 use super::Shading;
-pub use super::RayCamera;
+pub(crate) use super::RayCamera;
 
-/// Key of "no surface" (the ray escapes to the background).
-pub(crate) const KEY_BACKGROUND: u32 = u32::MAX;
+/// Key of "no surface" (the ray escapes to the background). Surface keys are
+/// `8·primitive + face` below these special values (16 bits each).
+pub(crate) const KEY_BACKGROUND: u32 = 0xFFFF;
 /// Key of a pixel without a ray under the camera model.
-pub(crate) const KEY_NO_RAY: u32 = u32::MAX - 1;
+pub(crate) const KEY_NO_RAY: u32 = 0xFFFE;
 /// Mirror key of a surface that does not reflect.
-pub(crate) const KEY_NONE: u32 = u32::MAX - 2;
+pub(crate) const KEY_NONE: u32 = 0xFFFD;
+/// Most primitives a scene may have so that every surface key fits in 16 bits.
+pub(crate) const MAX_PRIMS: usize = 0xFFF8 / 8;
+// The most wafers plus the carrier's 5 + 2·100 boxes fit.
+const _: () = assert!(super::scene::MAX_WAFERS + 5 + 2 * 100 <= MAX_PRIMS);
 
 /// A ray `o + s·d` with the componentwise inverse of its direction.
 #[derive(Debug, Clone, Copy)]
@@ -204,15 +209,17 @@ impl Prepared {
         best
     }
 
-    /// Closest hit of a camera ray (origin at the camera centre, unit direction `d`) through
-    /// image position `(u, v)` among `cands`, skipping those whose image box misses `(u, v)`.
+    /// Closest hit of a camera ray (origin at the camera centre, direction `d` of any positive
+    /// length; hit distances are in units of `|d|`) through image position `(u, v)` among
+    /// `cands`, skipping those whose image box misses `(u, v)`.
     #[inline]
     pub fn trace_primary(&self, d: &Vector3<f64>, cands: &[TileCand], u: f32, v: f32) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut s_max = f64::INFINITY;
         let inv = d.map(|x| 1.0 / x);
+        let len = d.norm();
         for c in cands {
-            if c.dmin >= s_max {
+            if c.dmin >= s_max * len {
                 break;
             }
             if u < c.bounds[0] || v < c.bounds[1] || u > c.bounds[2] || v > c.bounds[3] {
@@ -238,18 +245,53 @@ impl Prepared {
     pub fn trace_primary_subset(&self, d: &Vector3<f64>, prims: &[u32]) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut s_max = f64::INFINITY;
-        let inv = d.map(|x| 1.0 / x);
         for &i in prims {
             let p = &self.prims[i as usize];
             let hit = match &p.shape {
                 Shape::Wafer { rot_t, cam_local, .. } => {
                     intersect_slab(cam_local, &(rot_t * d), self.radius, self.half, 0.0, s_max)
                 }
-                Shape::Box(_) => intersect_box(&p.aabb, &self.cam_center, &inv, 0.0, s_max),
+                Shape::Box(_) => intersect_box(&p.aabb, &self.cam_center, &d.map(|x| 1.0 / x), 0.0, s_max),
             };
             if let Some((s, face)) = hit {
                 s_max = s;
                 best = Some(Hit { s, prim: i, face });
+            }
+        }
+        best
+    }
+
+    /// Prepares the camera rays over one pixel, `d(dx, dy) = d[0] + dx·d[1] + dy·d[2]` (world),
+    /// for tracing against `prims`: each wafer gets the three vectors in its own frame.
+    pub fn bundle(&self, d: [Vector3<f64>; 3], prims: &[u32], out: &mut Bundle) {
+        out.d = d;
+        out.prims.clear();
+        for &i in prims {
+            let local = match &self.prims[i as usize].shape {
+                Shape::Wafer { rot_t, .. } => Some([rot_t * d[0], rot_t * d[1], rot_t * d[2]]),
+                Shape::Box(_) => None,
+            };
+            out.prims.push((i, local));
+        }
+    }
+
+    /// Closest hit, among the bundle's primitives, of the bundle's ray at sub-pixel offset
+    /// `(dx, dy)`, whose world direction is `d`.
+    #[inline]
+    pub fn trace_bundle(&self, b: &Bundle, dx: f64, dy: f64, d: &Vector3<f64>) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        let mut s_max = f64::INFINITY;
+        for (i, local) in &b.prims {
+            let hit = match (local, &self.prims[*i as usize].shape) {
+                (Some(l), Shape::Wafer { cam_local, .. }) => {
+                    let dl = l[0] + l[1] * dx + l[2] * dy;
+                    intersect_slab(cam_local, &dl, self.radius, self.half, 0.0, s_max)
+                }
+                _ => intersect_box(&self.prims[*i as usize].aabb, &self.cam_center, &d.map(|x| 1.0 / x), 0.0, s_max),
+            };
+            if let Some((s, face)) = hit {
+                s_max = s;
+                best = Some(Hit { s, prim: *i, face });
             }
         }
         best
@@ -304,7 +346,7 @@ impl Prepared {
     }
 
     /// Radiance and surface key (primary key in the high half, mirrored key in the low half) of
-    /// the ray `o + s·d` (`d` unit) given its first hit.
+    /// the ray `o + s·d` (`d` of any positive length) given its first hit.
     ///
     /// With `mirror_subset = Some((prims, complete))` the mirrored ray is first traced against
     /// `prims` only; if it misses them and `complete` is false, against the whole scene.
@@ -314,7 +356,7 @@ impl Prepared {
         d: &Vector3<f64>,
         hit: Option<Hit>,
         mirror_subset: Option<(&[u32], bool)>,
-    ) -> (f64, u64) {
+    ) -> (f64, u32) {
         let Some(hit) = hit else {
             return (self.shading.background, key2(KEY_BACKGROUND, KEY_NONE));
         };
@@ -347,6 +389,16 @@ impl Prepared {
     }
 }
 
+/// The camera rays over one pixel, affine in the sub-pixel offset, prepared for a few
+/// primitives (see [`Prepared::bundle`]).
+#[derive(Debug, Default)]
+pub(crate) struct Bundle {
+    /// World directions `d0, ∂d/∂u, ∂d/∂v`.
+    pub d: [Vector3<f64>; 3],
+    /// The primitives, with the three vectors in the wafer frame for wafers.
+    pub prims: Vec<(u32, Option<[Vector3<f64>; 3]>)>,
+}
+
 /// A primitive that may be hit by the camera rays of one image tile, with the bounding box
 /// `[umin, vmin, umax, vmax]` of its image and its distance bound.
 #[derive(Debug, Clone, Copy)]
@@ -356,9 +408,11 @@ pub(crate) struct TileCand {
     pub dmin: f64,
 }
 
+/// A pixel's surface key: the primary surface's key in the high 16 bits, the mirrored
+/// surface's key in the low 16 bits.
 #[inline]
-pub(crate) fn key2(a: u32, b: u32) -> u64 {
-    ((a as u64) << 32) | b as u64
+pub(crate) fn key2(a: u32, b: u32) -> u32 {
+    (a << 16) | b
 }
 
 #[cold]

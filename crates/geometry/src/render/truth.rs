@@ -6,6 +6,7 @@ use rayon::prelude::*;
 
 use super::trace::{Prepared, RayCamera};
 use super::{Scene, Shading};
+use crate::camera::Camera;
 use crate::conic::{Ellipse, project_circle};
 use crate::{GeometryError, Result};
 
@@ -209,12 +210,13 @@ impl<C: RayCamera> Tester<'_, C> {
 ///
 /// # Errors
 /// As [`super::render`], plus [`GeometryError::InvalidParameter`] for `n_samples < 3`.
-pub fn rim_visibility<C: RayCamera>(
+pub fn rim_visibility(
     scene: &Scene,
-    cam: &C,
+    camera: &Camera,
     t_wc: &Isometry3<f64>,
     n_samples: usize,
 ) -> Result<Vec<RimTruth>> {
+    let cam = camera;
     super::validate_inputs(scene, cam, t_wc)?;
     if n_samples < 3 {
         return Err(GeometryError::InvalidParameter {
@@ -236,14 +238,15 @@ pub fn rim_visibility<C: RayCamera>(
 /// # Errors
 /// As [`rim_visibility`], plus [`GeometryError::InvalidParameter`] for a wafer index out of
 /// range and [`GeometryError::NonFinite`] for a NaN/inf angle.
-pub fn rim_points_visible<C: RayCamera>(
+pub fn rim_points_visible(
     scene: &Scene,
-    cam: &C,
+    camera: &Camera,
     t_wc: &Isometry3<f64>,
     wafer: usize,
     rim: Rim,
     angles: &[f64],
 ) -> Result<Vec<bool>> {
+    let cam = camera;
     super::validate_inputs(scene, cam, t_wc)?;
     if wafer >= scene.wafers.len() {
         return Err(GeometryError::InvalidParameter {
