@@ -51,17 +51,13 @@ def setup(kf):
     kf.R = np.eye(3) * 0.05**2
 
 
-def timed(make, zs, repeats):
-    """Median wall time of ``batch_filter`` over fresh filters, and the last result."""
-    times = []
-    out = None
-    for _ in range(repeats):
-        kf = make()
-        setup(kf)
-        t0 = time.perf_counter()
-        out = kf.batch_filter(zs)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), out
+def run_once(make, zs):
+    """Wall time of one ``batch_filter`` on a fresh filter, and its result."""
+    kf = make()
+    setup(kf)
+    t0 = time.perf_counter()
+    out = kf.batch_filter(zs)
+    return time.perf_counter() - t0, out
 
 
 def main():
@@ -83,24 +79,33 @@ def main():
     runs = {
         "filterpy (Python callbacks)": (
             lambda: FpUKF(9, 3, DT, hx=hx, fx=fx, points=FpPoints(9, alpha, beta, kappa)),
-            args.repeats,
+            1,
         ),
         "autoteach, Python callbacks": (
             lambda: est.UnscentedKalmanFilter(9, 3, DT, hx, fx, est.MerweScaledSigmaPoints(9, alpha, beta, kappa)),
-            args.repeats,
+            1,
         ),
         "autoteach batch, built-in LinearModel": (
             lambda: est.UnscentedKalmanFilter.from_model(lin, est.MerweScaledSigmaPoints(9, alpha, beta, kappa), dt=DT),
-            max(args.repeats, 21),
+            15,
         ),
         "autoteach batch, built-in, square-root": (
             lambda: est.UnscentedKalmanFilter.from_model(
                 lin, est.MerweScaledSigmaPoints(9, 1.0, 2.0, 0.0), dt=DT, square_root=True
             ),
-            max(args.repeats, 21),
+            15,
         ),
     }
-    results = {name: timed(make, zs, reps) for name, (make, reps) in runs.items()}
+    # Interleaved rounds (each round runs every filter; the fast ones several times), so that a
+    # change of machine load affects all filters alike; medians over rounds.
+    times = {name: [] for name in runs}
+    results = {}
+    for _ in range(args.repeats):
+        for name, (make, reps) in runs.items():
+            for _ in range(reps):
+                t, results[name] = run_once(make, zs)
+                times[name].append(t)
+    results = {name: (statistics.median(times[name]), results[name]) for name in runs}
 
     ref_means, ref_covs = results["filterpy (Python callbacks)"][1]
     for name in ("autoteach, Python callbacks", "autoteach batch, built-in LinearModel"):
@@ -111,7 +116,7 @@ def main():
         print(f"{name}: max relative difference to filterpy: means {err_m:.1e}, covariances {err_p:.1e}")
 
     base = results["filterpy (Python callbacks)"][0]
-    print(f"\n9-state UKF, {args.steps} steps, median of repeated runs")
+    print(f"\n9-state UKF, {args.steps} steps, median of {args.repeats} interleaved rounds")
     print(f"{'filter':<42}{'per step (us)':>15}{'speed-up vs filterpy':>24}")
     for name, (t, _) in results.items():
         print(f"{name:<42}{t / args.steps * 1e6:>15.2f}{base / t:>23.1f}x")

@@ -279,7 +279,9 @@ def test_closed_form_kalman_filter_equals_builtin_batch():
     R = np.eye(3) * 0.01
     x = np.zeros(9)
     P = np.eye(9)
-    kf = est.UnscentedKalmanFilter.from_model(est.LinearModel(F, H), est.MerweScaledSigmaPoints(9, 0.7, 2.0, 0.0), dt=dt)
+    kf = est.UnscentedKalmanFilter.from_model(
+        est.LinearModel(F, H), est.MerweScaledSigmaPoints(9, 0.7, 2.0, 0.0), dt=dt
+    )
     kf.Q, kf.R = Q, R
     for variant in [{}, {"square_root": True}, {"noise": "augmented"}]:
         f = est.UnscentedKalmanFilter.from_model(
@@ -299,6 +301,49 @@ def test_closed_form_kalman_filter_equals_builtin_batch():
             assert out["log_likelihoods"][k] == pytest.approx(ll, rel=1e-9, abs=1e-9)
         assert_close(out["xs"][-1], x, 1e-9, f"x {variant}")
         assert_close(out["Ps"][-1], P, 1e-9, f"P {variant}")
+
+
+def test_per_call_overrides_match_filterpy():
+    """predict(dt=, fx=, **fx_args) and update(R=scalar, hx=, **hx_args) as filterpy."""
+
+    def fx_scaled(x, dt, gain=1.0):
+        return cv_fx(x, dt) * np.array([1.0, gain, 1.0, gain])
+
+    def hx_offset(x, offset=0.0):
+        return radar_hx(x) + np.array([offset, 0.0])
+
+    fp, at = radar_pair(alpha=0.5, beta=2.0, kappa=0.0)
+    for k, z in enumerate(radar_data(steps=40)):
+        for kf in (fp, at):
+            kf.predict(dt=0.5, fx=fx_scaled, gain=0.99)
+            kf.update(z, R=0.01 * (1 + k % 3), hx=hx_offset, offset=0.1)
+        assert_close(at.x, fp.x, what=f"x {k}")
+        assert_close(at.P, fp.P, what=f"P {k}")
+    assert_close(at.x_prior, fp.x_prior, what="x_prior")
+
+
+def test_builtin_batch_releases_the_gil():
+    import threading
+
+    model = est.ConstantVelocityModel(3, dt=0.01)
+    kf = est.UnscentedKalmanFilter.from_model(model, est.MerweScaledSigmaPoints(6, 0.5, 2.0, 0.0))
+    zs = np.random.default_rng(0).normal(size=(50_000, 3))
+    ticks = [0]
+    seen = {}
+    done = threading.Event()
+
+    def run():
+        seen["before"] = ticks[0]
+        kf.batch_filter(zs)
+        seen["after"] = ticks[0]
+        done.set()
+
+    worker = threading.Thread(target=run)
+    worker.start()
+    while not done.is_set():
+        ticks[0] += 1  # the main thread advances during the batch only if the GIL is released
+    worker.join()
+    assert seen["after"] - seen["before"] > 1000
 
 
 def test_square_root_matches_standard_on_the_nonlinear_model():
@@ -335,7 +380,9 @@ def test_augmented_callbacks_receive_noise():
     def hx(x, v):
         return np.array([x[0] + v[0]])
 
-    f = est.UnscentedKalmanFilter(2, 1, dt, hx, fx, est.MerweScaledSigmaPoints(2, 0.5, 2.0, 0.0), noise="augmented", dim_w=1)
+    f = est.UnscentedKalmanFilter(
+        2, 1, dt, hx, fx, est.MerweScaledSigmaPoints(2, 0.5, 2.0, 0.0), noise="augmented", dim_w=1
+    )
     assert f.Q.shape == (1, 1)
     f.Q = np.array([[0.04]])
     f.R = np.array([[0.25]])
@@ -387,9 +434,9 @@ def test_bad_inputs_raise_invalid_input():
     with pytest.raises(InvalidInputError, match="UT"):
         at.predict(UT=lambda *a: None)
     with pytest.raises(InvalidInputError, match="built-in"):
-        est.UnscentedKalmanFilter.from_model(est.ConstantVelocityModel(2), est.MerweScaledSigmaPoints(4, 1, 2, 0)).predict(
-            w=1
-        )
+        est.UnscentedKalmanFilter.from_model(
+            est.ConstantVelocityModel(2), est.MerweScaledSigmaPoints(4, 1, 2, 0)
+        ).predict(w=1)
     with pytest.raises(InvalidInputError, match=r"measurement matrix H: expected shape \[2, 3\], got \[2, 2\]"):
         est.LinearModel(np.eye(3), np.eye(2))
     with pytest.raises(InvalidInputError, match="transition matrix F"):
@@ -403,7 +450,9 @@ def test_callback_errors_propagate():
     f = est.UnscentedKalmanFilter(4, 2, 1.0, radar_hx, boom, est.MerweScaledSigmaPoints(4, 1.0, 2.0, 0.0))
     with pytest.raises(KeyError, match="boom"):
         f.predict()
-    g = est.UnscentedKalmanFilter(4, 2, 1.0, radar_hx, lambda x, dt: x[:3], est.MerweScaledSigmaPoints(4, 1.0, 2.0, 0.0))
+    g = est.UnscentedKalmanFilter(
+        4, 2, 1.0, radar_hx, lambda x, dt: x[:3], est.MerweScaledSigmaPoints(4, 1.0, 2.0, 0.0)
+    )
     with pytest.raises(InvalidInputError, match=r"fx returned an array of shape \(3,\), expected 4 values"):
         g.predict()
 

@@ -345,3 +345,171 @@ def assign_with_unassigned(
     cost: F64Array, row_unassigned_cost: F64Array, col_unassigned_cost: F64Array
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], float]:
     """Assignment with non-assignment costs; see :func:`autoteach.detect.assign_with_unassigned`."""
+
+# --- estimate (ukf) ---
+
+from collections.abc import Callable as _Callable  # noqa: E402
+from typing import Any as _Any  # noqa: E402
+
+def merwe_sigma_points(x: F64Array, p: F64Array, alpha: float, beta: float, kappa: float) -> F64Array:
+    """Van der Merwe's scaled sigma points ``(2n+1, n)`` of mean ``x`` (n,) and covariance ``p`` (n, n).
+
+    Order as filterpy: the mean, then ``x + L[:, k]``, then ``x - L[:, k]`` with ``L`` the lower
+    Cholesky factor of ``(n + lambda) p``. Raises InvalidInputError for bad sizes, NaN, bad
+    parameters or a ``p`` that is not symmetric positive definite.
+    """
+
+def merwe_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[F64Array, F64Array]:
+    """The weights ``(Wm, Wc)`` (each ``(2n+1,)``) of van der Merwe's scaled sigma points."""
+
+class UkfLinearModel:
+    """Built-in linear model ``x' = F x + B u``, ``z = H x`` (F (n, n), H (m, n), B (n, k) or None)."""
+
+    def __init__(self, f: F64Array, h: F64Array, b: F64Array | None = None) -> None: ...
+    @property
+    def dim_x(self) -> int: ...
+    @property
+    def dim_z(self) -> int: ...
+    @property
+    def dim_u(self) -> int: ...
+
+class UkfConstantVelocityModel:
+    """Built-in constant-velocity model in ``dim`` dimensions: state ``[p; v]``, input acceleration, ``z = p``."""
+
+    def __init__(self, dim: int) -> None: ...
+    @property
+    def dim_x(self) -> int: ...
+    @property
+    def dim_z(self) -> int: ...
+    @property
+    def dim_u(self) -> int: ...
+
+class UkfFilter:
+    """The compiled unscented Kalman filter (standard or square-root; additive or augmented noise).
+
+    Build it with :meth:`builtin` (a built-in model: batches run in Rust without the GIL) or
+    :meth:`callbacks` (Python callables, called as filterpy calls them; an exception they raise
+    propagates unchanged). Covariances that lose positive definiteness during filtering raise
+    ConvergenceError naming the step, unless ``repair=True`` (eigenvalues clipped).
+    """
+
+    @staticmethod
+    def builtin(
+        model: UkfLinearModel | UkfConstantVelocityModel,
+        alpha: float,
+        beta: float,
+        kappa: float,
+        *,
+        square_root: bool = False,
+        augmented: bool = False,
+        repair: bool = False,
+    ) -> UkfFilter: ...
+    @staticmethod
+    def callbacks(
+        dim_x: int,
+        dim_z: int,
+        fx: _Callable[..., _Any],
+        hx: _Callable[..., _Any],
+        alpha: float,
+        beta: float,
+        kappa: float,
+        *,
+        x_mean: _Callable[[F64Array, F64Array], _Any] | None = None,
+        z_mean: _Callable[[F64Array, F64Array], _Any] | None = None,
+        residual_x: _Callable[[F64Array, F64Array], _Any] | None = None,
+        residual_z: _Callable[[F64Array, F64Array], _Any] | None = None,
+        state_add: _Callable[[F64Array, F64Array], _Any] | None = None,
+        subtract: _Callable[[F64Array, F64Array], _Any] | None = None,
+        sqrt: _Callable[[F64Array], _Any] | None = None,
+        square_root: bool = False,
+        augmented: bool = False,
+        repair: bool = False,
+        dim_w: int | None = None,
+        dim_v: int | None = None,
+    ) -> UkfFilter:
+        """A filter on Python callables, called as filterpy calls them.
+
+        ``fx(x, dt, **fx_kwargs)`` (augmented: ``fx(x, dt, w, **fx_kwargs)``), ``hx(x, **hx_kwargs)``
+        (augmented: ``hx(x, v, **hx_kwargs)``), ``x_mean(sigmas (2n+1, n), Wm)``, ``residual_x(a, b)``,
+        ``state_add(x, dx)``, ``subtract(x, -offset)`` for the sigma points, ``sqrt(M)`` returning a matrix
+        whose rows are the sigma offsets.
+        """
+
+    def set_state(
+        self,
+        x: F64Array | None = None,
+        p: F64Array | None = None,
+        q: F64Array | None = None,
+        r: F64Array | None = None,
+    ) -> None:
+        """Set any of x (n,), P (n, n), Q, R (validated: sizes, finiteness, symmetry, definiteness)."""
+
+    def predict(
+        self,
+        dt: float,
+        u: F64Array | None = None,
+        fx_kwargs: dict[str, _Any] | None = None,
+        fx: _Callable[..., _Any] | None = None,
+    ) -> None: ...
+    def update(
+        self,
+        z: F64Array,
+        r: F64Array | None = None,
+        hx_kwargs: dict[str, _Any] | None = None,
+        hx: _Callable[..., _Any] | None = None,
+    ) -> None: ...
+    def skip_update(self) -> None:
+        """Record a missing measurement (posterior = prior)."""
+
+    def batch(
+        self,
+        zs: F64Array,
+        dt: float,
+        mask: list[bool] | None = None,
+        us: F64Array | None = None,
+        dts: F64Array | None = None,
+        rs: F64Array | None = None,
+        priors: bool = True,
+    ) -> dict[str, F64Array]:
+        """Predict/update over ``zs`` (n, dim_z) in one call.
+
+        Returns ``xs`` (n, dim_x), ``Ps`` (n, dim_x, dim_x), ``log_likelihoods`` (n,) and, with
+        ``priors``, ``x_priors``, ``P_priors``. ``mask`` marks the measurements present.
+        """
+
+    @property
+    def dim_x(self) -> int: ...
+    @property
+    def dim_z(self) -> int: ...
+    @property
+    def x(self) -> F64Array: ...
+    @property
+    def P(self) -> F64Array: ...  # noqa: N802
+    @property
+    def Q(self) -> F64Array: ...  # noqa: N802
+    @property
+    def R(self) -> F64Array: ...  # noqa: N802
+    @property
+    def x_prior(self) -> F64Array: ...
+    @property
+    def P_prior(self) -> F64Array: ...  # noqa: N802
+    @property
+    def x_post(self) -> F64Array: ...
+    @property
+    def P_post(self) -> F64Array: ...  # noqa: N802
+    @property
+    def K(self) -> F64Array: ...  # noqa: N802
+    @property
+    def y(self) -> F64Array: ...
+    @property
+    def S(self) -> F64Array: ...  # noqa: N802
+    @property
+    def log_likelihood(self) -> float: ...
+    @property
+    def step(self) -> int: ...
+    @property
+    def repairs(self) -> int: ...
+    @property
+    def Wm(self) -> F64Array: ...  # noqa: N802
+    @property
+    def Wc(self) -> F64Array: ...  # noqa: N802

@@ -19,7 +19,8 @@ Errors: bad input raises :class:`~autoteach.errors.InvalidInputError`; degenerat
 Example:
     >>> import numpy as np
     >>> from autoteach.detect import fit_ellipse
-    >>> from autoteach.geometry import Ellipse
+    >>> from autoteach._convert import as_f64
+from autoteach.geometry import Ellipse
     >>> arc = Ellipse(320.0, 240.0, 300.0, 120.0, 0.4).sample(200, 0.3, 0.3 + np.radians(120))
     >>> fit = fit_ellipse(arc, method="geometric")
     >>> round(fit.ellipse.cx, 6), round(fit.ellipse.b, 6)
@@ -36,25 +37,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
+from autoteach._convert import as_f64
 from autoteach.errors import InvalidInputError
 from autoteach.geometry import Ellipse
 
 __all__ = ["EllipseFit", "assign_with_unassigned", "fit_ellipse", "linear_sum_assignment"]
 
 FitMethod = Literal["direct", "geometric"]
-
-
-def _as_f64(value: ArrayLike, name: str) -> NDArray[np.float64]:
-    """Convert ``value`` to a float64 array; shapes and finiteness are checked in Rust."""
-    if isinstance(value, (str, bytes)):
-        raise InvalidInputError(f"{name} must be an array of real numbers, got {type(value).__name__} {value!r}")
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError) as err:
-        raise InvalidInputError(f"{name} must be an array of real numbers: {err}") from None
-    if arr.dtype.kind not in "iuf":
-        raise InvalidInputError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
-    return arr.astype(np.float64, copy=False)
 
 
 @dataclass(frozen=True)
@@ -108,7 +97,7 @@ def fit_ellipse(points: ArrayLike, method: FitMethod = "geometric") -> EllipseFi
     """
     if method not in ("direct", "geometric"):
         raise InvalidInputError(f"method must be 'direct' or 'geometric', got {method!r}")
-    inner = _core.fit_ellipse(_as_f64(points, "points"), method)
+    inner = _core.fit_ellipse(as_f64(points, "points"), method)
     return EllipseFit(
         ellipse=Ellipse._wrap(inner.ellipse),
         residual=inner.residual,
@@ -141,7 +130,7 @@ def linear_sum_assignment(cost: ArrayLike, maximize: bool = False) -> tuple[NDAr
             costs whose sums overflow.
 
     """
-    return _core.linear_sum_assignment(_as_f64(cost, "cost"), bool(maximize))
+    return _core.linear_sum_assignment(as_f64(cost, "cost"), bool(maximize))
 
 
 def assign_with_unassigned(
@@ -169,7 +158,7 @@ def assign_with_unassigned(
 
     """
     return _core.assign_with_unassigned(
-        _as_f64(cost, "cost"),
-        _as_f64(row_unassigned_cost, "row_unassigned_cost"),
-        _as_f64(col_unassigned_cost, "col_unassigned_cost"),
+        as_f64(cost, "cost"),
+        as_f64(row_unassigned_cost, "row_unassigned_cost"),
+        as_f64(col_unassigned_cost, "col_unassigned_cost"),
     )

@@ -247,7 +247,8 @@ class UnscentedKalmanFilter:
         fx: Process function ``fx(x, dt, **fx_args)``, or a :class:`LinearModel` /
             :class:`ConstantVelocityModel` (the fast path).
         points: A :class:`MerweScaledSigmaPoints` with ``n == dim_x`` (its ``alpha``, ``beta``,
-            ``kappa``, ``sqrt_method`` and ``subtract`` are used).
+            ``kappa``, ``sqrt_method`` and ``subtract`` are used). Another sigma-point object
+            with ``n``, ``alpha``, ``beta``, ``kappa`` (e.g. filterpy's) contributes those four.
         sqrt_fn: Kept as ``self.msqrt`` for compatibility; like filterpy, the square root
             actually used is the sigma points' ``sqrt_method``.
         x_mean_fn: ``x_mean_fn(sigmas, Wm)`` mean of state sigma points ``(2n+1, n)``.
@@ -433,7 +434,9 @@ class UnscentedKalmanFilter:
 
     # -- filterpy interface --------------------------------------------------------------------
 
-    def predict(self, dt: float | None = None, UT: Any = None, fx: Callable[..., ArrayLike] | None = None, **fx_args: Any) -> None:  # noqa: N803
+    def predict(
+        self, dt: float | None = None, UT: Any = None, fx: Callable[..., ArrayLike] | None = None, **fx_args: Any
+    ) -> None:  # noqa: N803
         """Predict over ``dt`` (default the constructor's); ``fx_args`` go to ``fx``.
 
         With a built-in model, ``u=`` is the control input and no other argument is accepted.
@@ -491,13 +494,16 @@ class UnscentedKalmanFilter:
         us: ArrayLike | None = None,
         dts: ArrayLike | float | None = None,
         Rs: ArrayLike | None = None,  # noqa: N803
+        *,
+        priors: bool = True,
     ) -> dict[str, F64Array]:
         """Run predict/update for every measurement in one call into Rust.
 
         ``zs``: ``(n, dim_z)`` (``None`` entries are missing measurements); ``us``: ``(n, dim_u)``
         control inputs (built-in models); ``dts``: scalar or ``(n,)``; ``Rs``: ``(n, dim_z, dim_z)``
-        or ``(n,)`` scalars. Returns ``xs``, ``Ps`` (posteriors), ``x_priors``, ``P_priors`` and
-        ``log_likelihoods`` (NaN where missing). The filter ends in the last posterior.
+        or ``(n,)`` scalars. Returns ``xs``, ``Ps`` (posteriors), ``log_likelihoods`` (NaN where
+        missing) and, with ``priors``, ``x_priors``, ``P_priors``. The filter ends in the last
+        posterior.
         """
         n = len(zs)  # type: ignore[arg-type]
         Z, mask = self._measurements(zs, n)  # noqa: N806
@@ -516,13 +522,15 @@ class UnscentedKalmanFilter:
                 r_arr = r_arr[:, None, None] * np.eye(self._dim_z)
         self._push()
         try:
-            out = self._inner.batch(Z, self._dt, mask=None if all(mask) else mask, us=u_arr, dts=dt_arr, rs=r_arr)
+            out = self._inner.batch(
+                Z, self._dt, mask=None if all(mask) else mask, us=u_arr, dts=dt_arr, rs=r_arr, priors=priors
+            )
         finally:
             # On error the compiled filter holds the last completed stage: mirror it.
             self._pull(prior=False, post=True)
         if n:
-            self.x_prior = out["x_priors"][-1].copy()
-            self.P_prior = out["P_priors"][-1].copy()
+            self.x_prior = np.asarray(self._inner.x_prior)
+            self.P_prior = np.asarray(self._inner.P_prior)
             if mask[-1]:
                 inner = self._inner
                 self.K = np.asarray(inner.K)
@@ -570,7 +578,7 @@ class UnscentedKalmanFilter:
             raise InvalidInputError("a custom UT is not supported: customise with x_mean_fn / residual_x")
         n = len(zs)  # type: ignore[arg-type]
         if saver is None:
-            out = self.batch(zs, us=us, dts=dts, Rs=Rs)
+            out = self.batch(zs, us=us, dts=dts, Rs=Rs, priors=False)
             means, covs = out["xs"], out["Ps"]
         else:
             means = np.zeros((n, self._dim_x))
@@ -632,4 +640,6 @@ class UnscentedKalmanFilter:
     def __repr__(self) -> str:
         kind = "square-root " if self.square_root else ""
         model = type(self._model).__name__ if self._model is not None else "callbacks"
-        return f"UnscentedKalmanFilter({kind}dim_x={self._dim_x}, dim_z={self._dim_z}, model={model}, noise={self.noise})"
+        return (
+            f"UnscentedKalmanFilter({kind}dim_x={self._dim_x}, dim_z={self._dim_z}, model={model}, noise={self.noise})"
+        )

@@ -36,7 +36,6 @@ Example:
 from __future__ import annotations
 
 import math
-import operator
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Literal
@@ -45,6 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
+from autoteach._convert import F64Array, as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
 
 __all__ = [
@@ -70,7 +70,7 @@ __all__ = [
     "so3_log",
 ]
 
-F64Array = NDArray[np.float64]
+
 """A float64 NumPy array."""
 
 DistanceKind = Literal["orthogonal", "sampson", "algebraic"]
@@ -82,53 +82,9 @@ DistanceKind = Literal["orthogonal", "sampson", "algebraic"]
 # --------------------------------------------------------------------------------------------
 
 
-def _as_f64(value: ArrayLike, name: str) -> F64Array:
-    """Convert ``value`` to a float64 array, rejecting anything that is not real numbers.
-
-    Shapes and finiteness are checked by the compiled functions, which name the argument too.
-    """
-    if isinstance(value, (str, bytes)):
-        raise InvalidInputError(f"{name} must be an array of real numbers, got {type(value).__name__} {value!r}")
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError) as err:
-        raise InvalidInputError(f"{name} must be an array of real numbers: {err}") from None
-    if arr.dtype.kind not in "iuf":
-        raise InvalidInputError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
-    return arr.astype(np.float64, copy=False)
-
-
-def _as_float(value: Any, name: str) -> float:
-    """Convert a real, finite scalar (Python or NumPy, or a 0-d array) to ``float``."""
-    if isinstance(value, (str, bytes, bool, np.bool_)):
-        raise InvalidInputError(f"{name} must be a real number, got {type(value).__name__} {value!r}")
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError) as err:
-        raise InvalidInputError(f"{name} must be a real number: {err}") from None
-    if arr.dtype.kind not in "iuf":
-        raise InvalidInputError(f"{name} must be a real number, got {type(value).__name__} of dtype {arr.dtype}")
-    if arr.shape != ():
-        raise InvalidInputError(f"{name} must be a real number (a scalar), got an array of shape {arr.shape}")
-    out = float(arr)
-    if not math.isfinite(out):
-        raise InvalidInputError(f"{name} must be finite, got {out}")
-    return out
-
-
-def _as_int(value: Any, name: str) -> int:
-    """Convert an integer (Python or NumPy, not bool) to ``int``."""
-    if isinstance(value, (bool, np.bool_)):
-        raise InvalidInputError(f"{name} must be an integer, got {value!r}")
-    try:
-        return operator.index(value)
-    except TypeError:
-        raise InvalidInputError(f"{name} must be an integer, got {type(value).__name__} {value!r}") from None
-
-
 def _as_blade(blade: Any) -> int:
     """Validate a blade number (1 or 2)."""
-    number = _as_int(blade, "blade")
+    number = as_int(blade, "blade")
     if number not in (1, 2):
         raise InvalidInputError(f"blade must be 1 or 2, got {number}")
     return number
@@ -149,7 +105,7 @@ def so3_exp(omega: ArrayLike) -> F64Array:
         Rotation matrices, shape ``(..., 3, 3)``.
 
     """
-    return _core.so3_exp(_as_f64(omega, "omega"))
+    return _core.so3_exp(as_f64(omega, "omega"))
 
 
 def so3_log(R: ArrayLike) -> F64Array:
@@ -163,7 +119,7 @@ def so3_log(R: ArrayLike) -> F64Array:
         Rotation vectors, shape ``(..., 3)``.
 
     """
-    return _core.so3_log(_as_f64(R, "R"))
+    return _core.so3_log(as_f64(R, "R"))
 
 
 def se3_exp(xi: ArrayLike) -> F64Array:
@@ -176,7 +132,7 @@ def se3_exp(xi: ArrayLike) -> F64Array:
         Homogeneous poses, shape ``(..., 4, 4)``.
 
     """
-    return _core.se3_exp(_as_f64(xi, "xi"))
+    return _core.se3_exp(as_f64(xi, "xi"))
 
 
 def se3_log(T: ArrayLike) -> F64Array:
@@ -189,7 +145,7 @@ def se3_log(T: ArrayLike) -> F64Array:
         Twists, shape ``(..., 6)``.
 
     """
-    return _core.se3_log(_as_f64(T, "T"))
+    return _core.se3_log(as_f64(T, "T"))
 
 
 def se3_plus(T: ArrayLike, xi: ArrayLike) -> F64Array:
@@ -205,7 +161,7 @@ def se3_plus(T: ArrayLike, xi: ArrayLike) -> F64Array:
         Perturbed poses, shape ``(..., 4, 4)`` (broadcast leading dimensions).
 
     """
-    t_arr, xi_arr = _broadcast_pair(_as_f64(T, "T"), "T", 2, _as_f64(xi, "xi"), "xi", 1)
+    t_arr, xi_arr = _broadcast_pair(as_f64(T, "T"), "T", 2, as_f64(xi, "xi"), "xi", 1)
     return _core.se3_plus(t_arr, xi_arr)
 
 
@@ -222,7 +178,7 @@ def se3_minus(Y: ArrayLike, X: ArrayLike) -> F64Array:
         Twists, shape ``(..., 6)`` (broadcast leading dimensions).
 
     """
-    y_arr, x_arr = _broadcast_pair(_as_f64(Y, "Y"), "Y", 2, _as_f64(X, "X"), "X", 2)
+    y_arr, x_arr = _broadcast_pair(as_f64(Y, "Y"), "Y", 2, as_f64(X, "X"), "X", 2)
     return _core.se3_minus(y_arr, x_arr)
 
 
@@ -255,7 +211,7 @@ def quat_to_matrix(q: ArrayLike) -> F64Array:
         Rotation matrices, shape ``(..., 3, 3)``.
 
     """
-    return _core.quat_to_matrix(_as_f64(q, "q"))
+    return _core.quat_to_matrix(as_f64(q, "q"))
 
 
 def matrix_to_quat(R: ArrayLike) -> F64Array:
@@ -268,7 +224,7 @@ def matrix_to_quat(R: ArrayLike) -> F64Array:
         Quaternions, shape ``(..., 4)``.
 
     """
-    return _core.matrix_to_quat(_as_f64(R, "R"))
+    return _core.matrix_to_quat(as_f64(R, "R"))
 
 
 def euler_zyx_to_matrix(angles: ArrayLike) -> F64Array:
@@ -281,7 +237,7 @@ def euler_zyx_to_matrix(angles: ArrayLike) -> F64Array:
         Rotation matrices, shape ``(..., 3, 3)``.
 
     """
-    return _core.euler_zyx_to_matrix(_as_f64(angles, "angles"))
+    return _core.euler_zyx_to_matrix(as_f64(angles, "angles"))
 
 
 def matrix_to_euler_zyx(R: ArrayLike) -> F64Array:
@@ -294,7 +250,7 @@ def matrix_to_euler_zyx(R: ArrayLike) -> F64Array:
         ``(yaw, pitch, roll)`` with pitch in ``[-π/2, π/2]``, shape ``(..., 3)``.
 
     """
-    return _core.matrix_to_euler_zyx(_as_f64(R, "R"))
+    return _core.matrix_to_euler_zyx(as_f64(R, "R"))
 
 
 def euler_xyz_to_matrix(angles: ArrayLike) -> F64Array:
@@ -307,7 +263,7 @@ def euler_xyz_to_matrix(angles: ArrayLike) -> F64Array:
         Rotation matrices, shape ``(..., 3, 3)``.
 
     """
-    return _core.euler_xyz_to_matrix(_as_f64(angles, "angles"))
+    return _core.euler_xyz_to_matrix(as_f64(angles, "angles"))
 
 
 def matrix_to_euler_xyz(R: ArrayLike) -> F64Array:
@@ -320,7 +276,7 @@ def matrix_to_euler_xyz(R: ArrayLike) -> F64Array:
         ``(a, b, c)`` with ``b`` in ``[-π/2, π/2]``, shape ``(..., 3)``.
 
     """
-    return _core.matrix_to_euler_xyz(_as_f64(R, "R"))
+    return _core.matrix_to_euler_xyz(as_f64(R, "R"))
 
 
 # --------------------------------------------------------------------------------------------
@@ -369,7 +325,7 @@ class RobotParams:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            object.__setattr__(self, f.name, _as_float(getattr(self, f.name), f.name))
+            object.__setattr__(self, f.name, as_float(getattr(self, f.name), f.name))
         # The Rust constructor holds the rules (positive lengths, |beta_c| < π/2): ask it.
         _core.WaferRobot(self.to_dict(), None)
 
@@ -389,7 +345,7 @@ class RobotParams:
         unknown = sorted(set(values) - set(names))
         if unknown:
             raise InvalidInputError(f"unknown robot parameter(s) {unknown}; expected names among {names}")
-        return cls(**{k: _as_float(v, k) for k, v in values.items()})
+        return cls(**{k: as_float(v, k) for k, v in values.items()})
 
 
 class WaferRobot:
@@ -423,7 +379,7 @@ class WaferRobot:
             raise InvalidInputError(
                 f"params must be None, a RobotParams or a mapping of names to values, got {type(params).__name__}"
             )
-        self._inner = _core.WaferRobot(values, None if base is None else _as_f64(base, "base"))
+        self._inner = _core.WaferRobot(values, None if base is None else as_f64(base, "base"))
 
     @property
     def params(self) -> RobotParams:
@@ -457,7 +413,7 @@ class WaferRobot:
             :attr:`base` for world poses.
 
         """
-        return self._inner.blade_pose(_as_f64(q, "q"), _as_blade(blade))
+        return self._inner.blade_pose(as_f64(q, "q"), _as_blade(blade))
 
     def camera_pose(self, q: ArrayLike) -> F64Array:
         """Camera pose in the world ``T_wc = T_wb·T_be2·T_e2c``, seed eq. (2.2).
@@ -469,7 +425,7 @@ class WaferRobot:
             Camera poses (camera frame to world), shape ``(..., 4, 4)``.
 
         """
-        return self._inner.camera_pose(_as_f64(q, "q"))
+        return self._inner.camera_pose(as_f64(q, "q"))
 
     def camera_pose_in_base(self, q: ArrayLike) -> F64Array:
         """Camera pose in the robot base ``T_bc = T_be2·T_e2c``.
@@ -481,7 +437,7 @@ class WaferRobot:
             Camera poses (camera frame to base frame), shape ``(..., 4, 4)``.
 
         """
-        return self._inner.camera_pose_in_base(_as_f64(q, "q"))
+        return self._inner.camera_pose_in_base(as_f64(q, "q"))
 
     def jacobian(self, q: ArrayLike, blade: int = 1) -> F64Array:
         """Blade Jacobian ``d(v_x, v_y, v_z, ω_z)/d(θ̇1, θ̇2, θ̇3, θ̇4, ḣ)`` in the base frame, seed eq. (2.5).
@@ -494,7 +450,7 @@ class WaferRobot:
             Jacobians, shape ``(..., 4, 5)``.
 
         """
-        return self._inner.jacobian(_as_f64(q, "q"), _as_blade(blade))
+        return self._inner.jacobian(as_f64(q, "q"), _as_blade(blade))
 
     def camera_jacobian(self, q: ArrayLike) -> F64Array:
         """Jacobian of ``T_wc(q)`` as right-perturbation twists ``[ω; ρ]`` per joint.
@@ -508,7 +464,7 @@ class WaferRobot:
             Jacobians, shape ``(..., 6, 5)``.
 
         """
-        return self._inner.camera_jacobian(_as_f64(q, "q"))
+        return self._inner.camera_jacobian(as_f64(q, "q"))
 
     def acceleration(self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, blade: int = 1) -> F64Array:
         """Blade acceleration ``(a_x, a_y, a_z, ω̇_z)`` in the base frame, seed eq. (2.6).
@@ -524,7 +480,7 @@ class WaferRobot:
             broadcast against each other.
 
         """
-        q_arr, qd_arr, qdd_arr = (_as_f64(q, "q"), _as_f64(qd, "qd"), _as_f64(qdd, "qdd"))
+        q_arr, qd_arr, qdd_arr = (as_f64(q, "q"), as_f64(qd, "qd"), as_f64(qdd, "qdd"))
         if q_arr.ndim >= 1 and qd_arr.ndim >= 1 and qdd_arr.ndim >= 1:
             try:
                 lead = np.broadcast_shapes(q_arr.shape[:-1], qd_arr.shape[:-1], qdd_arr.shape[:-1])
@@ -553,7 +509,7 @@ class WaferRobot:
 
         """
         return self._inner.inverse_kinematics(
-            _as_f64(T, "T"), _as_blade(blade), _as_float(other_blade_angle, "other_blade_angle")
+            as_f64(T, "T"), _as_blade(blade), as_float(other_blade_angle, "other_blade_angle")
         )
 
     def inverse_kinematics_camera(self, T_wc: ArrayLike, theta3: float = 0.0) -> F64Array:
@@ -570,7 +526,7 @@ class WaferRobot:
             UnreachablePoseError: The camera pose cannot be reached.
 
         """
-        return self._inner.inverse_kinematics_camera(_as_f64(T_wc, "T_wc"), _as_float(theta3, "theta3"))
+        return self._inner.inverse_kinematics_camera(as_f64(T_wc, "T_wc"), as_float(theta3, "theta3"))
 
 
 def joints_from_encoders(q_enc: ArrayLike, offsets: ArrayLike) -> F64Array:
@@ -584,7 +540,7 @@ def joints_from_encoders(q_enc: ArrayLike, offsets: ArrayLike) -> F64Array:
         Joint vectors, shape ``(..., 5)``.
 
     """
-    return _core.joints_from_encoders(_as_f64(q_enc, "q_enc"), _as_f64(offsets, "offsets"))
+    return _core.joints_from_encoders(as_f64(q_enc, "q_enc"), as_f64(offsets, "offsets"))
 
 
 # --------------------------------------------------------------------------------------------
@@ -622,10 +578,10 @@ class Camera:
     def __init__(self, model: str, params: ArrayLike, width: int, height: int) -> None:
         if not isinstance(model, str):
             raise InvalidInputError(f"model must be a string, got {type(model).__name__}")
-        w, h = _as_int(width, "width"), _as_int(height, "height")
+        w, h = as_int(width, "width"), as_int(height, "height")
         if w <= 0 or h <= 0:
             raise InvalidInputError(f"width and height must be positive, got {w} x {h}")
-        self._inner = _core.Camera(model, _as_f64(params, "params"), w, h)
+        self._inner = _core.Camera(model, as_f64(params, "params"), w, h)
 
     @property
     def model(self) -> str:
@@ -677,7 +633,7 @@ class Camera:
                 and Brown–Conrady models, on the optical centre); the message gives its index.
 
         """
-        return self._inner.project(_as_f64(points, "points"))
+        return self._inner.project(as_f64(points, "points"))
 
     def project_jacobians(self, points: ArrayLike) -> tuple[F64Array, F64Array, F64Array]:
         """Projects points and returns the analytic Jacobians of the projection.
@@ -691,7 +647,7 @@ class Camera:
             :attr:`params`.
 
         """
-        return self._inner.project_jacobians(_as_f64(points, "points"))
+        return self._inner.project_jacobians(as_f64(points, "points"))
 
     def unproject(self, pixels: ArrayLike) -> F64Array:
         """Return the unit bearing vectors (camera frame) of pixels; ``project(unproject(px)) ≈ px``.
@@ -703,7 +659,7 @@ class Camera:
             Unit vectors, shape ``(..., 3)``.
 
         """
-        return self._inner.unproject(_as_f64(pixels, "pixels"))
+        return self._inner.unproject(as_f64(pixels, "pixels"))
 
     def in_image(self, pixels: ArrayLike) -> NDArray[np.bool_]:
         """Whether pixels fall inside the image (``-0.5 ≤ u < width − 0.5``, same for ``v``).
@@ -717,7 +673,7 @@ class Camera:
             Booleans, shape ``(...)``; non-finite pixels are outside.
 
         """
-        return self._inner.in_image(_as_f64(pixels, "pixels"))
+        return self._inner.in_image(as_f64(pixels, "pixels"))
 
 
 # --------------------------------------------------------------------------------------------
@@ -749,7 +705,7 @@ class Ellipse:
 
     def __init__(self, cx: float, cy: float, a: float, b: float, theta: float) -> None:
         self._inner = _core.Ellipse(
-            _as_float(cx, "cx"), _as_float(cy, "cy"), _as_float(a, "a"), _as_float(b, "b"), _as_float(theta, "theta")
+            as_float(cx, "cx"), as_float(cy, "cy"), as_float(a, "a"), as_float(b, "b"), as_float(theta, "theta")
         )
 
     @classmethod
@@ -771,12 +727,12 @@ class Ellipse:
             InvalidInputError: Wrong shape, not symmetric, or non-finite.
 
         """
-        return cls._wrap(_core.Ellipse.from_conic(_as_f64(C, "C")))
+        return cls._wrap(_core.Ellipse.from_conic(as_f64(C, "C")))
 
     @classmethod
     def from_array(cls, values: ArrayLike) -> Ellipse:
         """Build the ellipse of ``(cx, cy, a, b, theta)``, the inverse of :meth:`as_array`."""
-        arr = _as_f64(values, "values")
+        arr = as_f64(values, "values")
         if arr.shape != (5,):
             raise InvalidInputError(f"values must have shape (5,) = (cx, cy, a, b, theta), got {arr.shape}")
         return cls(*arr)
@@ -848,7 +804,7 @@ class Ellipse:
 
     def point_at(self, t: ArrayLike) -> F64Array:
         """Points at parameters ``t`` (radians), shape ``(...)`` → ``(..., 2)``."""
-        return self._inner.point_at(_as_f64(t, "t"))
+        return self._inner.point_at(as_f64(t, "t"))
 
     def sample(self, n: int, t0: float = 0.0, t1: float = 2.0 * math.pi) -> F64Array:
         """``n`` points at eccentric angles evenly spaced from ``t0`` to ``t1`` (both included).
@@ -862,10 +818,10 @@ class Ellipse:
             Points, shape ``(n, 2)``.
 
         """
-        count = _as_int(n, "n")
+        count = as_int(n, "n")
         if count < 2:
             raise InvalidInputError(f"n must be at least 2 (both ends are included), got {count}")
-        return self._inner.sample(count, _as_float(t0, "t0"), _as_float(t1, "t1"))
+        return self._inner.sample(count, as_float(t0, "t0"), as_float(t1, "t1"))
 
     def distance(self, points: ArrayLike, kind: DistanceKind = "orthogonal") -> F64Array:
         """Distances of points to the ellipse.
@@ -883,11 +839,11 @@ class Ellipse:
         """
         if kind not in ("orthogonal", "sampson", "algebraic"):
             raise InvalidInputError(f"kind must be 'orthogonal', 'sampson' or 'algebraic', got {kind!r}")
-        return self._inner.distance(_as_f64(points, "points"), kind)
+        return self._inner.distance(as_f64(points, "points"), kind)
 
     def closest_point(self, points: ArrayLike) -> F64Array:
         """Return the points of the ellipse closest to ``points`` (shape ``(..., 2)`` → ``(..., 2)``)."""
-        return self._inner.closest_point(_as_f64(points, "points"))
+        return self._inner.closest_point(as_f64(points, "points"))
 
 
 def project_circle(K: ArrayLike, T_cw: ArrayLike, center: ArrayLike, normal: ArrayLike, radius: float) -> Ellipse:
@@ -911,11 +867,11 @@ def project_circle(K: ArrayLike, T_cw: ArrayLike, center: ArrayLike, normal: Arr
     """
     return Ellipse._wrap(
         _core.project_circle(
-            _as_f64(K, "K"),
-            _as_f64(T_cw, "T_cw"),
-            _as_f64(center, "center"),
-            _as_f64(normal, "normal"),
-            _as_float(radius, "radius"),
+            as_f64(K, "K"),
+            as_f64(T_cw, "T_cw"),
+            as_f64(center, "center"),
+            as_f64(normal, "normal"),
+            as_float(radius, "radius"),
         )
     )
 
@@ -941,7 +897,7 @@ def project_circle_jacobian(K: ArrayLike, T_co: ArrayLike, radius: float) -> tup
             (``(a − b)/a ≤ 1e-9``) that ``theta`` and its derivative are undefined.
 
     """
-    inner, jac = _core.project_circle_jacobian(_as_f64(K, "K"), _as_f64(T_co, "T_co"), _as_float(radius, "radius"))
+    inner, jac = _core.project_circle_jacobian(as_f64(K, "K"), as_f64(T_co, "T_co"), as_float(radius, "radius"))
     return Ellipse._wrap(inner), jac
 
 
@@ -958,4 +914,4 @@ def circle_image_conic(K: ArrayLike, T_co: ArrayLike, radius: float) -> F64Array
         The conic (3×3), scaled to unit Frobenius norm and negative inside the ellipse.
 
     """
-    return _core.circle_image_conic(_as_f64(K, "K"), _as_f64(T_co, "T_co"), _as_float(radius, "radius"))
+    return _core.circle_image_conic(as_f64(K, "K"), as_f64(T_co, "T_co"), as_float(radius, "radius"))

@@ -20,6 +20,9 @@
 //! assert_eq!(a.cost, 5.0);
 //! ```
 
+// `!(x < y)` is deliberate: it is also true for NaN (an overflowed sum).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use std::ops::{Add, Sub};
 
 use nalgebra::DMatrix;
@@ -42,7 +45,11 @@ pub struct Assignment {
 impl Assignment {
     /// The assigned pairs `(row, col)`, sorted by row.
     pub fn pairs(&self) -> Vec<(usize, usize)> {
-        self.row_to_col.iter().enumerate().filter_map(|(i, c)| c.map(|j| (i, j))).collect()
+        self.row_to_col
+            .iter()
+            .enumerate()
+            .filter_map(|(i, c)| c.map(|j| (i, j)))
+            .collect()
     }
 }
 
@@ -64,7 +71,13 @@ pub fn solve_assignment(cost: &DMatrix<f64>) -> Result<Assignment> {
     let transposed = n > m;
     let (nr, nc) = if transposed { (m, n) } else { (n, m) };
     // Row-major copy of the (possibly transposed) problem so the inner loop reads contiguously.
-    let entry = |i: usize, j: usize| if transposed { cost[(j, i)] } else { cost[(i, j)] };
+    let entry = |i: usize, j: usize| {
+        if transposed {
+            cost[(j, i)]
+        } else {
+            cost[(i, j)]
+        }
+    };
     let col4row = if cost.iter().any(|c| c.is_infinite()) {
         let dense: Vec<Lex> = (0..nr)
             .flat_map(|i| (0..nc).map(move |j| (i, j)))
@@ -72,13 +85,20 @@ pub fn solve_assignment(cost: &DMatrix<f64>) -> Result<Assignment> {
             .collect();
         shortest_augmenting_path(nr, nc, &dense)
     } else {
-        let dense: Vec<f64> = (0..nr).flat_map(|i| (0..nc).map(move |j| (i, j))).map(|(i, j)| entry(i, j)).collect();
+        let dense: Vec<f64> = (0..nr)
+            .flat_map(|i| (0..nc).map(move |j| (i, j)))
+            .map(|(i, j)| entry(i, j))
+            .collect();
         shortest_augmenting_path(nr, nc, &dense)
     }
     .ok_or_else(|| DetectError::Infeasible {
         reason: format!("the costs of the {n}×{m} matrix overflow f64 in the shortest-path sums"),
     })?;
-    let mut out = Assignment { row_to_col: vec![None; n], col_to_row: vec![None; m], cost: 0.0 };
+    let mut out = Assignment {
+        row_to_col: vec![None; n],
+        col_to_row: vec![None; m],
+        cost: 0.0,
+    };
     for (r, &c) in col4row.iter().enumerate() {
         let (i, j) = if transposed { (c, r) } else { (r, c) };
         let v = cost[(i, j)];
@@ -96,7 +116,12 @@ fn check_total(out: Assignment, n: usize, m: usize) -> Result<Assignment> {
     if out.cost.is_finite() {
         Ok(out)
     } else {
-        Err(DetectError::Infeasible { reason: format!("the total cost of the {n}×{m} assignment overflows f64 ({})", out.cost) })
+        Err(DetectError::Infeasible {
+            reason: format!(
+                "the total cost of the {n}×{m} assignment overflows f64 ({})",
+                out.cost
+            ),
+        })
     }
 }
 
@@ -122,10 +147,18 @@ pub fn solve_assignment_with_unassigned(
 ) -> Result<Assignment> {
     let (n, m) = cost.shape();
     if row_unassigned_cost.len() != n {
-        return Err(DetectError::WrongLength { what: "row_unassigned_cost", got: row_unassigned_cost.len(), expected: n });
+        return Err(DetectError::WrongLength {
+            what: "row_unassigned_cost",
+            got: row_unassigned_cost.len(),
+            expected: n,
+        });
     }
     if col_unassigned_cost.len() != m {
-        return Err(DetectError::WrongLength { what: "col_unassigned_cost", got: col_unassigned_cost.len(), expected: m });
+        return Err(DetectError::WrongLength {
+            what: "col_unassigned_cost",
+            got: col_unassigned_cost.len(),
+            expected: m,
+        });
     }
     check_costs("cost", cost)?;
     check_vector("row_unassigned_cost", row_unassigned_cost)?;
@@ -144,10 +177,17 @@ pub fn solve_assignment_with_unassigned(
             dense[(n + j) * size + m + i] = Lex::ZERO;
         }
     }
-    let col4row = shortest_augmenting_path(size, size, &dense).ok_or_else(|| DetectError::Infeasible {
-        reason: format!("the costs of the {n}×{m} problem overflow f64 in the shortest-path sums"),
-    })?;
-    let mut out = Assignment { row_to_col: vec![None; n], col_to_row: vec![None; m], cost: 0.0 };
+    let col4row =
+        shortest_augmenting_path(size, size, &dense).ok_or_else(|| DetectError::Infeasible {
+            reason: format!(
+                "the costs of the {n}×{m} problem overflow f64 in the shortest-path sums"
+            ),
+        })?;
+    let mut out = Assignment {
+        row_to_col: vec![None; n],
+        col_to_row: vec![None; m],
+        cost: 0.0,
+    };
     let mut forbidden_used = Vec::new();
     for (r, &c) in col4row.iter().enumerate() {
         let e = dense[r * size + c];
@@ -164,7 +204,13 @@ pub fn solve_assignment_with_unassigned(
     if !forbidden_used.is_empty() {
         let must: Vec<String> = forbidden_used
             .iter()
-            .map(|&(r, c)| if r < n { format!("row {r}") } else { format!("column {}", c) })
+            .map(|&(r, c)| {
+                if r < n {
+                    format!("row {r}")
+                } else {
+                    format!("column {}", c)
+                }
+            })
             .collect();
         return Err(DetectError::Infeasible {
             reason: format!(
@@ -182,7 +228,12 @@ fn check_costs(what: &'static str, cost: &DMatrix<f64>) -> Result<()> {
         for i in 0..cost.nrows() {
             let value = cost[(i, j)];
             if value.is_nan() || value == f64::NEG_INFINITY {
-                return Err(DetectError::InvalidCost { what, row: i, col: j, value });
+                return Err(DetectError::InvalidCost {
+                    what,
+                    row: i,
+                    col: j,
+                    value,
+                });
             }
         }
     }
@@ -192,7 +243,12 @@ fn check_costs(what: &'static str, cost: &DMatrix<f64>) -> Result<()> {
 /// Rejects NaN and −∞ entries of a per-row/per-column vector.
 fn check_vector(what: &'static str, v: &[f64]) -> Result<()> {
     match v.iter().position(|c| c.is_nan() || *c == f64::NEG_INFINITY) {
-        Some(row) => Err(DetectError::InvalidCost { what, row, col: 0, value: v[row] }),
+        Some(row) => Err(DetectError::InvalidCost {
+            what,
+            row,
+            col: 0,
+            value: v[row],
+        }),
         None => Ok(()),
     }
 }
@@ -220,32 +276,54 @@ struct Lex {
 }
 
 impl Lex {
-    const FORBIDDEN: Lex = Lex { forbidden: 1, cost: 0.0 };
+    const FORBIDDEN: Lex = Lex {
+        forbidden: 1,
+        cost: 0.0,
+    };
 
     /// `+∞` becomes one forbidden pair; finite values are kept.
     fn from_cost(c: f64) -> Lex {
-        if c == f64::INFINITY { Lex::FORBIDDEN } else { Lex { forbidden: 0, cost: c } }
+        if c == f64::INFINITY {
+            Lex::FORBIDDEN
+        } else {
+            Lex {
+                forbidden: 0,
+                cost: c,
+            }
+        }
     }
 }
 
 impl Add for Lex {
     type Output = Lex;
     fn add(self, o: Lex) -> Lex {
-        Lex { forbidden: self.forbidden + o.forbidden, cost: self.cost + o.cost }
+        Lex {
+            forbidden: self.forbidden + o.forbidden,
+            cost: self.cost + o.cost,
+        }
     }
 }
 
 impl Sub for Lex {
     type Output = Lex;
     fn sub(self, o: Lex) -> Lex {
-        Lex { forbidden: self.forbidden - o.forbidden, cost: self.cost - o.cost }
+        Lex {
+            forbidden: self.forbidden - o.forbidden,
+            cost: self.cost - o.cost,
+        }
     }
 }
 
 impl PathCost for Lex {
-    const ZERO: Self = Lex { forbidden: 0, cost: 0.0 };
+    const ZERO: Self = Lex {
+        forbidden: 0,
+        cost: 0.0,
+    };
     // Forbidden counts stay within ±(rows + cols), far below this.
-    const UNREACHED: Self = Lex { forbidden: i64::MAX, cost: f64::INFINITY };
+    const UNREACHED: Self = Lex {
+        forbidden: i64::MAX,
+        cost: f64::INFINITY,
+    };
 }
 
 /// Crouse 2016 Algorithm 1 on a row-major `nr × nc` matrix with `nr ≤ nc`: returns the column
@@ -334,7 +412,13 @@ mod tests {
 
     /// Every matching (each row takes no column or an unused one), visited recursively.
     fn for_each_matching(n: usize, m: usize, f: &mut dyn FnMut(&[Option<usize>])) {
-        fn rec(i: usize, m: usize, cur: &mut Vec<Option<usize>>, used: &mut Vec<bool>, f: &mut dyn FnMut(&[Option<usize>])) {
+        fn rec(
+            i: usize,
+            m: usize,
+            cur: &mut Vec<Option<usize>>,
+            used: &mut Vec<bool>,
+            f: &mut dyn FnMut(&[Option<usize>]),
+        ) {
             if i == cur.len() {
                 f(cur);
                 return;
@@ -414,11 +498,21 @@ mod tests {
             }
         }
         assert_eq!(a.col_to_row.iter().filter(|r| r.is_some()).count(), k);
-        assert!((sum - a.cost).abs() < 1e-9, "reported {} vs sum {sum}", a.cost);
+        assert!(
+            (sum - a.cost).abs() < 1e-9,
+            "reported {} vs sum {sum}",
+            a.cost
+        );
         k
     }
 
-    fn random_matrix(rng: &mut Pcg64, n: usize, m: usize, p_forbidden: f64, integer: bool) -> DMatrix<f64> {
+    fn random_matrix(
+        rng: &mut Pcg64,
+        n: usize,
+        m: usize,
+        p_forbidden: f64,
+        integer: bool,
+    ) -> DMatrix<f64> {
         DMatrix::from_fn(n, m, |_, _| {
             if rng.random::<f64>() < p_forbidden {
                 f64::INFINITY
@@ -443,7 +537,11 @@ mod tests {
             let k = check_consistent(&cost, &a);
             let (bk, bc) = brute_force(&cost);
             assert_eq!(k, bk, "cardinality, trial {trial}, cost {cost}");
-            assert!((a.cost - bc).abs() < 1e-9, "trial {trial}: {} vs brute force {bc}\n{cost}", a.cost);
+            assert!(
+                (a.cost - bc).abs() < 1e-9,
+                "trial {trial}: {} vs brute force {bc}\n{cost}",
+                a.cost
+            );
         }
     }
 
@@ -504,17 +602,31 @@ mod tests {
     fn nan_and_negative_infinity_are_errors() {
         let mut cost = DMatrix::from_element(3, 3, 1.0);
         cost[(1, 2)] = f64::NAN;
-        assert!(matches!(solve_assignment(&cost), Err(DetectError::InvalidCost { row: 1, col: 2, .. })));
+        assert!(matches!(
+            solve_assignment(&cost),
+            Err(DetectError::InvalidCost { row: 1, col: 2, .. })
+        ));
         cost[(1, 2)] = f64::NEG_INFINITY;
-        assert!(matches!(solve_assignment(&cost), Err(DetectError::InvalidCost { row: 1, col: 2, .. })));
+        assert!(matches!(
+            solve_assignment(&cost),
+            Err(DetectError::InvalidCost { row: 1, col: 2, .. })
+        ));
         let ok = DMatrix::from_element(2, 2, 1.0);
         assert!(matches!(
             solve_assignment_with_unassigned(&ok, &[1.0, f64::NAN], &[1.0, 1.0]),
-            Err(DetectError::InvalidCost { what: "row_unassigned_cost", row: 1, .. })
+            Err(DetectError::InvalidCost {
+                what: "row_unassigned_cost",
+                row: 1,
+                ..
+            })
         ));
         assert!(matches!(
             solve_assignment_with_unassigned(&ok, &[1.0], &[1.0, 1.0]),
-            Err(DetectError::WrongLength { what: "row_unassigned_cost", got: 1, expected: 2 })
+            Err(DetectError::WrongLength {
+                what: "row_unassigned_cost",
+                got: 1,
+                expected: 2
+            })
         ));
     }
 
@@ -534,13 +646,23 @@ mod tests {
         for trial in 0..300 {
             let n = rng.random_range(0..=5);
             let m = rng.random_range(0..=5);
-            let cost = random_matrix(&mut rng, n, m, if trial % 2 == 0 { 0.3 } else { 0.0 }, trial % 3 == 0);
+            let cost = random_matrix(
+                &mut rng,
+                n,
+                m,
+                if trial % 2 == 0 { 0.3 } else { 0.0 },
+                trial % 3 == 0,
+            );
             let ru: Vec<f64> = (0..n).map(|_| rng.random_range(0.0..6.0)).collect();
             let cu: Vec<f64> = (0..m).map(|_| rng.random_range(0.0..6.0)).collect();
             let a = solve_assignment_with_unassigned(&cost, &ru, &cu).unwrap();
             check_consistent_unassigned(&cost, &ru, &cu, &a);
             let bc = brute_force_unassigned(&cost, &ru, &cu);
-            assert!((a.cost - bc).abs() < 1e-9, "trial {trial}: {} vs {bc}", a.cost);
+            assert!(
+                (a.cost - bc).abs() < 1e-9,
+                "trial {trial}: {} vs {bc}",
+                a.cost
+            );
         }
     }
 

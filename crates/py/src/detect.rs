@@ -3,7 +3,9 @@
 //! Each function converts its NumPy inputs, calls one core function and converts the result;
 //! the friendly wrappers live in `python/autoteach/detect.py`.
 
-use autoteach_detect::assignment::{Assignment, solve_assignment, solve_assignment_with_unassigned};
+use autoteach_detect::assignment::{
+    Assignment, solve_assignment, solve_assignment_with_unassigned,
+};
 use autoteach_detect::ellipse::{EllipseFit, FitMethod, fit_ellipse as core_fit_ellipse};
 use nalgebra::{DMatrix, Vector2};
 use numpy::{IntoPyArray, PyArray1, PyArrayDyn};
@@ -24,7 +26,9 @@ impl PyEllipseFit {
     /// The fitted ellipse.
     #[getter]
     fn ellipse(&self) -> PyEllipse {
-        PyEllipse { inner: self.inner.ellipse }
+        PyEllipse {
+            inner: self.inner.ellipse,
+        }
     }
 
     /// Mean absolute orthogonal distance (pixels).
@@ -79,7 +83,10 @@ fn points_arg(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<Vector
         )));
     }
     let (data, _) = arr.batch(&[2], "(N, 2)")?;
-    Ok(data.chunks_exact(2).map(|c| Vector2::new(c[0], c[1])).collect())
+    Ok(data
+        .chunks_exact(2)
+        .map(|c| Vector2::new(c[0], c[1]))
+        .collect())
 }
 
 /// Reads a 2-D cost matrix.
@@ -110,13 +117,29 @@ fn fit_ellipse(py: Python<'_>, points: &Bound<'_, PyAny>, method: &str) -> PyRes
         }
     };
     let pts = points_arg(points, "points")?;
-    let inner = convert::run_batched(py, 2 * pts.len(), || core_fit_ellipse(&pts, method).map_err(errors::detect))?;
+    let inner = convert::run_batched(py, 2 * pts.len(), || {
+        core_fit_ellipse(&pts, method).map_err(errors::detect)
+    })?;
     Ok(PyEllipseFit { inner })
 }
 
+/// Row and column indices of assigned pairs, as NumPy `intp` arrays.
+type Indices<'py> = (Bound<'py, PyArray1<isize>>, Bound<'py, PyArray1<isize>>);
+
+/// Row and column indices of assigned pairs and the total cost.
+type IndicesAndTotal<'py> = (
+    Bound<'py, PyArray1<isize>>,
+    Bound<'py, PyArray1<isize>>,
+    f64,
+);
+
 /// Assigned pairs as (row indices, column indices), sorted by row.
-fn pairs<'py>(py: Python<'py>, a: &Assignment) -> (Bound<'py, PyArray1<isize>>, Bound<'py, PyArray1<isize>>) {
-    let (rows, cols): (Vec<isize>, Vec<isize>) = a.pairs().into_iter().map(|(i, j)| (i as isize, j as isize)).unzip();
+fn pairs<'py>(py: Python<'py>, a: &Assignment) -> Indices<'py> {
+    let (rows, cols): (Vec<isize>, Vec<isize>) = a
+        .pairs()
+        .into_iter()
+        .map(|(i, j)| (i as isize, j as isize))
+        .unzip();
     (rows.into_pyarray(py), cols.into_pyarray(py))
 }
 
@@ -128,7 +151,7 @@ fn linear_sum_assignment<'py>(
     py: Python<'py>,
     cost: &Bound<'py, PyAny>,
     maximize: bool,
-) -> PyResult<(Bound<'py, PyArray1<isize>>, Bound<'py, PyArray1<isize>>)> {
+) -> PyResult<Indices<'py>> {
     let mut m = matrix_arg(cost, "cost")?;
     if maximize {
         if let Some(v) = m.iter().find(|v| v.is_nan() || **v == f64::INFINITY) {
@@ -150,7 +173,7 @@ fn assign_with_unassigned<'py>(
     cost: &Bound<'py, PyAny>,
     row_unassigned_cost: &Bound<'py, PyAny>,
     col_unassigned_cost: &Bound<'py, PyAny>,
-) -> PyResult<(Bound<'py, PyArray1<isize>>, Bound<'py, PyArray1<isize>>, f64)> {
+) -> PyResult<IndicesAndTotal<'py>> {
     let m = matrix_arg(cost, "cost")?;
     let ru = Array::new(row_unassigned_cost, "row_unassigned_cost")?.vector()?;
     let cu = Array::new(col_unassigned_cost, "col_unassigned_cost")?.vector()?;

@@ -153,6 +153,8 @@ pub fn detect(err: autoteach_detect::DetectError) -> PyErr {
         | E::InvalidCost { .. }
         | E::WrongLength { .. }
         | E::Infeasible { .. } => invalid_input(err.to_string()),
-        E::Degenerate { .. } | E::RankDeficient { .. } => new_err("DegenerateGeometryError", err.to_string()),
+        E::Degenerate { .. } | E::RankDeficient { .. } => {
+            new_err("DegenerateGeometryError", err.to_string())
+        }
     }
 }

@@ -96,6 +96,9 @@ fn merwe_sigma_points<'py>(
     to_numpy(py, s.as_slice().to_vec(), &[s.ncols(), s.nrows()])
 }
 
+/// `(Wm, Wc)` as NumPy arrays.
+type Weights<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
+
 /// The weights `(Wm, Wc)` of van der Merwe's scaled sigma points.
 #[pyfunction]
 fn merwe_weights<'py>(
@@ -104,7 +107,7 @@ fn merwe_weights<'py>(
     alpha: f64,
     beta: f64,
     kappa: f64,
-) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+) -> PyResult<Weights<'py>> {
     let pts = sigma_points(alpha, beta, kappa, n)?;
     Ok((vec_out(py, pts.wm()), vec_out(py, pts.wc())))
 }
@@ -123,7 +126,11 @@ struct PyLinearModel {
 impl PyLinearModel {
     #[new]
     #[pyo3(signature = (f, h, b=None))]
-    fn new(f: &Bound<'_, PyAny>, h: &Bound<'_, PyAny>, b: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+    fn new(
+        f: &Bound<'_, PyAny>,
+        h: &Bound<'_, PyAny>,
+        b: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
         let f = matrix(f, "F")?;
         let h = matrix(h, "H")?;
         let b = b.map(|b| matrix(b, "B")).transpose()?;
@@ -324,21 +331,38 @@ impl UkfModel for PyModel {
         _u: Option<&DVector<f64>>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        let over = lock(&self.shared.fx_override).as_ref().map(|f| Python::attach(|py| f.clone_ref(py)));
-        let kwargs = lock(&self.shared.fx_kwargs).as_ref().map(|k| Python::attach(|py| k.clone_ref(py)));
+        let over = lock(&self.shared.fx_override)
+            .as_ref()
+            .map(|f| Python::attach(|py| f.clone_ref(py)));
+        let kwargs = lock(&self.shared.fx_kwargs)
+            .as_ref()
+            .map(|k| Python::attach(|py| k.clone_ref(py)));
         let f = over.as_ref().unwrap_or(&self.fx);
         self.call(
             "fx",
             f,
-            |py| PyTuple::new(py, [view_out(py, x).into_any(), dt.into_pyobject(py)?.into_any()]),
+            |py| {
+                PyTuple::new(
+                    py,
+                    [view_out(py, x).into_any(), dt.into_pyobject(py)?.into_any()],
+                )
+            },
             kwargs.as_ref(),
             out,
         )
     }
 
-    fn hx(&self, x: DVectorView<'_, f64>, out: &mut DVector<f64>) -> autoteach_estimate::Result<()> {
-        let over = lock(&self.shared.hx_override).as_ref().map(|f| Python::attach(|py| f.clone_ref(py)));
-        let kwargs = lock(&self.shared.hx_kwargs).as_ref().map(|k| Python::attach(|py| k.clone_ref(py)));
+    fn hx(
+        &self,
+        x: DVectorView<'_, f64>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        let over = lock(&self.shared.hx_override)
+            .as_ref()
+            .map(|f| Python::attach(|py| f.clone_ref(py)));
+        let kwargs = lock(&self.shared.hx_kwargs)
+            .as_ref()
+            .map(|k| Python::attach(|py| k.clone_ref(py)));
         let f = over.as_ref().unwrap_or(&self.hx);
         self.call(
             "hx",
@@ -357,8 +381,12 @@ impl UkfModel for PyModel {
         _u: Option<&DVector<f64>>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        let over = lock(&self.shared.fx_override).as_ref().map(|f| Python::attach(|py| f.clone_ref(py)));
-        let kwargs = lock(&self.shared.fx_kwargs).as_ref().map(|k| Python::attach(|py| k.clone_ref(py)));
+        let over = lock(&self.shared.fx_override)
+            .as_ref()
+            .map(|f| Python::attach(|py| f.clone_ref(py)));
+        let kwargs = lock(&self.shared.fx_kwargs)
+            .as_ref()
+            .map(|k| Python::attach(|py| k.clone_ref(py)));
         let f = over.as_ref().unwrap_or(&self.fx);
         self.call(
             "fx",
@@ -384,8 +412,12 @@ impl UkfModel for PyModel {
         v: DVectorView<'_, f64>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        let over = lock(&self.shared.hx_override).as_ref().map(|f| Python::attach(|py| f.clone_ref(py)));
-        let kwargs = lock(&self.shared.hx_kwargs).as_ref().map(|k| Python::attach(|py| k.clone_ref(py)));
+        let over = lock(&self.shared.hx_override)
+            .as_ref()
+            .map(|f| Python::attach(|py| f.clone_ref(py)));
+        let kwargs = lock(&self.shared.hx_kwargs)
+            .as_ref()
+            .map(|k| Python::attach(|py| k.clone_ref(py)));
         let f = over.as_ref().unwrap_or(&self.hx);
         self.call(
             "hx",
@@ -410,7 +442,15 @@ impl UkfModel for PyModel {
             Some(f) => self.call(
                 "x_mean_fn",
                 f,
-                |py| PyTuple::new(py, [sigmas_out(py, sigmas)?.into_any(), vec_out(py, wm).into_any()]),
+                |py| {
+                    PyTuple::new(
+                        py,
+                        [
+                            sigmas_out(py, sigmas)?.into_any(),
+                            vec_out(py, wm).into_any(),
+                        ],
+                    )
+                },
                 None,
                 out,
             ),
@@ -431,7 +471,15 @@ impl UkfModel for PyModel {
             Some(f) => self.call(
                 "z_mean_fn",
                 f,
-                |py| PyTuple::new(py, [sigmas_out(py, sigmas)?.into_any(), vec_out(py, wm).into_any()]),
+                |py| {
+                    PyTuple::new(
+                        py,
+                        [
+                            sigmas_out(py, sigmas)?.into_any(),
+                            vec_out(py, wm).into_any(),
+                        ],
+                    )
+                },
                 None,
                 out,
             ),
@@ -519,7 +567,15 @@ impl UkfModel for PyModel {
             Some(f) => self.call(
                 "subtract",
                 f,
-                |py| PyTuple::new(py, [view_out(py, x), PyArray1::from_iter(py, offset.iter().map(|v| -v))]),
+                |py| {
+                    PyTuple::new(
+                        py,
+                        [
+                            view_out(py, x),
+                            PyArray1::from_iter(py, offset.iter().map(|v| -v)),
+                        ],
+                    )
+                },
                 None,
                 out,
             ),
@@ -583,7 +639,11 @@ fn build(
         CovariancePolicy::Strict
     };
     Ok(if square_root {
-        Box::new(SquareRootUkf::new(model, points)?.with_noise(noise)?.with_policy(policy))
+        Box::new(
+            SquareRootUkf::new(model, points)?
+                .with_noise(noise)?
+                .with_policy(policy),
+        )
     } else {
         Box::new(
             UnscentedKalmanFilter::new(model, points)?
@@ -677,7 +737,8 @@ impl PyUkf {
             )));
         };
         let points = sigma_points(alpha, beta, kappa, m.dim_x())?;
-        let inner = build(m, points.clone(), square_root, augmented, repair).map_err(errors::estimate)?;
+        let inner =
+            build(m, points.clone(), square_root, augmented, repair).map_err(errors::estimate)?;
         Ok(Self {
             inner,
             shared: None,
@@ -717,11 +778,17 @@ impl PyUkf {
                 "dim_x and dim_z must be positive, got {dim_x} and {dim_z}"
             )));
         }
-        for (name, f) in [("fx", Some(&fx)), ("hx", Some(&hx)), ("x_mean_fn", x_mean.as_ref()),
-            ("z_mean_fn", z_mean.as_ref()), ("residual_x", residual_x.as_ref()),
-            ("residual_z", residual_z.as_ref()), ("state_add", state_add.as_ref()),
-            ("subtract", subtract.as_ref()), ("sqrt_method", sqrt.as_ref())]
-        {
+        for (name, f) in [
+            ("fx", Some(&fx)),
+            ("hx", Some(&hx)),
+            ("x_mean_fn", x_mean.as_ref()),
+            ("z_mean_fn", z_mean.as_ref()),
+            ("residual_x", residual_x.as_ref()),
+            ("residual_z", residual_z.as_ref()),
+            ("state_add", state_add.as_ref()),
+            ("subtract", subtract.as_ref()),
+            ("sqrt_method", sqrt.as_ref()),
+        ] {
             if let Some(f) = f
                 && !f.is_callable()
             {
@@ -748,8 +815,14 @@ impl PyUkf {
             shared: shared.clone(),
         };
         let points = sigma_points(alpha, beta, kappa, dim_x)?;
-        let inner = build(Box::new(model), points.clone(), square_root, augmented, repair)
-            .map_err(errors::estimate)?;
+        let inner = build(
+            Box::new(model),
+            points.clone(),
+            square_root,
+            augmented,
+            repair,
+        )
+        .map_err(errors::estimate)?;
         Ok(Self {
             inner,
             shared: Some(shared),
@@ -827,9 +900,9 @@ impl PyUkf {
 
     /// Runs predict/update over all steps. `zs` is `(n, dim_z)`; `mask` `(n,)` bool marks the
     /// measurements present (default all); `us` `(n, dim_u)`, `dts` `(n,)` and `rs`
-    /// `(n, dim_z, dim_z)` are optional. Returns a dict of `xs`, `Ps`, `x_priors`,
-    /// `P_priors` and `log_likelihoods`. Built-in models run without the GIL.
-    #[pyo3(signature = (zs, dt, mask=None, us=None, dts=None, rs=None))]
+    /// `(n, dim_z, dim_z)` are optional. Returns a dict of `xs`, `Ps`, `log_likelihoods` and
+    /// (with `priors`) `x_priors`, `P_priors`. Built-in models run without the GIL.
+    #[pyo3(signature = (zs, dt, mask=None, us=None, dts=None, rs=None, priors=true))]
     #[allow(clippy::too_many_arguments)]
     fn batch<'py>(
         &mut self,
@@ -840,6 +913,7 @@ impl PyUkf {
         us: Option<&Bound<'py, PyAny>>,
         dts: Option<&Bound<'py, PyAny>>,
         rs: Option<&Bound<'py, PyAny>>,
+        priors: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let m = self.inner.dim_z();
         let n = self.inner.dim_x();
@@ -914,6 +988,9 @@ impl PyUkf {
             })
             .transpose()?;
         let mut inputs = BatchInputs::new(dt, &zs);
+        if !priors {
+            inputs = inputs.without_priors();
+        }
         if let Some(us) = &us {
             inputs = inputs.with_us(us);
         }
@@ -930,31 +1007,23 @@ impl PyUkf {
             let inner = &mut self.inner;
             convert::detached(py, || Ok(inner.batch(&inputs)))?
         };
-        let out = result.map_err(|e| self.error(e))?;
-        let flat_v = |vs: &[DVector<f64>]| {
-            let mut out = Vec::with_capacity(vs.len() * n);
-            for v in vs {
-                out.extend_from_slice(v.as_slice());
-            }
-            out
-        };
-        // Row-major output: entry (i, j) of each matrix from its column-major storage.
-        let flat_m = |ms: &[DMatrix<f64>]| {
-            let mut out = Vec::with_capacity(ms.len() * n * n);
-            for p in ms {
-                let data = p.as_slice();
-                for i in 0..n {
-                    out.extend((0..n).map(|j| data[i + j * n]));
-                }
-            }
-            out
+        let out = result.map_err(|e| self.error(e))?.into_flat();
+        // Covariances are stored column-major: the (steps, n, n) array of that memory holds
+        // each matrix transposed, so its axes 1 and 2 are swapped (a view, no copy).
+        let matrices = |data: Vec<f64>| -> PyResult<Bound<'py, PyAny>> {
+            to_numpy(py, data, &[steps, n, n])?.call_method1("swapaxes", (1, 2))
         };
         let d = PyDict::new(py);
-        d.set_item("xs", to_numpy(py, flat_v(&out.xs), &[steps, n])?)?;
-        d.set_item("Ps", to_numpy(py, flat_m(&out.ps), &[steps, n, n])?)?;
-        d.set_item("x_priors", to_numpy(py, flat_v(&out.x_priors), &[steps, n])?)?;
-        d.set_item("P_priors", to_numpy(py, flat_m(&out.p_priors), &[steps, n, n])?)?;
-        d.set_item("log_likelihoods", PyArray1::from_vec(py, out.log_likelihoods))?;
+        d.set_item("xs", to_numpy(py, out.xs, &[steps, n])?)?;
+        d.set_item("Ps", matrices(out.ps)?)?;
+        if priors {
+            d.set_item("x_priors", to_numpy(py, out.x_priors, &[steps, n])?)?;
+            d.set_item("P_priors", matrices(out.p_priors)?)?;
+        }
+        d.set_item(
+            "log_likelihoods",
+            PyArray1::from_vec(py, out.log_likelihoods),
+        )?;
         Ok(d)
     }
 

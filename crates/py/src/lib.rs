@@ -7,8 +7,8 @@
 use pyo3::prelude::*;
 
 pub mod convert;
-pub mod errors;
 mod detect;
+pub mod errors;
 mod estimate;
 mod geometry;
 mod sim;

@@ -28,10 +28,9 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 fn camera(model: &str, params: &Bound<'_, PyAny>, width: i64, height: i64) -> PyResult<Camera> {
     let p = convert::finite_array(params, "camera_params")?.vector()?;
     let size = |n: i64, what: &str| {
-        u32::try_from(n)
-            .ok()
-            .filter(|&n| n > 0)
-            .ok_or_else(|| errors::invalid_input(format!("{what} must be a positive 32-bit integer, got {n}")))
+        u32::try_from(n).ok().filter(|&n| n > 0).ok_or_else(|| {
+            errors::invalid_input(format!("{what} must be a positive 32-bit integer, got {n}"))
+        })
     };
     let (w, h) = (size(width, "width")?, size(height, "height")?);
     let model: CameraModel = model.parse().map_err(errors::geometry)?;
@@ -39,7 +38,12 @@ fn camera(model: &str, params: &Bound<'_, PyAny>, width: i64, height: i64) -> Py
 }
 
 /// Reads the wafer poses `(N, 4, 4)` and builds the scene.
-fn scene(wafer_poses: &Bound<'_, PyAny>, radius: f64, thickness: f64, carrier: bool) -> PyResult<Scene> {
+fn scene(
+    wafer_poses: &Bound<'_, PyAny>,
+    radius: f64,
+    thickness: f64,
+    carrier: bool,
+) -> PyResult<Scene> {
     let (wafers, lead) = convert::isometries(wafer_poses, "wafer_poses")?;
     if lead.len() != 1 {
         return Err(errors::invalid_input(format!(
@@ -90,7 +94,9 @@ fn render_frame<'py>(
     let scene = scene(wafer_poses, wafer_radius, wafer_thickness, carrier)?;
     let t_wc = convert::isometry(t_wc, "t_wc")?;
     if !(1..=16).contains(&supersample) {
-        return Err(errors::invalid_input(format!("supersample must be in 1..=16, got {supersample}")));
+        return Err(errors::invalid_input(format!(
+            "supersample must be in 1..=16, got {supersample}"
+        )));
     }
     let opts = RenderOptions {
         gain,
@@ -98,11 +104,14 @@ fn render_frame<'py>(
         blur_sigma,
         noise_sigma,
         supersample: supersample as usize,
-        seed: u64::try_from(seed)
-            .map_err(|_| errors::invalid_input(format!("seed must be an integer in [0, 2**64), got {seed}")))?,
+        seed: u64::try_from(seed).map_err(|_| {
+            errors::invalid_input(format!("seed must be an integer in [0, 2**64), got {seed}"))
+        })?,
         ..RenderOptions::default()
     };
-    let img = convert::detached(py, || render::render(&scene, &cam, &t_wc, &opts).map_err(errors::geometry))?;
+    let img = convert::detached(py, || {
+        render::render(&scene, &cam, &t_wc, &opts).map_err(errors::geometry)
+    })?;
     let arr = Array2::from_shape_vec((img.height, img.width), img.data)
         .map_err(|e| errors::internal(format!("image of {}x{}: {e}", img.width, img.height)))?;
     Ok(arr.into_pyarray(py))
@@ -114,7 +123,10 @@ fn truth_dict<'py>(py: Python<'py>, t: RimTruth) -> PyResult<Bound<'py, PyDict>>
     d.set_item("wafer", t.wafer)?;
     d.set_item("rim", t.rim.name())?;
     match t.ellipse {
-        Some(e) => d.set_item("ellipse", PyArray1::from_vec(py, vec![e.cx, e.cy, e.a, e.b, e.theta]))?,
+        Some(e) => d.set_item(
+            "ellipse",
+            PyArray1::from_vec(py, vec![e.cx, e.cy, e.a, e.b, e.theta]),
+        )?,
         None => d.set_item("ellipse", py.None())?,
     }
     let n = t.intervals.len();
@@ -154,7 +166,9 @@ fn rim_visibility<'py>(
     let scene = scene(wafer_poses, wafer_radius, wafer_thickness, carrier)?;
     let t_wc = convert::isometry(t_wc, "t_wc")?;
     if !(3..=1_000_000).contains(&n_samples) {
-        return Err(errors::invalid_input(format!("n_samples must be in 3..=1000000, got {n_samples}")));
+        return Err(errors::invalid_input(format!(
+            "n_samples must be in 3..=1000000, got {n_samples}"
+        )));
     }
     let truths = convert::detached(py, || {
         render::rim_visibility(&scene, &cam, &t_wc, n_samples as usize).map_err(errors::geometry)
@@ -195,14 +209,22 @@ fn rim_points_visible<'py>(
     let rim = match rim {
         "upper" => Rim::Upper,
         "lower" => Rim::Lower,
-        other => return Err(errors::invalid_input(format!("rim must be \"upper\" or \"lower\", got {other:?}"))),
+        other => {
+            return Err(errors::invalid_input(format!(
+                "rim must be \"upper\" or \"lower\", got {other:?}"
+            )));
+        }
     };
     if wafer < 0 || wafer as usize >= scene.wafers.len() {
-        return Err(errors::invalid_input(format!("wafer index {wafer} out of range for {} wafers", scene.wafers.len())));
+        return Err(errors::invalid_input(format!(
+            "wafer index {wafer} out of range for {} wafers",
+            scene.wafers.len()
+        )));
     }
     let angles = convert::finite_array(angles, "angles")?.vector()?;
     let vis = convert::detached(py, || {
-        render::rim_points_visible(&scene, &cam, &t_wc, wafer as usize, rim, &angles).map_err(errors::geometry)
+        render::rim_points_visible(&scene, &cam, &t_wc, wafer as usize, rim, &angles)
+            .map_err(errors::geometry)
     })?;
     Ok(PyArray1::from_vec(py, vis))
 }

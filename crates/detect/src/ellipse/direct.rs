@@ -32,7 +32,11 @@ pub fn fit_ellipse_direct(points: &[Vector2<f64>]) -> Result<EllipseFit> {
     let e = solve(&prep)?;
     let (residual_mean, residual_rms, covariance) = residual::evaluate(&e, &prep.centred, None)?;
     Ok(EllipseFit {
-        ellipse: Ellipse { cx: e.cx + prep.centroid.x, cy: e.cy + prep.centroid.y, ..e },
+        ellipse: Ellipse {
+            cx: e.cx + prep.centroid.x,
+            cy: e.cy + prep.centroid.y,
+            ..e
+        },
         residual_mean,
         residual_rms,
         covariance,
@@ -56,7 +60,9 @@ pub(crate) fn solve(prep: &Prepared) -> Result<Ellipse> {
     let eigenvalues = mp.complex_eigenvalues();
     let mut best: Option<(f64, Vector3<f64>)> = None;
     for lambda in eigenvalues.iter().map(|z| z.re) {
-        let Some(a) = null_vector(&(mp - Matrix3::identity() * lambda)) else { continue };
+        let Some(a) = null_vector(&(mp - Matrix3::identity() * lambda)) else {
+            continue;
+        };
         let c = ellipticity(&a);
         if !(c > 1e-12 * a.norm_squared()) {
             continue;
@@ -96,9 +102,19 @@ fn coefficients(prep: &Prepared, a1: &Vector3<f64>) -> [f64; 6] {
 /// A unit null vector of a (numerically) rank-2 3×3 matrix: the longest cross product of two
 /// of its rows.
 fn null_vector(b: &Matrix3<f64>) -> Option<Vector3<f64>> {
-    let rows = [b.row(0).transpose(), b.row(1).transpose(), b.row(2).transpose()];
-    let candidates = [rows[0].cross(&rows[1]), rows[0].cross(&rows[2]), rows[1].cross(&rows[2])];
-    let v = candidates.into_iter().max_by(|x, y| x.norm_squared().total_cmp(&y.norm_squared()))?;
+    let rows = [
+        b.row(0).transpose(),
+        b.row(1).transpose(),
+        b.row(2).transpose(),
+    ];
+    let candidates = [
+        rows[0].cross(&rows[1]),
+        rows[0].cross(&rows[2]),
+        rows[1].cross(&rows[2]),
+    ];
+    let v = candidates
+        .into_iter()
+        .max_by(|x, y| x.norm_squared().total_cmp(&y.norm_squared()))?;
     let n = v.norm();
     (n > 0.0 && n.is_finite()).then(|| v / n)
 }
@@ -116,7 +132,11 @@ fn rms_sampson(prep: &Prepared, c: &[f64; 6]) -> f64 {
             let gx = 2.0 * a * x + b * y + d;
             let gy = b * x + 2.0 * cc * y + e;
             let g2 = gx * gx + gy * gy;
-            if g2 > 0.0 { val * val / g2 } else { f64::INFINITY }
+            if g2 > 0.0 {
+                val * val / g2
+            } else {
+                f64::INFINITY
+            }
         })
         .sum();
     (sum / prep.centred.len() as f64).sqrt()
@@ -135,7 +155,11 @@ fn reject_hyperbolic(prep: &Prepared, ellipse_conic: &[f64; 6]) -> Result<()> {
     let r_free = rms_sampson(prep, &free);
     let r_ellipse = rms_sampson(prep, ellipse_conic);
     if r_ellipse > HYPERBOLA_RATIO * r_free {
-        let kind = if c == 0.0 { "a parabola or parallel lines" } else { "a hyperbola or a pair of lines" };
+        let kind = if c == 0.0 {
+            "a parabola or parallel lines"
+        } else {
+            "a hyperbola or a pair of lines"
+        };
         return Err(DetectError::Degenerate {
             reason: format!(
                 "the {} points lie on {kind}, not an ellipse: RMS Sampson distance {:.3e} px for the \

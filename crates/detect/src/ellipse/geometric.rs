@@ -9,19 +9,22 @@ use crate::{DetectError, Result};
 /// Options of [`fit_ellipse_geometric`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GeometricFitOptions {
-    /// Maximum number of Levenberg–Marquardt iterations (accepted or rejected steps count
-    /// once per outer iteration). Default 100.
+    /// Maximum number of Levenberg–Marquardt iterations, both phases together (each iteration
+    /// makes one accepted step, possibly after rejected ones). Default 100.
     pub max_iterations: usize,
-    /// Relative tolerance: the iteration stops when an accepted step moves every parameter by
-    /// less than `tolerance` (centre and axes relative to the point spread plus their value,
-    /// `θ` in radians), or lowers the sum of squares by less than `tolerance` of it.
-    /// Default `1e-10`.
+    /// Relative tolerance of the orthogonal phase: the iteration stops when a step is predicted
+    /// to lower the sum of squared distances — or an accepted step lowered it — by less than
+    /// `tolerance` of it, or moves the unit-norm conic coefficients (normalised coordinates) by
+    /// less than `tolerance`. Default `1e-10`.
     pub tolerance: f64,
 }
 
 impl Default for GeometricFitOptions {
     fn default() -> Self {
-        GeometricFitOptions { max_iterations: 100, tolerance: 1e-10 }
+        GeometricFitOptions {
+            max_iterations: 100,
+            tolerance: 1e-10,
+        }
     }
 }
 
@@ -33,29 +36,32 @@ const LAMBDA_MAX: f64 = 1e16;
 const SAMPSON_TOLERANCE: f64 = 1e-6;
 
 /// Geometric ellipse fit (000_3b1454b2b2194811.txt §3.2 `FitEllipse`, ellipse of eq. 3.1/3.2):
-/// Levenberg–Marquardt minimisation of `Σ dᵢ²` over `(cx, cy, a, b, θ)`, with `dᵢ` the signed
-/// orthogonal (Euclidean) distance of point `i` to the ellipse — the maximum-likelihood fit for
+/// Levenberg–Marquardt minimisation of `Σ dᵢ²` over the ellipse, with `dᵢ` the signed
+/// orthogonal (Euclidean) distance of point `i` to it — the maximum-likelihood fit for
 /// isotropic Gaussian edge noise, unbiased to first order even on arcs of 60–160°, where the
 /// algebraic fits shrink the ellipse.
 ///
-/// Each evaluation finds every foot point with [`Ellipse::parameter_of`] (exact closest point).
-/// The iteration itself runs on the conic coefficients of eq. (3.3) in normalised coordinates,
-/// with the exact Jacobian of the orthogonal distances `∂dᵢ/∂q = m(x'ᵢ)/‖∇f(x'ᵢ)‖` at the foot
-/// points (a linear family of conics fits a partial arc, so Gauss–Newton converges in a few
-/// steps where it crawls along a curved valley in `(cx, cy, a, b, θ)`); Marquardt's damping
-/// `λ·diag(JᵀJ)` keeps the steps scale-invariant. The covariance uses the analytic Jacobian with
-/// respect to `(cx, cy, a, b, θ)`, `∂dᵢ/∂p = −n̂ᵢ·∂x'/∂p` at the foot point (Ahn, Rauh &
-/// Warnecke 2001, orthogonal distance fitting with the foot-point angles eliminated).
+/// The iteration runs on the conic coefficients of eq. (3.3) in normalised coordinates (a
+/// linear family of conics fits a partial arc, so Gauss–Newton converges in a few steps where it
+/// crawls along a curved valley in `(cx, cy, a, b, θ)`), first on the Sampson distance, then on
+/// the exact orthogonal distance with its exact Jacobian `∂dᵢ/∂q = m(x'ᵢ)/‖∇f(x'ᵢ)‖` at the foot
+/// points `x'ᵢ`; Marquardt's damping `λ·diag(JᵀJ)` keeps the steps scale-invariant. Foot points
+/// are exact closest points (certified Newton, else [`Ellipse::parameter_of`]). The covariance
+/// uses the analytic Jacobian with respect to `(cx, cy, a, b, θ)`, `∂dᵢ/∂p = −n̂ᵢ·∂x'/∂p` at the
+/// foot point (Ahn, Rauh & Warnecke 2001, orthogonal distance fitting with the foot-point angles
+/// eliminated).
 ///
-/// Starts from `initial` if given, else from [`super::fit_ellipse_direct`]. The returned
-/// covariance is `σ̂²(JᵀJ)⁻¹` at the solution (see [`EllipseFit::covariance`] for near-circles).
-/// When the iteration limit is reached the last (best) ellipse is returned with
-/// `converged = false`.
+/// Starts from `initial` if given, else from [`super::fit_ellipse_direct`] (which screens the
+/// points in either case). The returned covariance is `σ̂²(JᵀJ)⁻¹` at the solution (see
+/// [`EllipseFit::covariance`] for near-circles). When the iteration limit is reached the last
+/// (best) ellipse is returned with `converged = false`.
 ///
 /// # Errors
 /// As [`super::fit_ellipse_direct`]; [`DetectError::InvalidParameter`] for bad options or a
 /// non-finite or non-positive `initial`; [`DetectError::RankDeficient`] if the solution's
-/// parameters are not determined by the points.
+/// parameters are not determined by the points — in particular when, on a short noisy arc, the
+/// least-squares ellipse does not exist and the iteration runs off toward a parabola
+/// (`a → ∞`; the message says so).
 pub fn fit_ellipse_geometric(
     points: &[Vector2<f64>],
     initial: Option<Ellipse>,
@@ -77,11 +83,16 @@ pub fn fit_ellipse_geometric(
     }
     let prep = Prepared::new(points)?;
     let c = prep.centroid;
+    // The direct fit also screens the data (hyperbolas, line pairs), even with an `initial`.
+    let direct = direct::solve(&prep)?;
     let start = match initial {
         Some(e) => Ellipse::new(e.cx - c.x, e.cy - c.y, e.a, e.b, e.theta).map_err(|err| {
             DetectError::InvalidParameter {
                 what: "initial ellipse",
-                value: [e.cx, e.cy, e.a, e.b, e.theta].into_iter().find(|v| !v.is_finite() || *v <= 0.0).unwrap_or(f64::NAN),
+                value: [e.cx, e.cy, e.a, e.b, e.theta]
+                    .into_iter()
+                    .find(|v| !v.is_finite() || *v <= 0.0)
+                    .unwrap_or(f64::NAN),
                 reason: if matches!(err, autoteach_geometry::GeometryError::NonFinite { .. }) {
                     "parameters must be finite"
                 } else {
@@ -89,12 +100,17 @@ pub fn fit_ellipse_geometric(
                 },
             }
         })?,
-        None => direct::solve(&prep)?,
+        None => direct,
     };
     let (e, iterations, converged, angles) = levenberg_marquardt(&prep, start, options);
-    let (residual_mean, residual_rms, covariance) = residual::evaluate(&e, &prep.centred, Some(&angles))?;
+    let (residual_mean, residual_rms, covariance) =
+        residual::evaluate(&e, &prep.centred, Some(&angles))?;
     Ok(EllipseFit {
-        ellipse: Ellipse { cx: e.cx + c.x, cy: e.cy + c.y, ..e },
+        ellipse: Ellipse {
+            cx: e.cx + c.x,
+            cy: e.cy + c.y,
+            ..e
+        },
         residual_mean,
         residual_rms,
         covariance,
@@ -126,10 +142,22 @@ fn levenberg_marquardt(
     let s = prep.scale;
     let inv = 1.0 / s;
     let points: Vec<Vector2<f64>> = prep.centred.iter().map(|p| p * inv).collect();
-    let to_pixels = |e: Ellipse| Ellipse { cx: e.cx * s, cy: e.cy * s, a: e.a * s, b: e.b * s, theta: e.theta };
+    let to_pixels = |e: Ellipse| Ellipse {
+        cx: e.cx * s,
+        cy: e.cy * s,
+        a: e.a * s,
+        b: e.b * s,
+        theta: e.theta,
+    };
     // Sum of squares that counts as an exact fit (rounding level of the input coordinates).
     let exact = points.len() as f64 * (1e-15 * (1.0 + prep.centroid.abs().max() * inv)).powi(2);
-    let mut e = Ellipse { cx: start.cx * inv, cy: start.cy * inv, a: start.a * inv, b: start.b * inv, theta: start.theta };
+    let mut e = Ellipse {
+        cx: start.cx * inv,
+        cy: start.cy * inv,
+        a: start.a * inv,
+        b: start.b * inv,
+        theta: start.theta,
+    };
     let mut q = oriented(e.conic_coefficients());
     // Foot angles on the current ellipse (Newton starts for the next evaluation) and on the
     // candidate; empty during the Sampson phase.
@@ -148,7 +176,6 @@ fn levenberg_marquardt(
             }
             // Hand over from the Sampson to the orthogonal distance.
             orthogonal = true;
-            phase_end = false;
             tol = options.tolerance;
             // Close to the optimum already: start with nearly Gauss–Newton steps.
             lambda = LAMBDA_START * 1e-3;
@@ -165,8 +192,7 @@ fn levenberg_marquardt(
         let dmax = diag.max();
         let qv = Vector6::from(q);
         let damped_base = jtj + qv * qv.transpose() * dmax;
-        let mut finished = false;
-        loop {
+        let finished = loop {
             let mut a = damped_base;
             for k in 0..6 {
                 a[(k, k)] += lambda * diag[k].max(1e-12 * dmax);
@@ -180,8 +206,7 @@ fn levenberg_marquardt(
             let Some((delta, next_q, next)) = candidate else {
                 lambda *= 10.0;
                 if lambda > LAMBDA_MAX {
-                    finished = true;
-                    break;
+                    break true;
                 }
                 continue;
             };
@@ -190,8 +215,7 @@ fn levenberg_marquardt(
             // evaluate it.
             let predicted = -(2.0 * delta.dot(&jtr) + delta.dot(&(jtj * delta)));
             if lambda <= LAMBDA_START && (predicted <= tol * ssr || delta.amax() <= tol) {
-                finished = true;
-                break;
+                break true;
             }
             let (next_jtj, next_jtr, next_ssr) = if orthogonal {
                 residual::accumulate_conic(&next, &next_q, &points, &angles, &mut next_angles)
@@ -203,15 +227,13 @@ fn levenberg_marquardt(
                 (e, q, jtj, jtr, ssr) = (next, next_q, next_jtj, next_jtr, next_ssr);
                 std::mem::swap(&mut angles, &mut next_angles);
                 lambda = (lambda * 0.1).max(1e-15);
-                finished = small_gain || delta.amax() <= tol;
-                break;
+                break small_gain || delta.amax() <= tol;
             }
             lambda *= 10.0;
             if lambda > LAMBDA_MAX {
-                finished = true;
-                break;
+                break true;
             }
-        }
+        };
         phase_end = finished;
     }
 }

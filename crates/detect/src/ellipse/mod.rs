@@ -30,6 +30,9 @@
 //! # }
 //! ```
 
+// `!(x > y)` is deliberate throughout: it is also true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 mod direct;
 mod geometric;
 mod residual;
@@ -92,7 +95,9 @@ pub enum FitMethod {
 pub fn fit_ellipse(points: &[Vector2<f64>], method: FitMethod) -> Result<EllipseFit> {
     match method {
         FitMethod::Direct => fit_ellipse_direct(points),
-        FitMethod::Geometric => fit_ellipse_geometric(points, None, &GeometricFitOptions::default()),
+        FitMethod::Geometric => {
+            fit_ellipse_geometric(points, None, &GeometricFitOptions::default())
+        }
     }
 }
 
@@ -121,7 +126,11 @@ impl Prepared {
         for (index, p) in points.iter().enumerate() {
             for value in [p.x, p.y] {
                 if !value.is_finite() {
-                    return Err(DetectError::NonFinite { what: "points", index, value });
+                    return Err(DetectError::NonFinite {
+                        what: "points",
+                        index,
+                        value,
+                    });
                 }
             }
         }
@@ -135,7 +144,10 @@ impl Prepared {
         let scale = (0.5 * spread).sqrt();
         if !(scale > 0.0) || !scale.is_finite() {
             return Err(DetectError::Degenerate {
-                reason: format!("all {n} points coincide at ({}, {})", centroid.x, centroid.y),
+                reason: format!(
+                    "all {n} points coincide at ({}, {})",
+                    centroid.x, centroid.y
+                ),
             });
         }
         // Scatter of [x², xy, y²] (s1), cross terms (s2) and [x, y, 1] (s3).
@@ -184,7 +196,13 @@ impl Prepared {
                 ),
             });
         }
-        Ok(Prepared { centroid, scale, centred, m, t })
+        Ok(Prepared {
+            centroid,
+            scale,
+            centred,
+            m,
+            t,
+        })
     }
 }
 

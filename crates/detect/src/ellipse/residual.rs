@@ -42,10 +42,14 @@ impl Foot {
 }
 
 /// The [`Foot`] of `p` on `e` (`sc = (sin θ, cos θ)` of `e`), for a single point.
+#[cfg(test)]
 pub(crate) fn foot(e: &Ellipse, sc: (f64, f64), p: &Vector2<f64>) -> Foot {
     let mut angles = Vec::with_capacity(1);
     foot_angles(e, std::slice::from_ref(p), &[], &mut angles);
-    let t = angles.first().copied().unwrap_or_else(|| e.parameter_of(p).sin_cos());
+    let t = angles
+        .first()
+        .copied()
+        .unwrap_or_else(|| e.parameter_of(p).sin_cos());
     foot_at(e, sc, p, t)
 }
 
@@ -123,7 +127,7 @@ pub(crate) fn foot_angles(
         for (((s, c), &u), &v) in ss.iter_mut().zip(cs.iter_mut()).zip(&us).zip(&vs) {
             let g = -a * u * *s + b * v * *c + k * *s * *c;
             let dg = -a * u * *c - b * v * *s + k * (*c - *s) * (*c + *s);
-            let delta = (-g / dg).max(-0.5).min(0.5);
+            let delta = (-g / dg).clamp(-0.5, 0.5);
             // Rotate by about delta and bring the norm back toward 1 without a square root
             // (one Newton step for 1/√n², exact to O((n² − 1)²)).
             let (cd, sd) = (1.0 - 0.5 * delta * delta, delta);
@@ -168,7 +172,12 @@ pub(crate) fn foot_angles(
 /// theorem gives `∂r/∂q = −n̂·∂x'/∂q` at fixed `t`:
 /// `(−n̂ₓ, −n̂ᵧ, −b cos²t/N, −a sin²t/N, −(a² − b²) sin t cos t/N)` (Ahn, Rauh & Warnecke 2001,
 /// orthogonal distance fitting, with the foot-point angle eliminated).
-pub(crate) fn distance_and_gradient(e: &Ellipse, sc: (f64, f64), p: &Vector2<f64>) -> (f64, Vector5<f64>) {
+#[cfg(test)]
+pub(crate) fn distance_and_gradient(
+    e: &Ellipse,
+    sc: (f64, f64),
+    p: &Vector2<f64>,
+) -> (f64, Vector5<f64>) {
     gradient_at(e, &foot(e, sc, p))
 }
 
@@ -201,7 +210,10 @@ pub(crate) fn distance_and_conic_gradient(
     let gx = 2.0 * q[0] * x + q[1] * y + q[3];
     let gy = q[1] * x + 2.0 * q[2] * y + q[4];
     let g = 1.0 / (gx * gx + gy * gy).sqrt();
-    (f.r, Vector6::new(x * x * g, x * y * g, y * y * g, x * g, y * g, g))
+    (
+        f.r,
+        Vector6::new(x * x * g, x * y * g, y * y * g, x * g, y * g, g),
+    )
 }
 
 /// Running normal equations `(JᵀJ, Jᵀr, Σ r²)` for `K` parameters, the upper triangle of `JᵀJ`
@@ -214,7 +226,11 @@ struct NormalAcc<const K: usize, const P: usize> {
 
 impl<const K: usize, const P: usize> NormalAcc<K, P> {
     fn new() -> Self {
-        NormalAcc { packed: [0.0; P], jtr: [0.0; K], ssr: 0.0 }
+        NormalAcc {
+            packed: [0.0; P],
+            jtr: [0.0; K],
+            ssr: 0.0,
+        }
     }
 
     /// Adds one residual `r` with gradient `g`.
@@ -261,9 +277,18 @@ pub(crate) struct Normal {
 /// Accumulates [`Normal`] without storing the Jacobian. `known` may hold the foot angles of
 /// the points on exactly this ellipse (from the last fitting iteration); otherwise they are
 /// computed.
-pub(crate) fn accumulate(e: &Ellipse, points: &[Vector2<f64>], known: Option<&[(f64, f64)]>) -> Normal {
+pub(crate) fn accumulate(
+    e: &Ellipse,
+    points: &[Vector2<f64>],
+    known: Option<&[(f64, f64)]>,
+) -> Normal {
     let sc = e.theta.sin_cos();
-    let mut out = Normal { jtj: Matrix5::zeros(), jtr: Vector5::zeros(), ssr: 0.0, sum_abs: 0.0 };
+    let mut out = Normal {
+        jtj: Matrix5::zeros(),
+        jtr: Vector5::zeros(),
+        ssr: 0.0,
+        sum_abs: 0.0,
+    };
     let mut computed = Vec::new();
     let angles = match known {
         Some(k) if k.len() == points.len() => k,
@@ -311,8 +336,16 @@ pub(crate) fn accumulate_conic(
 /// approximation of the signed orthogonal distance, eq. 3.3 written out as
 /// `f = q·m(x)`, `m = [x², xy, y², x, y, 1]`) with respect to `q`: `(JᵀJ, Jᵀr, Σ r²)` with
 /// `∂r/∂q = m/‖∇f‖ − f·(∇f·∂∇f/∂q)/‖∇f‖³`.
-pub(crate) fn accumulate_sampson(q: &[f64; 6], points: &[Vector2<f64>]) -> (Matrix6<f64>, Vector6<f64>, f64) {
-    let grad = |p: &Vector2<f64>| (2.0 * q[0] * p.x + q[1] * p.y + q[3], q[1] * p.x + 2.0 * q[2] * p.y + q[4]);
+pub(crate) fn accumulate_sampson(
+    q: &[f64; 6],
+    points: &[Vector2<f64>],
+) -> (Matrix6<f64>, Vector6<f64>, f64) {
+    let grad = |p: &Vector2<f64>| {
+        (
+            2.0 * q[0] * p.x + q[1] * p.y + q[3],
+            q[1] * p.x + 2.0 * q[2] * p.y + q[4],
+        )
+    };
     // 1/‖∇f‖ in a separate, vectorisable pass (square roots and divisions dominate otherwise).
     let inv_norms: Vec<f64> = points
         .iter()
@@ -342,7 +375,8 @@ pub(crate) fn accumulate_sampson(q: &[f64; 6], points: &[Vector2<f64>]) -> (Matr
 
 /// Mean and RMS absolute orthogonal residual and the covariance of `(cx, cy, a, b, θ)` of the
 /// fit `e` to `points` (see [`super::EllipseFit::covariance`] for the conventions).
-/// `known`: foot angles on `e`, as for [`accumulate`].
+/// `points` are centred on their centroid (the frame of `e`); `known`: foot angles on `e`, as
+/// for [`accumulate`].
 ///
 /// # Errors
 /// [`DetectError::RankDeficient`] when `JᵀJ` (apart from a circle's undefined `θ`) is singular.
@@ -361,19 +395,23 @@ pub(crate) fn evaluate(
     let sigma2 = acc.ssr / (n - 5) as f64;
     let a = acc.jtj;
     let diag = a.diagonal();
-    let dmax = diag.max();
     let names = ["cx", "cy", "a", "b", "theta"];
     if let Some(k) = (0..4).find(|&k| !(diag[k] > 0.0)) {
         return Err(DetectError::RankDeficient {
-            reason: format!("the points do not constrain {} (JᵀJ diagonal {:?})", names[k], diag.as_slice()),
+            reason: format!(
+                "the points do not constrain {} (JᵀJ diagonal {:?})",
+                names[k],
+                diag.as_slice()
+            ),
         });
     }
-    let spread = (points.iter().map(|p| (p - Vector2::new(e.cx, e.cy)).norm_squared()).sum::<f64>() / n as f64).sqrt();
+    // `points` are centred on their centroid: their RMS radius.
+    let spread = (points.iter().map(|p| p.norm_squared()).sum::<f64>() / n as f64).sqrt();
     let shape = format!(
-        "ellipse a = {:.4e}, b = {:.4e} px, {n} points within {spread:.4e} px of its centre{}",
+        "fitted ellipse a = {:.4e}, b = {:.4e} px for {n} points of RMS radius {spread:.4e} px{}",
         e.a,
         e.b,
-        if e.a > 20.0 * spread.max(e.b) {
+        if e.a > 20.0 * spread {
             "; the fit degenerates toward a parabola: the arc is too short or too noisy to determine an ellipse"
         } else {
             ""
@@ -420,10 +458,14 @@ fn scaled_inverse(a: &Matrix5<f64>, without_theta: bool, what: &str) -> Result<M
             reason: format!(
                 "the orthogonal-distance Jacobian is rank deficient (smallest eigenvalue {lmin:.3e} of \
                  the normalised JᵀJ, along (cx, cy, a, b, theta) = {:?}): {what}",
-                v.iter().map(|x| (x * 1e3).round() / 1e3).collect::<Vec<_>>()
+                v.iter()
+                    .map(|x| (x * 1e3).round() / 1e3)
+                    .collect::<Vec<_>>()
             ),
         });
     }
-    let rinv = eig.eigenvectors * Matrix5::from_diagonal(&eig.eigenvalues.map(|l| 1.0 / l)) * eig.eigenvectors.transpose();
+    let rinv = eig.eigenvectors
+        * Matrix5::from_diagonal(&eig.eigenvalues.map(|l| 1.0 / l))
+        * eig.eigenvectors.transpose();
     Ok(Matrix5::from_fn(|i, j| rinv[(i, j)] * d[i] * d[j]))
 }

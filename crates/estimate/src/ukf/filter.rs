@@ -1,6 +1,6 @@
 //! The interface shared by the standard and the square-root filter, and the batch runner.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DMatrixView, DVector, DVectorView};
 
 use crate::{EstimateError, Result};
 
@@ -33,6 +33,9 @@ pub struct BatchInputs<'a> {
     pub dts: Option<&'a [f64]>,
     /// Optional measurement covariances, one per step (overriding R).
     pub rs: Option<&'a [DMatrix<f64>]>,
+    /// Record the priors (default `true`; without them the result's prior accessors return
+    /// `None` and a run stores half as much).
+    pub keep_priors: bool,
 }
 
 impl<'a> BatchInputs<'a> {
@@ -44,7 +47,14 @@ impl<'a> BatchInputs<'a> {
             us: None,
             dts: None,
             rs: None,
+            keep_priors: true,
         }
+    }
+
+    /// Does not record the priors.
+    pub fn without_priors(mut self) -> Self {
+        self.keep_priors = false;
+        self
     }
 
     /// Adds control inputs (one per step).
@@ -88,18 +98,127 @@ impl<'a> BatchInputs<'a> {
 }
 
 /// The output of a batch run: for every step the prior (after the prediction) and the
-/// posterior (after the update; equal to the prior when the measurement was missing).
+/// posterior (after the update; equal to the prior when the measurement was missing), stored
+/// contiguously (each state `dim_x` values, each covariance `dim_x²` values column-major).
 #[derive(Debug, Clone, PartialEq)]
 pub struct BatchResult {
-    /// Posterior means.
-    pub xs: Vec<DVector<f64>>,
-    /// Posterior covariances.
-    pub ps: Vec<DMatrix<f64>>,
-    /// Prior means.
-    pub x_priors: Vec<DVector<f64>>,
-    /// Prior covariances.
-    pub p_priors: Vec<DMatrix<f64>>,
+    dim_x: usize,
+    xs: Vec<f64>,
+    ps: Vec<f64>,
+    x_priors: Vec<f64>,
+    p_priors: Vec<f64>,
+    log_likelihoods: Vec<f64>,
+}
+
+impl BatchResult {
+    fn with_capacity(steps: usize, prior_steps: usize, n: usize) -> Self {
+        Self {
+            dim_x: n,
+            xs: Vec::with_capacity(steps * n),
+            ps: Vec::with_capacity(steps * n * n),
+            x_priors: Vec::with_capacity(prior_steps * n),
+            p_priors: Vec::with_capacity(prior_steps * n * n),
+            log_likelihoods: Vec::with_capacity(steps),
+        }
+    }
+
+    /// Number of steps.
+    pub fn len(&self) -> usize {
+        self.log_likelihoods.len()
+    }
+
+    /// `true` for a run over no steps.
+    pub fn is_empty(&self) -> bool {
+        self.log_likelihoods.is_empty()
+    }
+
+    /// The state dimension.
+    pub fn dim_x(&self) -> usize {
+        self.dim_x
+    }
+
+    fn vector<'a>(&self, data: &'a [f64], k: usize) -> Option<DVectorView<'a, f64>> {
+        let n = self.dim_x;
+        data.get(k * n..(k + 1) * n)
+            .map(|s| DVectorView::from_slice(s, n))
+    }
+
+    fn matrix<'a>(&self, data: &'a [f64], k: usize) -> Option<DMatrixView<'a, f64>> {
+        let n = self.dim_x;
+        data.get(k * n * n..(k + 1) * n * n)
+            .map(|s| DMatrixView::from_slice(s, n, n))
+    }
+
+    /// The posterior mean of step `k` (`None` past the end).
+    pub fn x(&self, k: usize) -> Option<DVectorView<'_, f64>> {
+        self.vector(&self.xs, k)
+    }
+
+    /// The posterior covariance of step `k`.
+    pub fn p(&self, k: usize) -> Option<DMatrixView<'_, f64>> {
+        self.matrix(&self.ps, k)
+    }
+
+    /// The prior mean of step `k`.
+    pub fn x_prior(&self, k: usize) -> Option<DVectorView<'_, f64>> {
+        self.vector(&self.x_priors, k)
+    }
+
+    /// The prior covariance of step `k`.
+    pub fn p_prior(&self, k: usize) -> Option<DMatrixView<'_, f64>> {
+        self.matrix(&self.p_priors, k)
+    }
+
     /// Log-likelihood of each measurement (NaN where it was missing).
+    pub fn log_likelihoods(&self) -> &[f64] {
+        &self.log_likelihoods
+    }
+
+    /// All posterior means, step after step (`len() · dim_x` values).
+    pub fn xs(&self) -> &[f64] {
+        &self.xs
+    }
+
+    /// All posterior covariances, step after step, each column-major.
+    pub fn ps(&self) -> &[f64] {
+        &self.ps
+    }
+
+    /// All prior means (empty when the priors were not kept).
+    pub fn x_priors(&self) -> &[f64] {
+        &self.x_priors
+    }
+
+    /// All prior covariances.
+    pub fn p_priors(&self) -> &[f64] {
+        &self.p_priors
+    }
+
+    /// The storage, without copying: `(xs, ps, x_priors, p_priors, log_likelihoods)` as
+    /// returned by the accessors of the same names.
+    pub fn into_flat(self) -> FlatBatch {
+        FlatBatch {
+            xs: self.xs,
+            ps: self.ps,
+            x_priors: self.x_priors,
+            p_priors: self.p_priors,
+            log_likelihoods: self.log_likelihoods,
+        }
+    }
+}
+
+/// The storage of a [`BatchResult`], taken by [`BatchResult::into_flat`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct FlatBatch {
+    /// Posterior means, step after step.
+    pub xs: Vec<f64>,
+    /// Posterior covariances, step after step, each column-major.
+    pub ps: Vec<f64>,
+    /// Prior means (empty when not kept).
+    pub x_priors: Vec<f64>,
+    /// Prior covariances (empty when not kept).
+    pub p_priors: Vec<f64>,
+    /// Log-likelihoods (NaN where the measurement was missing).
     pub log_likelihoods: Vec<f64>,
 }
 
@@ -165,19 +284,16 @@ pub trait SigmaPointFilter {
     fn batch(&mut self, inputs: &BatchInputs<'_>) -> Result<BatchResult> {
         inputs.check()?;
         let n = inputs.zs.len();
-        let mut out = BatchResult {
-            xs: Vec::with_capacity(n),
-            ps: Vec::with_capacity(n),
-            x_priors: Vec::with_capacity(n),
-            p_priors: Vec::with_capacity(n),
-            log_likelihoods: Vec::with_capacity(n),
-        };
+        let prior_steps = if inputs.keep_priors { n } else { 0 };
+        let mut out = BatchResult::with_capacity(n, prior_steps, self.dim_x());
         for (i, z) in inputs.zs.iter().enumerate() {
             let dt = inputs.dts.map_or(inputs.dt, |d| d[i]);
             let u = inputs.us.map(|u| &u[i]);
             self.predict(dt, u)?;
-            out.x_priors.push(self.x().clone());
-            out.p_priors.push(self.p());
+            if inputs.keep_priors {
+                out.x_priors.extend_from_slice(self.x().as_slice());
+                self.append_p(&mut out.p_priors);
+            }
             match z {
                 Some(z) => {
                     self.update(z, inputs.rs.map(|r| &r[i]))?;
@@ -188,10 +304,15 @@ pub trait SigmaPointFilter {
                     out.log_likelihoods.push(f64::NAN);
                 }
             }
-            out.xs.push(self.x().clone());
-            out.ps.push(self.p());
+            out.xs.extend_from_slice(self.x().as_slice());
+            self.append_p(&mut out.ps);
         }
         Ok(out)
+    }
+
+    /// Appends the current covariance (column-major) to `out`.
+    fn append_p(&self, out: &mut Vec<f64>) {
+        out.extend_from_slice(self.p().as_slice());
     }
 
     /// Records a missing measurement: the posterior equals the prior (filterpy's

@@ -24,7 +24,14 @@ pub(crate) fn product(m: usize, k: usize, n: usize, a: &[f64], b: &[f64], out: &
 
 /// `out = a · diag(w) · aᵀ` for `a` (`r × c`), through `matrixmultiply` for large enough
 /// sizes (`scratch` holds `a · diag(w)`, `r × c`), else [`weighted_gram`]. Symmetrised.
-pub(crate) fn weighted_gram_auto(r: usize, c: usize, a: &[f64], w: &[f64], scratch: &mut [f64], out: &mut [f64]) {
+pub(crate) fn weighted_gram_auto(
+    r: usize,
+    c: usize,
+    a: &[f64],
+    w: &[f64],
+    scratch: &mut [f64],
+    out: &mut [f64],
+) {
     if r >= BLOCKED_MIN && c >= BLOCKED_MIN {
         let aw = &mut scratch[..r * c];
         for ((dst, src), &wk) in aw.chunks_exact_mut(r).zip(a.chunks_exact(r)).zip(w) {
@@ -34,13 +41,13 @@ pub(crate) fn weighted_gram_auto(r: usize, c: usize, a: &[f64], w: &[f64], scrat
         }
         let awv = nalgebra::DMatrixView::from_slice(aw, r, c);
         // aᵀ as a strided view of a's storage: entry (k, i) is a[i + k r].
-        let atv = nalgebra::MatrixView::<f64, nalgebra::Dyn, nalgebra::Dyn, nalgebra::Dyn, nalgebra::Dyn>::from_slice_with_strides(
-            &a[..r * c],
-            c,
-            r,
-            r,
-            1,
-        );
+        let atv = nalgebra::MatrixView::<
+            f64,
+            nalgebra::Dyn,
+            nalgebra::Dyn,
+            nalgebra::Dyn,
+            nalgebra::Dyn,
+        >::from_slice_with_strides(&a[..r * c], c, r, r, 1);
         let mut ov = nalgebra::DMatrixViewMut::from_slice(&mut out[..r * r], r, r);
         ov.gemm(1.0, &awv, &atv, 0.0);
         // Rounding in the blocked product can differ between (i, j) and (j, i).
@@ -79,7 +86,10 @@ pub(crate) fn weighted_gram_small(r: usize, a: &[f64], w: &[f64], out: &mut [f64
 pub(crate) fn gemm(m: usize, k: usize, n: usize, a: &[f64], b: &[f64], out: &mut [f64]) {
     let a = &a[..m * k];
     let b = &b[..k * n];
-    for (oj, bj) in out[..m * n].chunks_exact_mut(m.max(1)).zip(b.chunks_exact(k.max(1))) {
+    for (oj, bj) in out[..m * n]
+        .chunks_exact_mut(m.max(1))
+        .zip(b.chunks_exact(k.max(1)))
+    {
         oj.fill(0.0);
         for (ap, &s) in a.chunks_exact(m.max(1)).zip(bj) {
             for (o, &x) in oj.iter_mut().zip(ap) {
@@ -122,10 +132,21 @@ pub(crate) fn weighted_sum(r: usize, a: &[f64], w: &[f64], out: &mut [f64]) {
 
 /// `out = Σₖ wₖ aₖ bₖᵀ` over the columns of `a` (`ra × c`) and `b` (`rb × c`); `out` is
 /// `ra × rb`.
-pub(crate) fn weighted_outer(ra: usize, rb: usize, a: &[f64], w: &[f64], b: &[f64], out: &mut [f64]) {
+pub(crate) fn weighted_outer(
+    ra: usize,
+    rb: usize,
+    a: &[f64],
+    w: &[f64],
+    b: &[f64],
+    out: &mut [f64],
+) {
     let out = &mut out[..ra * rb];
     out.fill(0.0);
-    for ((ak, bk), &wk) in a.chunks_exact(ra.max(1)).zip(b.chunks_exact(rb.max(1))).zip(w) {
+    for ((ak, bk), &wk) in a
+        .chunks_exact(ra.max(1))
+        .zip(b.chunks_exact(rb.max(1)))
+        .zip(w)
+    {
         for (oj, &bjk) in out.chunks_exact_mut(ra.max(1)).zip(bk) {
             let s = wk * bjk;
             for (o, &x) in oj.iter_mut().zip(ak) {
@@ -188,15 +209,24 @@ pub(crate) fn cholesky(n: usize, a: &[f64], l: &mut [f64]) -> bool {
         let lj = &mut rest[..n];
         lj[..j].fill(0.0);
         lj[j..].copy_from_slice(&a[j + j * n..(j + 1) * n]);
-        // L[j.., j] = A[j.., j] − Σₖ L[j, k] L[j.., k].
-        for lk in done.chunks_exact(n) {
-            let s = lk[j];
+        // L[j.., j] = A[j.., j] − Σₖ L[j, k] L[j.., k], two columns k per pass over L[j.., j].
+        let mut pairs = done.chunks_exact(2 * n);
+        for lk in &mut pairs {
+            let (a0, a1) = lk.split_at(n);
+            let (s0, s1) = (a0[j], a1[j]);
+            for ((o, &v0), &v1) in lj[j..].iter_mut().zip(&a0[j..]).zip(&a1[j..]) {
+                *o -= s0 * v0 + s1 * v1;
+            }
+        }
+        if let Some(lk) = pairs.remainder().get(..n) {
+            let s0 = lk[j];
             for (o, &v) in lj[j..].iter_mut().zip(&lk[j..]) {
-                *o -= s * v;
+                *o -= s0 * v;
             }
         }
         let d = lj[j];
-        if !(d > 0.0) || !d.is_finite() {
+        // `d > 0` is false for NaN too.
+        if d.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !d.is_finite() {
             return false;
         }
         let djj = d.sqrt();
@@ -209,17 +239,32 @@ pub(crate) fn cholesky(n: usize, a: &[f64], l: &mut [f64]) -> bool {
     true
 }
 
-/// `true` iff every value is finite: a branch-free pass (`|x| ≤ f64::MAX` is false exactly
-/// for NaN and ±inf) that the compiler vectorises.
+/// `true` iff every value is finite: `x · 0` is NaN exactly for NaN and ±inf, summed in eight
+/// independent lanes so the compiler vectorises the pass and the additions do not wait on
+/// each other.
 pub(crate) fn all_finite(a: &[f64]) -> bool {
-    a.iter().fold(true, |ok, x| ok & (x.abs() <= f64::MAX))
+    let mut acc = [0.0f64; 8];
+    let chunks = a.chunks_exact(8);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for (s, &x) in acc.iter_mut().zip(c) {
+            *s += x * 0.0;
+        }
+    }
+    for (s, &x) in acc.iter_mut().zip(rest) {
+        *s += x * 0.0;
+    }
+    acc.iter().sum::<f64>() == 0.0
 }
 
 /// `out[i + j m] = at[:, i] · b[:, j]` for `at` (`k × m`, the transpose of the left factor)
 /// and `b` (`k × n`): contiguous dot products, faster than [`gemm`] when `m` is small.
 pub(crate) fn gemm_tn(m: usize, k: usize, n: usize, at: &[f64], b: &[f64], out: &mut [f64]) {
     let at = &at[..k * m];
-    for (oj, bj) in out[..m * n].chunks_exact_mut(m.max(1)).zip(b[..k * n].chunks_exact(k.max(1))) {
+    for (oj, bj) in out[..m * n]
+        .chunks_exact_mut(m.max(1))
+        .zip(b[..k * n].chunks_exact(k.max(1)))
+    {
         for (o, ai) in oj.iter_mut().zip(at.chunks_exact(k.max(1))) {
             *o = ai.iter().zip(bj).map(|(x, y)| x * y).sum();
         }
@@ -228,12 +273,13 @@ pub(crate) fn gemm_tn(m: usize, k: usize, n: usize, at: &[f64], b: &[f64], out: 
 
 /// Solves `L X = B` in place for lower-triangular `L` (`n × n`) and `B` (`n × c`).
 pub(crate) fn solve_lower(n: usize, l: &[f64], b: &mut [f64]) {
+    let l = &l[..n * n];
     for x in b.chunks_exact_mut(n.max(1)) {
-        for j in 0..n {
-            let v = x[j] / l[j + j * n];
+        for (j, lj) in l.chunks_exact(n).enumerate() {
+            let v = x[j] / lj[j];
             x[j] = v;
-            for i in (j + 1)..n {
-                x[i] -= l[i + j * n] * v;
+            for (xi, &lij) in x[j + 1..].iter_mut().zip(&lj[j + 1..]) {
+                *xi -= lij * v;
             }
         }
     }
@@ -241,13 +287,15 @@ pub(crate) fn solve_lower(n: usize, l: &[f64], b: &mut [f64]) {
 
 /// Solves `Lᵀ X = B` in place for lower-triangular `L` (`n × n`) and `B` (`n × c`).
 pub(crate) fn solve_lower_transposed(n: usize, l: &[f64], b: &mut [f64]) {
+    let l = &l[..n * n];
     for x in b.chunks_exact_mut(n.max(1)) {
-        for j in (0..n).rev() {
-            let mut v = x[j];
-            for i in (j + 1)..n {
-                v -= l[i + j * n] * x[i];
-            }
-            x[j] = v / l[j + j * n];
+        for (j, lj) in l.chunks_exact(n).enumerate().rev() {
+            let dot: f64 = lj[j + 1..]
+                .iter()
+                .zip(&x[j + 1..])
+                .map(|(a, b)| a * b)
+                .sum();
+            x[j] = (x[j] - dot) / lj[j];
         }
     }
 }
@@ -267,7 +315,9 @@ mod tests {
     use nalgebra::DMatrix;
 
     fn mat(r: usize, c: usize, seed: usize) -> DMatrix<f64> {
-        DMatrix::from_fn(r, c, |i, j| (((i * 7 + j * 13 + seed * 5) % 11) as f64 - 5.0) * 0.3)
+        DMatrix::from_fn(r, c, |i, j| {
+            (((i * 7 + j * 13 + seed * 5) % 11) as f64 - 5.0) * 0.3
+        })
     }
 
     fn spd_copy(a: &DMatrix<f64>) -> DMatrix<f64> {
@@ -298,11 +348,16 @@ mod tests {
         let mut gb = vec![0.0; 81];
         weighted_gram_auto(9, 19, big.as_slice(), &wb, &mut scratch, &mut gb);
         let wbd = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&wb));
-        assert!((DMatrix::from_column_slice(9, 9, &gb) - &big * &wbd * big.transpose()).amax() < 1e-12);
+        assert!(
+            (DMatrix::from_column_slice(9, 9, &gb) - &big * &wbd * big.transpose()).amax() < 1e-12
+        );
         let small = mat(3, 19, 6);
         let mut gs = vec![0.0; 9];
         weighted_gram_auto(3, 19, small.as_slice(), &wb, &mut scratch, &mut gs);
-        assert!((DMatrix::from_column_slice(3, 3, &gs) - &small * &wbd * small.transpose()).amax() < 1e-12);
+        assert!(
+            (DMatrix::from_column_slice(3, 3, &gs) - &small * &wbd * small.transpose()).amax()
+                < 1e-12
+        );
         let f = mat(9, 9, 5);
         let mut fb = vec![0.0; 9 * 19];
         product(9, 9, 19, f.as_slice(), big.as_slice(), &mut fb);

@@ -94,7 +94,10 @@ pub(crate) fn check_finite_at(data: &[f64], what: impl Fn() -> String, step: usi
 pub(crate) fn asymmetry(m: &DMatrix<f64>) -> f64 {
     let n = m.nrows();
     let a = m.as_slice();
-    let scale = a.iter().fold(0.0f64, |acc, v| acc.max(v.abs())).max(f64::MIN_POSITIVE);
+    let scale = a
+        .iter()
+        .fold(0.0f64, |acc, v| acc.max(v.abs()))
+        .max(f64::MIN_POSITIVE);
     let mut worst: f64 = 0.0;
     for j in 0..n {
         for i in (j + 1)..n {
@@ -195,26 +198,33 @@ pub(crate) fn factor_covariance(
 }
 
 /// [`factor_covariance`] for a matrix that is symmetric by construction (a weighted Gram
-/// matrix plus a validated Q or R): the symmetry test is skipped when the factorisation
-/// succeeds.
-pub(crate) fn factor_symmetric(
+/// matrix plus a validated Q or R, or a lower-triangle update mirrored): the factor is written
+/// into `l` (`n × n`), and the symmetry test is skipped (and nothing allocated) when the
+/// factorisation succeeds.
+pub(crate) fn factor_symmetric_into(
     p: &mut DMatrix<f64>,
+    l: &mut DMatrix<f64>,
     what: &str,
     step: usize,
     policy: CovariancePolicy,
     repairs: &mut usize,
-) -> Result<DMatrix<f64>> {
-    if kernels::all_finite(p.as_slice())
-        && let Some(l) = cholesky(p)
-    {
-        return Ok(l);
+) -> Result<()> {
+    let n = p.nrows();
+    if kernels::all_finite(p.as_slice()) && kernels::cholesky(n, p.as_slice(), l.as_mut_slice()) {
+        return Ok(());
     }
-    factor_covariance(p, what, step, policy, repairs)
+    let f = factor_covariance(p, what, step, policy, repairs)?;
+    l.copy_from(&f);
+    Ok(())
 }
 
 /// Validates a covariance given as input (`n × n`, finite, symmetric to [`SYMMETRY_TOL`]) and
 /// returns its symmetrised copy.
-pub(crate) fn validate_covariance_input(m: &DMatrix<f64>, n: usize, what: &str) -> Result<DMatrix<f64>> {
+pub(crate) fn validate_covariance_input(
+    m: &DMatrix<f64>,
+    n: usize,
+    what: &str,
+) -> Result<DMatrix<f64>> {
     check_shape(m, n, n, what)?;
     check_finite_input(m.as_slice(), what)?;
     let asym = asymmetry(m);
@@ -261,7 +271,10 @@ pub(crate) fn chol_rank1(l: &mut DMatrix<f64>, x: &mut DVector<f64>, sign: f64) 
     for k in 0..n {
         let lkk = l[(k, k)];
         let r2 = lkk * lkk + sign * x[k] * x[k];
-        if !(r2 > 0.0) || !r2.is_finite() || lkk == 0.0 {
+        if r2.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+            || !r2.is_finite()
+            || lkk == 0.0
+        {
             return false;
         }
         let r = r2.sqrt();
@@ -300,7 +313,9 @@ mod tests {
     fn spd(n: usize, seed: u64) -> DMatrix<f64> {
         let mut s = seed;
         let a = DMatrix::from_fn(n, n, |_, _| {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5
         });
         &a * a.transpose() + DMatrix::identity(n, n) * 0.1
@@ -328,7 +343,9 @@ mod tests {
 
     #[test]
     fn tria_reproduces_a_at() {
-        let a = DMatrix::from_fn(4, 9, |i, j| ((i * 7 + j * 3) % 5) as f64 - 2.0 + 0.1 * j as f64);
+        let a = DMatrix::from_fn(4, 9, |i, j| {
+            ((i * 7 + j * 3) % 5) as f64 - 2.0 + 0.1 * j as f64
+        });
         let s = tria(&a);
         assert!((&s * s.transpose() - &a * a.transpose()).amax() < 1e-12);
         for i in 0..4 {

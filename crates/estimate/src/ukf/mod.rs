@@ -26,7 +26,7 @@
 //! ukf.set_r(DMatrix::identity(1, 1) * 0.01)?;
 //! let zs: Vec<_> = (0..50).map(|k| Some(DVector::from_element(1, 0.5 * k as f64))).collect();
 //! let out = ukf.batch(&BatchInputs::new(1.0, &zs))?;
-//! assert!((out.xs[49][1] - 0.5).abs() < 1e-3); // the velocity
+//! assert!((out.x(49).unwrap()[1] - 0.5).abs() < 1e-3); // the velocity
 //! # Ok::<(), autoteach_estimate::EstimateError>(())
 //! ```
 
@@ -40,7 +40,7 @@ mod sqrt;
 mod standard;
 mod transform;
 
-pub use filter::{BatchInputs, BatchResult, NoiseForm, SigmaPointFilter};
+pub use filter::{BatchInputs, BatchResult, FlatBatch, NoiseForm, SigmaPointFilter};
 pub use linalg::CovariancePolicy;
 pub use model::UkfModel;
 pub use models::{ConstantVelocityModel, LinearModel};

@@ -9,9 +9,9 @@ use crate::Result;
 /// measurement function `h`, and the hooks that make the filter work on states and
 /// measurements that are not plain vectors.
 ///
-/// This is the structure of seed 000_3b1454b2b2194811.txt eq. (5.1): `X(k+1) = f(X(k), u(k))
-/// + w`, `y(k+1) = h(X(k+1)) + v`, where the seed's input `u` is the SLAM increment and its
-/// state mixes a translation, Euler angles and joint zero offsets.
+/// This is the structure of seed 000_3b1454b2b2194811.txt eq. (5.1),
+/// `X(k+1) = f(X(k), u(k)) + w` and `y(k+1) = h(X(k+1)) + v`, where the seed's input `u` is
+/// the SLAM increment and its state mixes a translation, Euler angles and joint zero offsets.
 ///
 /// # Manifold states
 ///
@@ -175,7 +175,12 @@ pub trait UkfModel {
         wm: &DVector<f64>,
         out: &mut DVector<f64>,
     ) -> Result<()> {
-        kernels::weighted_sum(sigmas.nrows(), sigmas.as_slice(), wm.as_slice(), out.as_mut_slice());
+        kernels::weighted_sum(
+            sigmas.nrows(),
+            sigmas.as_slice(),
+            wm.as_slice(),
+            out.as_mut_slice(),
+        );
         Ok(())
     }
 
@@ -186,7 +191,12 @@ pub trait UkfModel {
         wm: &DVector<f64>,
         out: &mut DVector<f64>,
     ) -> Result<()> {
-        kernels::weighted_sum(sigmas.nrows(), sigmas.as_slice(), wm.as_slice(), out.as_mut_slice());
+        kernels::weighted_sum(
+            sigmas.nrows(),
+            sigmas.as_slice(),
+            wm.as_slice(),
+            out.as_mut_slice(),
+        );
         Ok(())
     }
 

@@ -9,12 +9,22 @@ use crate::{EstimateError, Result};
 
 /// `out[:, i] = x + offsets[:, i]`.
 fn vector_sigma_points(x: &DVector<f64>, offsets: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-    kernels::add_columns(x.len(), x.as_slice(), offsets.as_slice(), out.as_mut_slice());
+    kernels::add_columns(
+        x.len(),
+        x.as_slice(),
+        offsets.as_slice(),
+        out.as_mut_slice(),
+    );
 }
 
 /// `out[:, i] = sigmas[:, i] − mean`.
 fn vector_residuals(sigmas: &DMatrix<f64>, mean: &DVector<f64>, out: &mut DMatrix<f64>) {
-    kernels::sub_columns(mean.len(), sigmas.as_slice(), mean.as_slice(), out.as_mut_slice());
+    kernels::sub_columns(
+        mean.len(),
+        sigmas.as_slice(),
+        mean.as_slice(),
+        out.as_mut_slice(),
+    );
 }
 
 /// The linear model `x' = F x + B u`, `z = H x` (noise additive). With it the UKF reproduces
@@ -121,7 +131,14 @@ impl UkfModel for LinearModel {
     ) -> Result<()> {
         let n = self.f.nrows();
         let ns = sigmas.ncols();
-        kernels::product(n, n, ns, self.f.as_slice(), sigmas.as_slice(), out.as_mut_slice());
+        kernels::product(
+            n,
+            n,
+            ns,
+            self.f.as_slice(),
+            sigmas.as_slice(),
+            out.as_mut_slice(),
+        );
         if let (Some(b), Some(u)) = (&self.b, u) {
             let bu = b * u;
             for c in out.as_mut_slice().chunks_exact_mut(n) {
@@ -135,7 +152,14 @@ impl UkfModel for LinearModel {
 
     fn hx_sigmas(&self, sigmas: &DMatrix<f64>, out: &mut DMatrix<f64>) -> Result<()> {
         let (m, n) = self.h.shape();
-        kernels::gemm_tn(m, n, sigmas.ncols(), self.ht.as_slice(), sigmas.as_slice(), out.as_mut_slice());
+        kernels::gemm_tn(
+            m,
+            n,
+            sigmas.ncols(),
+            self.ht.as_slice(),
+            sigmas.as_slice(),
+            out.as_mut_slice(),
+        );
         Ok(())
     }
 

@@ -55,7 +55,7 @@ impl MerweScaledSigmaPoints {
         }
         let nf = n as f64;
         let lambda = alpha * alpha * (nf + kappa) - nf;
-        if !(nf + lambda > 0.0) {
+        if (nf + lambda).partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return Err(EstimateError::InvalidParameter {
                 name: "kappa",
                 value: kappa,

@@ -180,7 +180,7 @@ impl<M: UkfModel> SquareRootUkf<M> {
     /// `tria([√Wc₁ D₁…, extra])` followed by the rank-1 correction with `Wc₀ D₀`, where D
     /// are the deviation columns. On a failed downdate: error, or (repair policy) the
     /// eigenvalue-clipped factor of the reconstructed matrix.
-    fn sqrt_cov(
+    fn sqrt_of_deviations(
         &mut self,
         dev: &DMatrix<f64>,
         wc: &DVector<f64>,
@@ -368,7 +368,7 @@ impl<M: UkfModel> SigmaPointFilter for SquareRootUkf<M> {
         };
         let wc = self.pred_points.wc().clone();
         let q_sqrt = (!augmented).then(|| self.q_sqrt.clone());
-        let sf = self.sqrt_cov(
+        let sf = self.sqrt_of_deviations(
             &ws.dev_out,
             &wc,
             q_sqrt.as_ref(),
@@ -394,7 +394,8 @@ impl<M: UkfModel> SigmaPointFilter for SquareRootUkf<M> {
         let augmented = self.noise == NoiseForm::Augmented;
         let r_sqrt = match r {
             Some(r) => {
-                let rv = linalg::validate_covariance_input(r, self.r.nrows(), "measurement noise R")?;
+                let rv =
+                    linalg::validate_covariance_input(r, self.r.nrows(), "measurement noise R")?;
                 linalg::psd_sqrt(&rv, "measurement noise R")?
             }
             None => self.r_sqrt.clone(),
@@ -431,7 +432,7 @@ impl<M: UkfModel> SigmaPointFilter for SquareRootUkf<M> {
             }
         };
         let wc = self.upd_points.wc().clone();
-        let sz = self.sqrt_cov(
+        let sz = self.sqrt_of_deviations(
             &ws.dev_out,
             &wc,
             (!augmented).then_some(&r_sqrt),

@@ -52,6 +52,44 @@ pub struct UnscentedKalmanFilter<M: UkfModel> {
     repairs: usize,
     pred_ws: Workspace,
     upd_ws: Workspace,
+    scratch: Scratch,
+}
+
+/// Buffers of one predict/update, swapped into the filter when the stage completes (so a
+/// failed stage leaves the filter unchanged and a step allocates nothing).
+#[derive(Debug, Clone)]
+struct Scratch {
+    x: DVector<f64>,
+    p: DMatrix<f64>,
+    l: DMatrix<f64>,
+    zp: DVector<f64>,
+    s: DMatrix<f64>,
+    ls: DMatrix<f64>,
+    pxz: DMatrix<f64>,
+    kt: DMatrix<f64>,
+    k: DMatrix<f64>,
+    y: DVector<f64>,
+    dx: DVector<f64>,
+    w: DVector<f64>,
+}
+
+impl Scratch {
+    fn new(n: usize, m: usize) -> Self {
+        Self {
+            x: DVector::zeros(n),
+            p: DMatrix::zeros(n, n),
+            l: DMatrix::zeros(n, n),
+            zp: DVector::zeros(m),
+            s: DMatrix::zeros(m, m),
+            ls: DMatrix::zeros(m, m),
+            pxz: DMatrix::zeros(n, m),
+            kt: DMatrix::zeros(m, n),
+            k: DMatrix::zeros(n, m),
+            y: DVector::zeros(m),
+            dx: DVector::zeros(n),
+            w: DVector::zeros(m),
+        }
+    }
 }
 
 impl<M: UkfModel> UnscentedKalmanFilter<M> {
@@ -81,6 +119,7 @@ impl<M: UkfModel> UnscentedKalmanFilter<M> {
             upd_points: points.clone(),
             pred_ws: Workspace::new(n, 0, n, ns),
             upd_ws: Workspace::new(n, 0, m, ns),
+            scratch: Scratch::new(n, m),
             points,
             noise: NoiseForm::Additive,
             policy: CovariancePolicy::Strict,
@@ -199,7 +238,10 @@ impl<M: UkfModel> UnscentedKalmanFilter<M> {
             return Ok(None);
         }
         let n = self.x.len();
-        match self.model.sqrt_cov(&self.p, n as f64 + self.points.lambda()) {
+        match self
+            .model
+            .sqrt_cov(&self.p, n as f64 + self.points.lambda())
+        {
             None => Ok(None),
             Some(r) => {
                 let a = r.map_err(|e| transform::at_step(e, step))?;
@@ -320,6 +362,7 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
             None => Offsets::Factor(&self.l),
         };
         let ws = &mut self.pred_ws;
+        let sc = &mut self.scratch;
         transform::draw(
             &self.model,
             &self.pred_points,
@@ -330,32 +373,36 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
             step,
         )?;
         transform::propagate_f(&self.model, augmented, dt, u, ws, step)?;
-        let mut x = DVector::zeros(self.x.len());
         transform::mean_and_devs(
             &self.model,
             Space::State,
             self.pred_points.wm(),
-            &mut x,
+            &mut sc.x,
             ws,
             step,
         )?;
-        let mut p = DMatrix::zeros(x.len(), x.len());
-        transform::weighted_gram(&ws.dev_out, self.pred_points.wc(), &mut ws.scratch, &mut p);
+        transform::weighted_gram(
+            &ws.dev_out,
+            self.pred_points.wc(),
+            &mut ws.scratch,
+            &mut sc.p,
+        );
         if !augmented {
-            p += &self.q;
+            sc.p += &self.q;
         }
-        let l = linalg::factor_symmetric(
-            &mut p,
+        linalg::factor_symmetric_into(
+            &mut sc.p,
+            &mut sc.l,
             "predicted covariance P_prior",
             step,
             self.policy,
             &mut self.repairs,
         )?;
-        self.x_prior.copy_from(&x);
-        self.p_prior.copy_from(&p);
-        self.x = x;
-        self.p = p;
-        self.l = l;
+        std::mem::swap(&mut self.x, &mut sc.x);
+        std::mem::swap(&mut self.p, &mut sc.p);
+        std::mem::swap(&mut self.l, &mut sc.l);
+        self.x_prior.copy_from(&self.x);
+        self.p_prior.copy_from(&self.p);
         self.steps += 1;
         Ok(())
     }
@@ -369,7 +416,8 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
         let augmented = self.noise == NoiseForm::Augmented;
         let r_given = match r {
             Some(r) => {
-                let rv = linalg::validate_covariance_input(r, self.r.nrows(), "measurement noise R")?;
+                let rv =
+                    linalg::validate_covariance_input(r, self.r.nrows(), "measurement noise R")?;
                 let sqrt = linalg::psd_sqrt(&rv, "measurement noise R")?;
                 Some((rv, sqrt))
             }
@@ -385,6 +433,7 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
             None => Offsets::Factor(&self.l),
         };
         let ws = &mut self.upd_ws;
+        let sc = &mut self.scratch;
         transform::draw(
             &self.model,
             &self.upd_points,
@@ -395,68 +444,75 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
             step,
         )?;
         transform::propagate_h(&self.model, augmented, ws, step)?;
-        let mut zp = DVector::zeros(m);
         let wm = self.upd_points.wm();
         let wc = self.upd_points.wc();
-        transform::mean_and_devs(&self.model, Space::Measurement, wm, &mut zp, ws, step)?;
+        transform::mean_and_devs(&self.model, Space::Measurement, wm, &mut sc.zp, ws, step)?;
         transform::state_devs(&self.model, &self.x, ws, step)?;
-        let mut s = DMatrix::zeros(m, m);
-        transform::weighted_gram(&ws.dev_out, wc, &mut ws.scratch, &mut s);
+        transform::weighted_gram(&ws.dev_out, wc, &mut ws.scratch, &mut sc.s);
         if !augmented {
-            s += r_mat;
+            sc.s += r_mat;
         }
-        let mut pxz = DMatrix::zeros(n, m);
-        transform::weighted_outer(&ws.dev_x, wc, &ws.dev_out, &mut pxz);
-        let ls = linalg::factor_symmetric(
-            &mut s,
+        transform::weighted_outer(&ws.dev_x, wc, &ws.dev_out, &mut sc.pxz);
+        linalg::factor_symmetric_into(
+            &mut sc.s,
+            &mut sc.ls,
             "innovation covariance S",
             step,
             self.policy,
             &mut self.repairs,
         )?;
         // K = Pxz S⁻¹  ⇔  S Kᵀ = Pxzᵀ, solved with S = Ls Lsᵀ.
-        let mut kt = DMatrix::zeros(m, n);
-        kernels::transpose(n, m, pxz.as_slice(), kt.as_mut_slice());
-        kernels::solve_lower(m, ls.as_slice(), kt.as_mut_slice());
-        kernels::solve_lower_transposed(m, ls.as_slice(), kt.as_mut_slice());
-        let mut k = DMatrix::zeros(n, m);
-        kernels::transpose(m, n, kt.as_slice(), k.as_mut_slice());
-        let mut y = DVector::zeros(m);
+        kernels::transpose(n, m, sc.pxz.as_slice(), sc.kt.as_mut_slice());
+        kernels::solve_lower(m, sc.ls.as_slice(), sc.kt.as_mut_slice());
+        kernels::solve_lower_transposed(m, sc.ls.as_slice(), sc.kt.as_mut_slice());
+        kernels::transpose(m, n, sc.kt.as_slice(), sc.k.as_mut_slice());
         self.model
-            .z_residual(z.column(0), zp.column(0), &mut y)
+            .z_residual(z.column(0), sc.zp.column(0), &mut sc.y)
             .map_err(|e| transform::at_step(e, step))?;
-        linalg::check_finite_at(y.as_slice(), || "innovation y".into(), step)?;
-        let mut dx = DVector::zeros(n);
-        kernels::gemm(n, m, 1, k.as_slice(), y.as_slice(), dx.as_mut_slice());
-        let mut x = DVector::zeros(n);
+        linalg::check_finite_at(sc.y.as_slice(), || "innovation y".into(), step)?;
+        kernels::gemm(
+            n,
+            m,
+            1,
+            sc.k.as_slice(),
+            sc.y.as_slice(),
+            sc.dx.as_mut_slice(),
+        );
         self.model
-            .x_add(self.x.column(0), dx.column(0), &mut x)
+            .x_add(self.x.column(0), sc.dx.column(0), &mut sc.x)
             .map_err(|e| transform::at_step(e, step))?;
-        linalg::check_finite_at(x.as_slice(), || "updated state x".into(), step)?;
+        linalg::check_finite_at(sc.x.as_slice(), || "updated state x".into(), step)?;
         // P = P⁻ − K S Kᵀ = P⁻ − K Pxzᵀ, on the lower triangle (exactly symmetric).
-        let mut p = self.p.clone();
-        kernels::sub_lower_abt(n, m, k.as_slice(), pxz.as_slice(), p.as_mut_slice());
-        let l = linalg::factor_symmetric(
-            &mut p,
+        sc.p.copy_from(&self.p);
+        kernels::sub_lower_abt(
+            n,
+            m,
+            sc.k.as_slice(),
+            sc.pxz.as_slice(),
+            sc.p.as_mut_slice(),
+        );
+        linalg::factor_symmetric_into(
+            &mut sc.p,
+            &mut sc.l,
             "updated covariance P",
             step,
             self.policy,
             &mut self.repairs,
         )?;
         // log N(y; 0, S) = −½ (yᵀS⁻¹y + ln det S + m ln 2π).
-        let mut w = y.clone();
-        kernels::solve_lower(m, ls.as_slice(), w.as_mut_slice());
-        let log_det: f64 = 2.0 * ls.diagonal().iter().map(|d| d.ln()).sum::<f64>();
-        self.log_likelihood = -0.5 * (w.norm_squared() + log_det + m as f64 * LN_2PI);
-        self.x_post.copy_from(&x);
-        self.p_post.copy_from(&p);
-        self.x = x;
-        self.p = p;
-        self.l = l;
-        self.k = k;
-        self.y = y;
-        self.s = s;
-        self.z_pred = zp;
+        sc.w.copy_from(&sc.y);
+        kernels::solve_lower(m, sc.ls.as_slice(), sc.w.as_mut_slice());
+        let log_det: f64 = 2.0 * sc.ls.diagonal().iter().map(|d| d.ln()).sum::<f64>();
+        self.log_likelihood = -0.5 * (sc.w.norm_squared() + log_det + m as f64 * LN_2PI);
+        std::mem::swap(&mut self.x, &mut sc.x);
+        std::mem::swap(&mut self.p, &mut sc.p);
+        std::mem::swap(&mut self.l, &mut sc.l);
+        std::mem::swap(&mut self.k, &mut sc.k);
+        std::mem::swap(&mut self.y, &mut sc.y);
+        std::mem::swap(&mut self.s, &mut sc.s);
+        std::mem::swap(&mut self.z_pred, &mut sc.zp);
+        self.x_post.copy_from(&self.x);
+        self.p_post.copy_from(&self.p);
         Ok(())
     }
 
@@ -503,5 +559,9 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
     fn skip_update(&mut self) {
         self.x_post.copy_from(&self.x);
         self.p_post.copy_from(&self.p);
+    }
+
+    fn append_p(&self, out: &mut Vec<f64>) {
+        out.extend_from_slice(self.p.as_slice());
     }
 }

@@ -124,7 +124,10 @@ fn linear_case(steps: usize) -> LinearCase {
     }
 }
 
-fn run_kf(c: &LinearCase, q_eff: &DMatrix<f64>) -> (Vec<DVector<f64>>, Vec<DMatrix<f64>>, Vec<f64>) {
+fn run_kf(
+    c: &LinearCase,
+    q_eff: &DMatrix<f64>,
+) -> (Vec<DVector<f64>>, Vec<DMatrix<f64>>, Vec<f64>) {
     let mut kf = Kf {
         x: c.x0.clone(),
         p: c.p0.clone(),
@@ -146,7 +149,12 @@ fn run_kf(c: &LinearCase, q_eff: &DMatrix<f64>) -> (Vec<DVector<f64>>, Vec<DMatr
     (xs, ps, lls)
 }
 
-fn check_against_kf<F: SigmaPointFilter>(mut filt: F, c: &LinearCase, q_eff: &DMatrix<f64>, tol: f64) {
+fn check_against_kf<F: SigmaPointFilter>(
+    mut filt: F,
+    c: &LinearCase,
+    q_eff: &DMatrix<f64>,
+    tol: f64,
+) {
     filt.set_x(c.x0.clone()).unwrap();
     filt.set_p(c.p0.clone()).unwrap();
     let out = filt
@@ -154,13 +162,29 @@ fn check_against_kf<F: SigmaPointFilter>(mut filt: F, c: &LinearCase, q_eff: &DM
         .unwrap();
     let (xs, ps, lls) = run_kf(c, q_eff);
     for k in 0..xs.len() {
-        assert!(close_v(&out.xs[k], &xs[k], tol), "x at step {k}: {} vs {}", out.xs[k], xs[k]);
-        assert!(close(&out.ps[k], &ps[k], tol), "P at step {k}: diff {:e} scale {:e}", (&out.ps[k] - &ps[k]).amax(), ps[k].amax());
+        assert!(
+            close_v(&out.x(k).unwrap().into_owned(), &xs[k], tol),
+            "x at step {k}: {} vs {}",
+            out.x(k).unwrap().into_owned(),
+            xs[k]
+        );
+        assert!(
+            close(&out.p(k).unwrap().into_owned(), &ps[k], tol),
+            "P at step {k}: diff {:e} scale {:e}",
+            (&out.p(k).unwrap().into_owned() - &ps[k]).amax(),
+            ps[k].amax()
+        );
         if lls[k].is_nan() {
-            assert!(out.log_likelihoods[k].is_nan());
-            assert_eq!(out.xs[k], out.x_priors[k]);
+            assert!(out.log_likelihoods()[k].is_nan());
+            assert_eq!(
+                out.x(k).unwrap().into_owned(),
+                out.x_prior(k).unwrap().into_owned()
+            );
         } else {
-            assert!((out.log_likelihoods[k] - lls[k]).abs() < 1e-8, "log-likelihood at {k}");
+            assert!(
+                (out.log_likelihoods()[k] - lls[k]).abs() < 1e-8,
+                "log-likelihood at {k}"
+            );
         }
     }
 }
@@ -214,7 +238,13 @@ impl UkfModel for NoiseThroughG {
     fn dim_w(&self) -> usize {
         3
     }
-    fn fx(&self, x: DVectorView<'_, f64>, dt: f64, u: Option<&DVector<f64>>, out: &mut DVector<f64>) -> Result<()> {
+    fn fx(
+        &self,
+        x: DVectorView<'_, f64>,
+        dt: f64,
+        u: Option<&DVector<f64>>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
         self.lin.fx(x, dt, u, out)
     }
     fn hx(&self, x: DVectorView<'_, f64>, out: &mut DVector<f64>) -> Result<()> {
@@ -281,7 +311,13 @@ impl UkfModel for RangeBearing {
     fn dim_z(&self) -> usize {
         2
     }
-    fn fx(&self, x: DVectorView<'_, f64>, dt: f64, _u: Option<&DVector<f64>>, out: &mut DVector<f64>) -> Result<()> {
+    fn fx(
+        &self,
+        x: DVectorView<'_, f64>,
+        dt: f64,
+        _u: Option<&DVector<f64>>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
         out[0] = x[0] + dt * x[2];
         out[1] = x[1] + dt * x[3];
         out[2] = x[2];
@@ -293,7 +329,12 @@ impl UkfModel for RangeBearing {
         out[1] = x[1].atan2(x[0]);
         Ok(())
     }
-    fn z_mean(&self, sigmas: &DMatrix<f64>, wm: &DVector<f64>, out: &mut DVector<f64>) -> Result<()> {
+    fn z_mean(
+        &self,
+        sigmas: &DMatrix<f64>,
+        wm: &DVector<f64>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
         let (mut r, mut s, mut c) = (0.0, 0.0, 0.0);
         for i in 0..wm.len() {
             r += wm[i] * sigmas[(0, i)];
@@ -304,7 +345,12 @@ impl UkfModel for RangeBearing {
         out[1] = s.atan2(c);
         Ok(())
     }
-    fn z_residual(&self, a: DVectorView<'_, f64>, b: DVectorView<'_, f64>, out: &mut DVector<f64>) -> Result<()> {
+    fn z_residual(
+        &self,
+        a: DVectorView<'_, f64>,
+        b: DVectorView<'_, f64>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
         out[0] = a[0] - b[0];
         out[1] = wrap(a[1] - b[1]);
         Ok(())
@@ -323,7 +369,10 @@ fn range_bearing_data(steps: usize) -> Vec<Option<DVector<f64>>> {
             x = nx;
             let mut z = DVector::zeros(2);
             m.hx(x.column(0), &mut z).unwrap();
-            let (n0, n1): (f64, f64) = (StandardNormal.sample(&mut rng), StandardNormal.sample(&mut rng));
+            let (n0, n1): (f64, f64) = (
+                StandardNormal.sample(&mut rng),
+                StandardNormal.sample(&mut rng),
+            );
             z[0] += 0.5 * n0;
             z[1] = wrap(z[1] + 0.01 * n1);
             Some(z)
@@ -351,13 +400,34 @@ fn square_root_equals_standard_on_a_nonlinear_model() {
         let a = std_f.batch(&BatchInputs::new(1.0, &zs)).unwrap();
         let b = sr_f.batch(&BatchInputs::new(1.0, &zs)).unwrap();
         for k in 0..zs.len() {
-            assert!(close_v(&a.xs[k], &b.xs[k], 1e-9), "x at {k}");
-            assert!(close(&a.ps[k], &b.ps[k], 1e-9), "P at {k}");
-            assert!(close(&a.p_priors[k], &b.p_priors[k], 1e-9), "P prior at {k}");
-            assert!((a.log_likelihoods[k] - b.log_likelihoods[k]).abs() < 1e-8);
+            assert!(
+                close_v(
+                    &a.x(k).unwrap().into_owned(),
+                    &b.x(k).unwrap().into_owned(),
+                    1e-9
+                ),
+                "x at {k}"
+            );
+            assert!(
+                close(
+                    &a.p(k).unwrap().into_owned(),
+                    &b.p(k).unwrap().into_owned(),
+                    1e-9
+                ),
+                "P at {k}"
+            );
+            assert!(
+                close(
+                    &a.p_prior(k).unwrap().into_owned(),
+                    &b.p_prior(k).unwrap().into_owned(),
+                    1e-9
+                ),
+                "P prior at {k}"
+            );
+            assert!((a.log_likelihoods()[k] - b.log_likelihoods()[k]).abs() < 1e-8);
         }
         // The target crossed the ±π bearing line and the filter followed it.
-        let last = a.xs.last().unwrap();
+        let last = a.x(a.len() - 1).unwrap().into_owned();
         assert!(last[0] < 0.0 && last[1] > 0.0, "{last}");
         assert!((last[3] - 1.0).abs() < 0.1, "{last}");
     }
@@ -385,7 +455,13 @@ impl UkfModel for Attitude {
     fn dim_u(&self) -> usize {
         3
     }
-    fn fx(&self, x: DVectorView<'_, f64>, dt: f64, u: Option<&DVector<f64>>, out: &mut DVector<f64>) -> Result<()> {
+    fn fx(
+        &self,
+        x: DVectorView<'_, f64>,
+        dt: f64,
+        u: Option<&DVector<f64>>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
         let w = u.map_or(Vector3::zeros(), |u| Vector3::new(u[0], u[1], u[2]));
         out.copy_from(&so3_log(&so3_plus(&rot(x), &(w * dt))));
         Ok(())
@@ -398,15 +474,33 @@ impl UkfModel for Attitude {
         out.rows_mut(3, 3).copy_from(&m);
         Ok(())
     }
-    fn x_add(&self, x: DVectorView<'_, f64>, dx: DVectorView<'_, f64>, out: &mut DVector<f64>) -> Result<()> {
-        out.copy_from(&so3_log(&so3_plus(&rot(x), &Vector3::new(dx[0], dx[1], dx[2]))));
+    fn x_add(
+        &self,
+        x: DVectorView<'_, f64>,
+        dx: DVectorView<'_, f64>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
+        out.copy_from(&so3_log(&so3_plus(
+            &rot(x),
+            &Vector3::new(dx[0], dx[1], dx[2]),
+        )));
         Ok(())
     }
-    fn x_residual(&self, a: DVectorView<'_, f64>, b: DVectorView<'_, f64>, out: &mut DVector<f64>) -> Result<()> {
+    fn x_residual(
+        &self,
+        a: DVectorView<'_, f64>,
+        b: DVectorView<'_, f64>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
         out.copy_from(&so3_minus(&rot(a), &rot(b)));
         Ok(())
     }
-    fn x_mean(&self, sigmas: &DMatrix<f64>, wm: &DVector<f64>, out: &mut DVector<f64>) -> Result<()> {
+    fn x_mean(
+        &self,
+        sigmas: &DMatrix<f64>,
+        wm: &DVector<f64>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
         let mut mean = rot(sigmas.column(0));
         for _ in 0..50 {
             let mut d = Vector3::zeros();
@@ -458,17 +552,26 @@ fn so3_state_converges_across_the_chart_boundary() {
         .count();
     assert!(jumps >= 1, "the trajectory must cross the chart boundary");
     for f in [&mut ukf as &mut dyn SigmaPointFilter, &mut sr] {
-        f.set_x(DVector::from_iterator(3, x0.iter().copied())).unwrap();
+        f.set_x(DVector::from_iterator(3, x0.iter().copied()))
+            .unwrap();
         f.set_p(DMatrix::identity(3, 3) * 0.3f64.powi(2)).unwrap();
-        f.set_q(DMatrix::identity(3, 3) * (gyro_sigma * dt).powi(2)).unwrap();
+        f.set_q(DMatrix::identity(3, 3) * (gyro_sigma * dt).powi(2))
+            .unwrap();
         f.set_r(DMatrix::identity(6, 6) * 0.02f64.powi(2)).unwrap();
         let out = f.batch(&BatchInputs::new(dt, &zs).with_us(&us)).unwrap();
-        for (k, (x, p)) in out.xs.iter().zip(&out.ps).enumerate().skip(20) {
-            let err = so3_minus(&rot(x.column(0)), &truths[k]);
+        for (k, truth) in truths.iter().enumerate().skip(20) {
+            let (x, p) = (
+                out.x(k).unwrap().into_owned(),
+                out.p(k).unwrap().into_owned(),
+            );
+            let err = so3_minus(&rot(x.column(0)), truth);
             let sd = p.diagonal().map(f64::sqrt);
             assert!(err.norm() < 0.05, "step {k}: error {} rad", err.norm());
             for i in 0..3 {
-                assert!(err[i].abs() < 5.0 * sd[i], "step {k}: error {err} vs sd {sd}");
+                assert!(
+                    err[i].abs() < 5.0 * sd[i],
+                    "step {k}: error {err} vs sd {sd}"
+                );
             }
             assert!(x.norm() <= std::f64::consts::PI + 1e-9);
         }
@@ -491,7 +594,13 @@ impl UkfModel for Square {
     fn dim_z(&self) -> usize {
         1
     }
-    fn fx(&self, x: DVectorView<'_, f64>, _dt: f64, _u: Option<&DVector<f64>>, out: &mut DVector<f64>) -> Result<()> {
+    fn fx(
+        &self,
+        x: DVectorView<'_, f64>,
+        _dt: f64,
+        _u: Option<&DVector<f64>>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
         out[0] = x[0] * x[0];
         out[1] = x[1];
         Ok(())
@@ -516,7 +625,10 @@ fn indefinite_prior_is_reported_or_repaired() {
         }) => {
             assert_eq!(step, 0);
             assert!(what.contains("P_prior"));
-            assert!((min_eigenvalue - (-0.5 + 0.1)).abs() < 1e-12, "{min_eigenvalue}");
+            assert!(
+                (min_eigenvalue - (-0.5 + 0.1)).abs() < 1e-12,
+                "{min_eigenvalue}"
+            );
         }
         other => panic!("expected NotPositiveDefinite, got {other:?}"),
     }
@@ -527,16 +639,30 @@ fn indefinite_prior_is_reported_or_repaired() {
     let mut sr = SquareRootUkf::new(Square, pts.clone()).unwrap();
     sr.set_q(q.clone()).unwrap();
     match sr.predict(1.0, None) {
-        Err(EstimateError::NotPositiveDefinite { step: 0, min_eigenvalue, .. }) => {
-            assert!((min_eigenvalue - (-0.5 + 0.1)).abs() < 1e-12, "{min_eigenvalue}");
+        Err(EstimateError::NotPositiveDefinite {
+            step: 0,
+            min_eigenvalue,
+            ..
+        }) => {
+            assert!(
+                (min_eigenvalue - (-0.5 + 0.1)).abs() < 1e-12,
+                "{min_eigenvalue}"
+            );
         }
         other => panic!("expected NotPositiveDefinite, got {other:?}"),
     }
 
     for policy_filter in [
-        Box::new(UnscentedKalmanFilter::new(Square, pts.clone()).unwrap().with_policy(CovariancePolicy::Repair))
-            as Box<dyn SigmaPointFilter>,
-        Box::new(SquareRootUkf::new(Square, pts.clone()).unwrap().with_policy(CovariancePolicy::Repair)),
+        Box::new(
+            UnscentedKalmanFilter::new(Square, pts.clone())
+                .unwrap()
+                .with_policy(CovariancePolicy::Repair),
+        ) as Box<dyn SigmaPointFilter>,
+        Box::new(
+            SquareRootUkf::new(Square, pts.clone())
+                .unwrap()
+                .with_policy(CovariancePolicy::Repair),
+        ),
     ] {
         let mut rep = policy_filter;
         rep.set_q(q.clone()).unwrap();
@@ -561,7 +687,13 @@ impl UkfModel for NanBeyondOne {
     fn dim_z(&self) -> usize {
         1
     }
-    fn fx(&self, x: DVectorView<'_, f64>, _dt: f64, _u: Option<&DVector<f64>>, out: &mut DVector<f64>) -> Result<()> {
+    fn fx(
+        &self,
+        x: DVectorView<'_, f64>,
+        _dt: f64,
+        _u: Option<&DVector<f64>>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
         out[0] = if x[0] > 1.0 { f64::NAN } else { x[0] + 0.3 };
         out[1] = x[1];
         Ok(())
@@ -579,10 +711,14 @@ fn nan_model_output_names_step_and_sigma_point() {
     ukf.set_p(DMatrix::identity(2, 2) * 1e-4).unwrap();
     ukf.set_q(DMatrix::identity(2, 2) * 1e-6).unwrap();
     ukf.set_r(DMatrix::identity(1, 1) * 1e-6).unwrap();
-    let zs: Vec<_> = (1..10).map(|k| Some(DVector::from_element(1, 0.3 * k as f64))).collect();
+    let zs: Vec<_> = (1..10)
+        .map(|k| Some(DVector::from_element(1, 0.3 * k as f64)))
+        .collect();
     // After 4 predictions x ≈ 1.2: every sigma point of step 4 is beyond 1 → NaN.
     match ukf.batch(&BatchInputs::new(1.0, &zs)) {
-        Err(EstimateError::NonFinite { step, what, value, .. }) => {
+        Err(EstimateError::NonFinite {
+            step, what, value, ..
+        }) => {
             assert_eq!(step, 4);
             assert!(what.starts_with("fx output at sigma point"), "{what}");
             assert!(value.is_nan());
@@ -598,7 +734,10 @@ fn nan_model_output_names_step_and_sigma_point() {
 fn size_mismatches_and_bad_inputs_are_reported() {
     let model = ConstantVelocityModel::new(2).unwrap();
     assert!(matches!(
-        UnscentedKalmanFilter::new(model, MerweScaledSigmaPoints::new(3, 1.0, 2.0, 0.0).unwrap()),
+        UnscentedKalmanFilter::new(
+            model,
+            MerweScaledSigmaPoints::new(3, 1.0, 2.0, 0.0).unwrap()
+        ),
         Err(EstimateError::DimensionMismatch { .. })
     ));
     let pts = MerweScaledSigmaPoints::new(4, 1.0, 2.0, 0.0).unwrap();
@@ -613,8 +752,14 @@ fn size_mismatches_and_bad_inputs_are_reported() {
         }
     );
     assert!(err.to_string().contains("expected shape [2], got [3]"));
-    assert!(matches!(ukf.set_q(DMatrix::identity(3, 3)), Err(EstimateError::DimensionMismatch { .. })));
-    assert!(matches!(ukf.set_x(DVector::zeros(5)), Err(EstimateError::DimensionMismatch { .. })));
+    assert!(matches!(
+        ukf.set_q(DMatrix::identity(3, 3)),
+        Err(EstimateError::DimensionMismatch { .. })
+    ));
+    assert!(matches!(
+        ukf.set_x(DVector::zeros(5)),
+        Err(EstimateError::DimensionMismatch { .. })
+    ));
     assert!(matches!(
         ukf.predict(1.0, Some(&DVector::zeros(3))),
         Err(EstimateError::DimensionMismatch { .. })
@@ -623,13 +768,25 @@ fn size_mismatches_and_bad_inputs_are_reported() {
         ukf.update(&DVector::from_vec(vec![1.0, f64::NAN]), None),
         Err(EstimateError::NonFiniteInput { index: 1, .. })
     ));
-    assert!(matches!(ukf.predict(f64::INFINITY, None), Err(EstimateError::NonFiniteInput { .. })));
+    assert!(matches!(
+        ukf.predict(f64::INFINITY, None),
+        Err(EstimateError::NonFiniteInput { .. })
+    ));
     let indefinite = DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, -1.0, 1.0, 1.0]));
-    assert!(matches!(ukf.set_p(indefinite.clone()), Err(EstimateError::InvalidCovariance { .. })));
-    assert!(matches!(ukf.set_r(DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, -1.0]))), Err(EstimateError::InvalidCovariance { .. })));
+    assert!(matches!(
+        ukf.set_p(indefinite.clone()),
+        Err(EstimateError::InvalidCovariance { .. })
+    ));
+    assert!(matches!(
+        ukf.set_r(DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, -1.0]))),
+        Err(EstimateError::InvalidCovariance { .. })
+    ));
     let mut asym = DMatrix::identity(4, 4);
     asym[(0, 1)] = 0.5;
-    assert!(matches!(ukf.set_p(asym), Err(EstimateError::InvalidCovariance { .. })));
+    assert!(matches!(
+        ukf.set_p(asym),
+        Err(EstimateError::InvalidCovariance { .. })
+    ));
     // Batch lengths.
     let zs = vec![Some(DVector::zeros(2)); 3];
     let dts = [1.0, 1.0];
@@ -639,8 +796,13 @@ fn size_mismatches_and_bad_inputs_are_reported() {
     ));
     // A model without input rejects u.
     let lin = LinearModel::new(DMatrix::identity(2, 2), DMatrix::identity(1, 2), None).unwrap();
-    let mut f = UnscentedKalmanFilter::new(lin, MerweScaledSigmaPoints::new(2, 1.0, 2.0, 1.0).unwrap()).unwrap();
-    assert!(matches!(f.predict(1.0, Some(&DVector::zeros(1))), Err(EstimateError::DimensionMismatch { .. })));
+    let mut f =
+        UnscentedKalmanFilter::new(lin, MerweScaledSigmaPoints::new(2, 1.0, 2.0, 1.0).unwrap())
+            .unwrap();
+    assert!(matches!(
+        f.predict(1.0, Some(&DVector::zeros(1))),
+        Err(EstimateError::DimensionMismatch { .. })
+    ));
     assert!(LinearModel::new(DMatrix::identity(2, 2), DMatrix::identity(1, 3), None).is_err());
     assert!(LinearModel::new(DMatrix::identity(2, 3), DMatrix::identity(1, 2), None).is_err());
     // The repair policy accepts and clips an indefinite initial P.
@@ -663,7 +825,11 @@ fn constant_velocity_model_matches_its_linear_form() {
     f[(0, 2)] = dt;
     f[(1, 3)] = dt;
     let h = DMatrix::from_row_slice(2, 4, &[1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
-    let b = DMatrix::from_row_slice(4, 2, &[0.5 * dt * dt, 0.0, 0.0, 0.5 * dt * dt, dt, 0.0, 0.0, dt]);
+    let b = DMatrix::from_row_slice(
+        4,
+        2,
+        &[0.5 * dt * dt, 0.0, 0.0, 0.5 * dt * dt, dt, 0.0, 0.0, dt],
+    );
     let lin = LinearModel::new(f, h, Some(b)).unwrap();
     let cv = ConstantVelocityModel::new(2).unwrap();
     let mut rng = Pcg64::seed_from_u64(5);
@@ -675,7 +841,15 @@ fn constant_velocity_model_matches_its_linear_form() {
     let ra = a.batch(&BatchInputs::new(dt, &zs).with_us(&us)).unwrap();
     let rc = c.batch(&BatchInputs::new(dt, &zs).with_us(&us)).unwrap();
     for k in 0..100 {
-        assert!(close_v(&ra.xs[k], &rc.xs[k], 1e-12));
-        assert!(close(&ra.ps[k], &rc.ps[k], 1e-12));
+        assert!(close_v(
+            &ra.x(k).unwrap().into_owned(),
+            &rc.x(k).unwrap().into_owned(),
+            1e-12
+        ));
+        assert!(close(
+            &ra.p(k).unwrap().into_owned(),
+            &rc.p(k).unwrap().into_owned(),
+            1e-12
+        ));
     }
 }

@@ -60,6 +60,8 @@ pub(crate) struct Workspace {
     pub off: DMatrix<f64>,
     /// Scratch of the output size (`dim_out × N`).
     pub scratch: DMatrix<f64>,
+    /// What `out` holds (`"fx output"` or `"hx output"`), for error messages.
+    pub out_label: &'static str,
 }
 
 impl Workspace {
@@ -73,6 +75,7 @@ impl Workspace {
             tmp_out: DVector::zeros(dim_out),
             off: DMatrix::zeros(n, num_sigmas),
             scratch: DMatrix::zeros(dim_out, num_sigmas),
+            out_label: "model output",
         }
     }
 }
@@ -120,10 +123,11 @@ pub(crate) fn draw<M: UkfModel + ?Sized>(
             *m = -scale * v;
         }
     }
+    // Sigma points and model outputs are checked for NaN/inf where they end up (the
+    // deviations, see `diagnose`), which is one pass instead of three.
     model
         .sigma_points(x, &ws.off, &mut ws.sig)
         .map_err(|e| at_step(e, step))?;
-    check_columns(&ws.sig, "sigma point", step)?;
     // Likewise only the noise-offset columns of `ws.noise` are written.
     if let Some(ns) = noise_sqrt {
         for k in 0..q {
@@ -172,7 +176,8 @@ pub(crate) fn propagate_f<M: UkfModel + ?Sized>(
             .fx_sigmas(&ws.sig, dt, u, &mut ws.out)
             .map_err(|e| at_step(e, step))?;
     }
-    check_columns(&ws.out, "fx output", step)
+    ws.out_label = "fx output";
+    Ok(())
 }
 
 /// `ws.out[:, i] = h(ws.sig[:, i])` (or `h(sig, noise)` when augmented).
@@ -194,7 +199,24 @@ pub(crate) fn propagate_h<M: UkfModel + ?Sized>(
             .hx_sigmas(&ws.sig, &mut ws.out)
             .map_err(|e| at_step(e, step))?;
     }
-    check_columns(&ws.out, "hx output", step)
+    ws.out_label = "hx output";
+    Ok(())
+}
+
+/// Names the first non-finite value upstream of a failed check: the sigma points, then (with
+/// `with_out`) the model outputs, then `last` (the matrix that failed, labelled `what`).
+fn diagnose(
+    ws: &Workspace,
+    with_out: bool,
+    last: &DMatrix<f64>,
+    what: &str,
+    step: usize,
+) -> Result<()> {
+    check_columns(&ws.sig, "sigma point", step)?;
+    if with_out {
+        check_columns(&ws.out, ws.out_label, step)?;
+    }
+    check_columns(last, what, step)
 }
 
 /// Which space a set of sigma points lives in (selects the mean/residual hooks).
@@ -225,13 +247,19 @@ pub(crate) fn mean_and_devs<M: UkfModel + ?Sized>(
         Space::State => "x_mean output",
         Space::Measurement => "z_mean output",
     };
-    linalg::check_finite_at(mean.as_slice(), || label.to_string(), step)?;
+    if !kernels::all_finite(mean.as_slice()) {
+        diagnose(ws, true, &ws.out, ws.out_label, step)?;
+        linalg::check_finite_at(mean.as_slice(), || label.to_string(), step)?;
+    }
     let r = match space {
         Space::State => model.x_residuals(&ws.out, mean, &mut ws.dev_out),
         Space::Measurement => model.z_residuals(&ws.out, mean, &mut ws.dev_out),
     };
     r.map_err(|e| at_step(e, step))?;
-    check_columns(&ws.dev_out, "residual", step)
+    if !kernels::all_finite(ws.dev_out.as_slice()) {
+        diagnose(ws, true, &ws.dev_out, "residual", step)?;
+    }
+    Ok(())
 }
 
 /// Deviations `sig_i ⊖ x` of the drawn state sigma points into `ws.dev_x`.
@@ -244,7 +272,10 @@ pub(crate) fn state_devs<M: UkfModel + ?Sized>(
     model
         .x_residuals(&ws.sig, x, &mut ws.dev_x)
         .map_err(|e| at_step(e, step))?;
-    check_columns(&ws.dev_x, "state residual", step)
+    if !kernels::all_finite(ws.dev_x.as_slice()) {
+        diagnose(ws, false, &ws.dev_x, "state residual", step)?;
+    }
+    Ok(())
 }
 
 /// `out = Σᵢ wᵢ aᵢ bᵢᵀ` over the columns of `a` and `b`.

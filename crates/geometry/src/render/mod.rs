@@ -8,18 +8,44 @@
 //! edges: an upper one corresponding to the upper surface and lower one corresponding to the
 //! lower surface"; "only less than half of the boundary is visible for a wafer in the FOUP").
 //!
-//! Image formation per pixel (OpenCV convention: pixel `(u, v)` is centred at image position
-//! `(u, v)`):
-//! 1. one ray through the pixel centre, unprojected by the camera model (so distortion renders
-//!    exactly), traced against the scene; the wafer's top/bottom faces are dark mirrors that add
-//!    `reflectivity ×` the radiance seen along the reflected ray (one bounce), which produces the
-//!    faint mirrored rims of neighbouring wafers;
-//! 2. adaptive anti-aliasing: where the surface hit (or the surface seen in the mirror) differs
-//!    from a 4-neighbour's, the pixel is re-rendered as the box-filtered mean of `s×s` rays in an
-//!    n-rooks pattern (all `s²` sub-sample rows and columns distinct, so near-horizontal and
-//!    near-vertical edges get `1/s²` coverage resolution);
-//! 3. lighting `255·gain·(1 + gx·x̂ + gy·ŷ)`, separable Gaussian blur, additive Gaussian sensor
-//!    noise from a seeded PCG generator, rounding to u8.
+//! Image formation (OpenCV convention: pixel `(u, v)` is centred at image position `(u, v)`):
+//! 1. rays through pixel positions, unprojected by the camera model (so distortion renders
+//!    exactly; see `rays.rs`), traced against the wafers (slabs) and the carrier's boxes. The
+//!    wafer's top/bottom faces are dark mirrors that add `reflectivity ×` the radiance seen
+//!    along the reflected ray (one bounce): mirrored rims of neighbouring wafers, mirrored
+//!    ridges. Surfaces are shaded with a directional light (see [`Shading`]).
+//! 2. Where to sample (`raster.rs`): pixel centres on a 4-px grid, refined to 2 px and 1 px
+//!    by bilinear interpolation inside cells whose corners see the same surface and tracing
+//!    elsewhere; then anti-aliasing of the pixels that a surface boundary crosses (found by
+//!    one ray between neighbouring centres that see different surfaces) as the box-filtered
+//!    mean of `s×s` sub-samples in an n-rooks pattern (all `s²` sub-sample rows and columns
+//!    distinct, so near-horizontal and near-vertical edges get `1/s²` coverage resolution;
+//!    low-contrast boundaries get `min(s, 2)²`).
+//! 3. Lighting `255·gain·(1 + gx·x̂ + gy·ŷ)`, separable Gaussian blur (optical blur),
+//!    additive Gaussian sensor noise from a seeded PCG generator, rounding to u8.
+//!
+//! [`rim_visibility`] gives the ground truth of the same geometry: per wafer and rim, the
+//! image ellipse, the visible circle-angle intervals and the visible points.
+//!
+//! ```
+//! use autoteach_geometry::camera::Camera;
+//! use autoteach_geometry::render::{self, Carrier, RenderOptions, Scene};
+//! use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+//!
+//! let carrier = Carrier::default();
+//! let scene = Scene::new((1..=26).map(|k| carrier.slot_pose(k)).collect());
+//! let camera = Camera::pinhole(300.0, 300.0, 159.5, 119.5, 320, 240)?;
+//! // Camera 0.45 m in front of the carrier at mid height, looking along +x (image x = −y).
+//! let axes = Matrix3::from_columns(&[-Vector3::y(), -Vector3::z(), Vector3::x()]);
+//! let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(axes));
+//! let t_wc = Isometry3::from_parts(Translation3::new(-0.45, 0.0, 0.125), rot);
+//! let image = render::render(&scene, &camera, &t_wc, &RenderOptions::default())?;
+//! assert_eq!(image.data.len(), 320 * 240);
+//! let truth = render::rim_visibility(&scene, &camera, &t_wc, 360)?;
+//! assert_eq!(truth.len(), 2 * 26);
+//! assert!(truth.iter().any(|t| t.fraction > 0.0));
+//! # Ok::<(), autoteach_geometry::GeometryError>(())
+//! ```
 
 mod post;
 mod raster;
@@ -105,7 +131,11 @@ impl Shading {
         check_finite("light_dir", self.light_dir.as_slice())?;
         let n = self.light_dir.norm();
         if (n - 1.0).abs() > 1e-6 {
-            return Err(GeometryError::InvalidParameter { what: "light_dir norm", value: n, reason: "must be 1" });
+            return Err(GeometryError::InvalidParameter {
+                what: "light_dir norm",
+                value: n,
+                reason: "must be 1",
+            });
         }
         for (what, v) in [
             ("background", self.background),
@@ -207,7 +237,11 @@ fn non_negative(what: &'static str, value: f64) -> Result<()> {
         return Err(GeometryError::NonFinite { what, value });
     }
     if value < 0.0 {
-        return Err(GeometryError::InvalidParameter { what, value, reason: "must be non-negative" });
+        return Err(GeometryError::InvalidParameter {
+            what,
+            value,
+            reason: "must be non-negative",
+        });
     }
     Ok(())
 }
@@ -230,7 +264,12 @@ fn validate_inputs<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f64>) 
 ///
 /// # Errors
 /// As [`render`].
-pub fn render_float(scene: &Scene, camera: &Camera, t_wc: &Isometry3<f64>, opts: &RenderOptions) -> Result<Vec<f32>> {
+pub fn render_float(
+    scene: &Scene,
+    camera: &Camera,
+    t_wc: &Isometry3<f64>,
+    opts: &RenderOptions,
+) -> Result<Vec<f32>> {
     render_float_with(scene, &rays::Rays::new(camera), t_wc, opts)
 }
 
@@ -245,7 +284,12 @@ pub fn render_float(scene: &Scene, camera: &Camera, t_wc: &Isometry3<f64>, opts:
 /// [`GeometryError::InvalidParameter`] for a non-positive wafer size, an invalid carrier or
 /// option; [`GeometryError::NonFinite`] for NaN/inf values; [`GeometryError::AtIndex`] naming
 /// the first invalid wafer pose.
-pub fn render(scene: &Scene, camera: &Camera, t_wc: &Isometry3<f64>, opts: &RenderOptions) -> Result<GrayImage> {
+pub fn render(
+    scene: &Scene,
+    camera: &Camera,
+    t_wc: &Isometry3<f64>,
+    opts: &RenderOptions,
+) -> Result<GrayImage> {
     render_with(scene, &rays::Rays::new(camera), t_wc, opts)
 }
 
@@ -264,10 +308,19 @@ fn render_float_with<C: RayCamera>(
     Ok(img)
 }
 
-fn render_with<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f64>, opts: &RenderOptions) -> Result<GrayImage> {
+fn render_with<C: RayCamera>(
+    scene: &Scene,
+    cam: &C,
+    t_wc: &Isometry3<f64>,
+    opts: &RenderOptions,
+) -> Result<GrayImage> {
     let img = render_float_with(scene, cam, t_wc, opts)?;
     let data = post::noise_quantise(&img, cam.width(), opts.noise_sigma, opts.seed);
-    Ok(GrayImage { width: cam.width(), height: cam.height(), data })
+    Ok(GrayImage {
+        width: cam.width(),
+        height: cam.height(),
+        data,
+    })
 }
 
 /// The camera itself: exact unprojection for every ray (the renderer wraps it in

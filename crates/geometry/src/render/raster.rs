@@ -5,7 +5,7 @@
 //! 2. Refinement to every second pixel, then to every pixel: a sample inside a cell whose four
 //!    corners see the same surface (and the same surface in the mirror) takes the bilinear
 //!    interpolation of the corners' radiance, which varies smoothly over one surface; every
-//!    other sample is traced, and so are the 4-px cells that a carrier box edge crosses. A
+//!    other sample is traced, and so are the 4-px cells that a slot ridge's edge crosses. A
 //!    feature that crosses a cell without changing the surface seen at its corners would have
 //!    to be thinner than the cell and bounded by the same surface on both sides: a slot ridge
 //!    against its wall (hence the box-edge marks), a wafer seen exactly edge-on against a
@@ -15,8 +15,10 @@
 //!    which side the boundary passes; for a single straight edge this flags exactly the pixels
 //!    whose square it crosses.
 //! 4. Anti-aliasing: each flagged pixel becomes the mean (box filter) of `s×s` sub-samples in an
-//!    n-rooks pattern (all `s²` sub-sample rows and columns distinct); pixels flagged only by a
-//!    change of the mirrored surface (low-contrast clutter) use `min(s, 2)²` sub-samples.
+//!    n-rooks pattern (all `s²` sub-sample rows and columns distinct); pixels crossed only by a
+//!    weak boundary (a radiance step below 20/255, or a change of the mirrored surface only)
+//!    use `min(s, 2)²` sub-samples, and steps below the noise (2/255; 4/255 in the mirror) are
+//!    not anti-aliased. The bright rim bands step by far more than 20/255 against anything.
 
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
@@ -27,10 +29,16 @@ use super::{RayCamera, RenderOptions, Scene};
 /// Secondary-only (mirror) surface changes with a radiance step below this are not
 /// anti-aliased: 4/255, about twice the default sensor noise.
 const MIRROR_CONTRAST: f64 = 4.0 / 255.0;
+/// Boundaries between primary surfaces with a radiance step below this (2/255) are not
+/// anti-aliased (the step is below the default sensor noise).
+const MIN_CONTRAST: f64 = 2.0 / 255.0;
+/// Boundaries with a radiance step of at least this (20/255, every rim against its
+/// surroundings) get the full `s×s` sub-samples; weaker ones `min(s, 2)²`.
+const HIGH_CONTRAST: f64 = 20.0 / 255.0;
 
-/// Flag of a pixel crossed by a boundary between primary surfaces.
+/// Flag of a pixel crossed by a high-contrast boundary between primary surfaces.
 const FLAG_PRIMARY: u8 = 2;
-/// Flag of a pixel crossed only by a boundary in the mirror image.
+/// Flag of a pixel crossed by a low-contrast boundary or one in the mirror image only.
 const FLAG_MIRROR: u8 = 1;
 
 /// The primary half of a surface key.
@@ -118,7 +126,9 @@ impl<C: RayCamera> Caster<'_, C> {
     fn sample(&self, u: f64, v: f64, pu: usize, pv: usize) -> (f64, u32) {
         match self.ray(u, v) {
             Some(d) => {
-                let hit = self.prep.trace_primary(&d, self.tiles.get(pu, pv), u as f32, v as f32);
+                let hit = self
+                    .prep
+                    .trace_primary(&d, self.tiles.get(pu, pv), u as f32, v as f32);
                 self.prep.shade(&self.prep.cam_center, &d, hit, None)
             }
             None => (self.prep.shading.background, key2(KEY_NO_RAY, KEY_NO_RAY)),
@@ -136,7 +146,8 @@ impl<C: RayCamera> Caster<'_, C> {
             Some(d) => {
                 let hit = match self.prep.trace_primary_subset(&d, &sub.prims) {
                     None if !sub.open_primary => {
-                        self.prep.trace_primary(&d, self.tiles.get(pu, pv), u as f32, v as f32)
+                        self.prep
+                            .trace_primary(&d, self.tiles.get(pu, pv), u as f32, v as f32)
                     }
                     found => found,
                 };
@@ -144,7 +155,12 @@ impl<C: RayCamera> Caster<'_, C> {
                 if let Some((k, l)) = sub.unique(p) {
                     return (l, k);
                 }
-                self.prep.shade(&self.prep.cam_center, &d, hit, Some((&sub.mirrors, sub.open_mirror)))
+                self.prep.shade(
+                    &self.prep.cam_center,
+                    &d,
+                    hit,
+                    Some((&sub.mirrors, sub.open_mirror)),
+                )
             }
             None => (self.prep.shading.background, key2(KEY_NO_RAY, KEY_NO_RAY)),
         }
@@ -157,28 +173,55 @@ impl<C: RayCamera> Caster<'_, C> {
     /// taken affine in the sub-pixel offset, from the rays at the centre and half a pixel to
     /// the right and below: exact for the pinhole model, and within ~1e-4 px for the
     /// distortion models, whose unprojection is smooth.
-    fn pixel_mean(&self, u: usize, v: usize, offsets: &[(f64, f64)], sub: &Subset, bundle: &mut Bundle) -> f64 {
+    fn pixel_mean(
+        &self,
+        u: usize,
+        v: usize,
+        offsets: &[(f64, f64)],
+        sub: &Subset,
+        bundle: &mut Bundle,
+    ) -> f64 {
         let (uf, vf) = (u as f64, v as f64);
-        let frame = (|| Some([self.ray(uf, vf)?, self.ray(uf + 0.5, vf)?, self.ray(uf, vf + 0.5)?]))();
+        let frame = (|| {
+            Some([
+                self.ray(uf, vf)?,
+                self.ray(uf + 0.5, vf)?,
+                self.ray(uf, vf + 0.5)?,
+            ])
+        })();
         let Some([d0, d1, d2]) = frame else {
-            let sum: f64 = offsets.iter().map(|(dx, dy)| self.sample_subset(uf + dx, vf + dy, u, v, sub).0).sum();
+            let sum: f64 = offsets
+                .iter()
+                .map(|(dx, dy)| self.sample_subset(uf + dx, vf + dy, u, v, sub).0)
+                .sum();
             return sum / offsets.len() as f64;
         };
-        self.prep.bundle([d0, (d1 - d0) * 2.0, (d2 - d0) * 2.0], &sub.prims, bundle);
+        self.prep
+            .bundle([d0, (d1 - d0) * 2.0, (d2 - d0) * 2.0], &sub.prims, bundle);
         let mut sum = 0.0;
         for &(dx, dy) in offsets {
             let d = bundle.d[0] + bundle.d[1] * dx + bundle.d[2] * dy;
             let hit = match self.prep.trace_bundle(bundle, dx, dy, &d) {
-                None if !sub.open_primary => {
-                    self.prep.trace_primary(&d, self.tiles.get(u, v), (uf + dx) as f32, (vf + dy) as f32)
-                }
+                None if !sub.open_primary => self.prep.trace_primary(
+                    &d,
+                    self.tiles.get(u, v),
+                    (uf + dx) as f32,
+                    (vf + dy) as f32,
+                ),
                 found => found,
             };
             let p = hit.map_or(KEY_BACKGROUND, |h| h.key());
             sum += match sub.unique(p) {
                 Some((_, l)) => l,
                 None => {
-                    self.prep.shade(&self.prep.cam_center, &d, hit, Some((&sub.mirrors, sub.open_mirror))).0
+                    self.prep
+                        .shade(
+                            &self.prep.cam_center,
+                            &d,
+                            hit,
+                            Some((&sub.mirrors, sub.open_mirror)),
+                        )
+                        .0
                 }
             };
         }
@@ -187,23 +230,39 @@ impl<C: RayCamera> Caster<'_, C> {
 }
 
 /// Does the surface `k` at radiance `l` differ from `ka` at `la` enough to matter: another
-/// primary surface, or another mirrored surface with a visible radiance step? Returns the flag.
+/// primary surface with a visible radiance step, or another mirrored surface with a step above
+/// the noise? Returns the flag (0 for no).
 #[inline]
 fn differs(k: u32, l: f64, ka: u32, la: f64) -> u8 {
+    let step = (l - la).abs();
     if primary(k) != primary(ka) {
-        FLAG_PRIMARY
-    } else if k != ka && (l - la).abs() > MIRROR_CONTRAST {
+        if step >= HIGH_CONTRAST {
+            FLAG_PRIMARY
+        } else if step >= MIN_CONTRAST {
+            FLAG_MIRROR
+        } else {
+            0
+        }
+    } else if k != ka && step > MIRROR_CONTRAST {
         FLAG_MIRROR
     } else {
         0
     }
 }
 
+/// Is the boundary between the centres worth locating: another primary surface (whatever the
+/// radiance step, so that a thin feature between the centres is found), or another mirrored
+/// surface with a visible step?
+#[inline]
+fn worth_midpoint(kn: u32, ln: f64, ka: u32, la: f64) -> bool {
+    primary(kn) != primary(ka) || (kn != ka && (ln - la).abs() > MIRROR_CONTRAST)
+}
+
 /// Sample coordinates along an axis of `n` pixels with spacing `step`: 0, step, 2·step, … and
 /// `n − 1`.
 fn grid_axis(n: usize, step: usize) -> Vec<usize> {
     let mut c: Vec<usize> = (0..n).step_by(step).collect();
-    if (n - 1) % step != 0 {
+    if !(n - 1).is_multiple_of(step) {
         c.push(n - 1);
     }
     c
@@ -225,14 +284,23 @@ impl Grid {
         let n = u.len();
         let mut keys = vec![0u32; n * v.len()];
         let mut rad = vec![0f32; n * v.len()];
-        keys.par_chunks_mut(n).zip(rad.par_chunks_mut(n)).enumerate().for_each(|(j, (krow, rrow))| {
-            for (i, &x) in u.iter().enumerate() {
-                let (l, k) = caster.sample(x as f64, v[j] as f64, x, v[j]);
-                krow[i] = k;
-                rrow[i] = l as f32;
-            }
-        });
-        Self { step, u, v, keys, rad }
+        keys.par_chunks_mut(n)
+            .zip(rad.par_chunks_mut(n))
+            .enumerate()
+            .for_each(|(j, (krow, rrow))| {
+                for (i, &x) in u.iter().enumerate() {
+                    let (l, k) = caster.sample(x as f64, v[j] as f64, x, v[j]);
+                    krow[i] = k;
+                    rrow[i] = l as f32;
+                }
+            });
+        Self {
+            step,
+            u,
+            v,
+            keys,
+            rad,
+        }
     }
 
     /// Index of the cell (its lower corner in the axis) holding coordinate `x`.
@@ -247,61 +315,104 @@ impl Grid {
     ///
     /// `marks`, indexed like the samples by the cell's lower corner, forces tracing in the
     /// marked cells.
-    fn refine<C: RayCamera>(&self, caster: &Caster<'_, C>, step: usize, marks: Option<&[bool]>) -> Self {
+    fn refine<C: RayCamera>(
+        &self,
+        caster: &Caster<'_, C>,
+        step: usize,
+        marks: Option<&[bool]>,
+    ) -> Self {
         let (w, h) = (self.u[self.u.len() - 1] + 1, self.v[self.v.len() - 1] + 1);
         let (fu, fv) = (grid_axis(w, step), grid_axis(h, step));
         let (ncu, ncv) = (self.u.len(), self.v.len());
         let n = fu.len();
         let mut keys = vec![0u32; n * fv.len()];
         let mut rad = vec![0f32; n * fv.len()];
-        keys.par_chunks_mut(n).zip(rad.par_chunks_mut(n)).enumerate().for_each(|(jf, (krow, rrow))| {
-            let y = fv[jf];
-            let j = self.cell(y, ncv);
-            let j1 = (j + 1).min(ncv - 1);
-            let (v0, v1) = (self.v[j], self.v[j1]);
-            let fy = if v1 > v0 { (y - v0) as f32 / (v1 - v0) as f32 } else { 0.0 };
-            for (ifine, &x) in fu.iter().enumerate() {
-                let i = self.cell(x, ncu);
-                let i1 = (i + 1).min(ncu - 1);
-                let (u0, u1) = (self.u[i], self.u[i1]);
-                let c = [j * ncu + i, j * ncu + i1, j1 * ncu + i, j1 * ncu + i1];
-                if (x == u0 || x == u1) && (y == v0 || y == v1) {
-                    let idx = c[usize::from(x != u0) + 2 * usize::from(y != v0)];
-                    krow[ifine] = self.keys[idx];
-                    rrow[ifine] = self.rad[idx];
-                    continue;
-                }
-                let k = self.keys[c[0]];
-                let marked = marks.is_some_and(|m| m[c[0]]);
-                if !marked && c.iter().all(|&ci| self.keys[ci] == k) {
-                    let fx = if u1 > u0 { (x - u0) as f32 / (u1 - u0) as f32 } else { 0.0 };
-                    let top = self.rad[c[0]] * (1.0 - fx) + self.rad[c[1]] * fx;
-                    let bottom = self.rad[c[2]] * (1.0 - fx) + self.rad[c[3]] * fx;
-                    krow[ifine] = k;
-                    rrow[ifine] = top * (1.0 - fy) + bottom * fy;
+        keys.par_chunks_mut(n)
+            .zip(rad.par_chunks_mut(n))
+            .enumerate()
+            .for_each(|(jf, (krow, rrow))| {
+                let y = fv[jf];
+                let j = self.cell(y, ncv);
+                let j1 = (j + 1).min(ncv - 1);
+                let (v0, v1) = (self.v[j], self.v[j1]);
+                let fy = if v1 > v0 {
+                    (y - v0) as f32 / (v1 - v0) as f32
                 } else {
-                    let (l, k) = caster.sample(x as f64, y as f64, x, y);
-                    krow[ifine] = k;
-                    rrow[ifine] = l as f32;
+                    0.0
+                };
+                for (ifine, &x) in fu.iter().enumerate() {
+                    let i = self.cell(x, ncu);
+                    let i1 = (i + 1).min(ncu - 1);
+                    let (u0, u1) = (self.u[i], self.u[i1]);
+                    let c = [j * ncu + i, j * ncu + i1, j1 * ncu + i, j1 * ncu + i1];
+                    if (x == u0 || x == u1) && (y == v0 || y == v1) {
+                        let idx = c[usize::from(x != u0) + 2 * usize::from(y != v0)];
+                        krow[ifine] = self.keys[idx];
+                        rrow[ifine] = self.rad[idx];
+                        continue;
+                    }
+                    let fx = if u1 > u0 {
+                        (x - u0) as f32 / (u1 - u0) as f32
+                    } else {
+                        0.0
+                    };
+                    // A sample on a grid line depends on that line's two ends only.
+                    let (ids, wts): (&[usize], [f32; 4]) = if x == u0 || x == u1 {
+                        let col = usize::from(x != u0);
+                        (&[c[col], c[col + 2]][..], [1.0 - fy, fy, 0.0, 0.0])
+                    } else if y == v0 || y == v1 {
+                        let row = 2 * usize::from(y != v0);
+                        (&[c[row], c[row + 1]][..], [1.0 - fx, fx, 0.0, 0.0])
+                    } else {
+                        (
+                            &c[..],
+                            [
+                                (1.0 - fx) * (1.0 - fy),
+                                fx * (1.0 - fy),
+                                (1.0 - fx) * fy,
+                                fx * fy,
+                            ],
+                        )
+                    };
+                    let k = self.keys[ids[0]];
+                    let marked = marks.is_some_and(|m| m[c[0]]);
+                    if !marked && ids.iter().all(|&ci| self.keys[ci] == k) {
+                        krow[ifine] = k;
+                        rrow[ifine] = ids.iter().zip(wts).map(|(&ci, wt)| self.rad[ci] * wt).sum();
+                    } else {
+                        let (l, k) = caster.sample(x as f64, y as f64, x, y);
+                        krow[ifine] = k;
+                        rrow[ifine] = l as f32;
+                    }
                 }
-            }
-        });
-        Self { step, u: fu, v: fv, keys, rad }
+            });
+        Self {
+            step,
+            u: fu,
+            v: fv,
+            keys,
+            rad,
+        }
     }
 }
 
-/// Marks the cells of `grid` (indexed by their lower corner) that an edge of a carrier box
-/// crosses (within 1.5 px): slot ridges are only a few pixels tall and seen against the wall
-/// they are attached to, so a coarse cell could otherwise hold a whole ridge between corners
-/// that all see the wall.
-fn edge_marks<C: RayCamera>(prep: &Prepared, cam: &C, t_wc: &Isometry3<f64>, grid: &Grid) -> Vec<bool> {
+/// Marks the cells of `grid` (indexed by their lower corner) that an edge of a slot ridge
+/// crosses (within 1.5 px): ridges are only a few pixels tall and seen against the wall they
+/// are attached to, so a coarse cell could otherwise hold a whole ridge between corners that
+/// all see the wall.
+fn edge_marks<C: RayCamera>(
+    prep: &Prepared,
+    cam: &C,
+    t_wc: &Isometry3<f64>,
+    grid: &Grid,
+) -> Vec<bool> {
     let (ncu, ncv) = (grid.u.len(), grid.v.len());
     let mut marks = vec![false; ncu * ncv];
     let t_cw = t_wc.inverse();
     let project = |x: &Vector3<f64>| cam.project(&(t_cw * nalgebra::Point3::from(*x)).coords);
     let (wf, hf) = (grid.u[ncu - 1] as f64, grid.v[ncv - 1] as f64);
     for p in &prep.prims {
-        if !matches!(p.shape, trace::Shape::Box(_)) {
+        if !matches!(p.shape, trace::Shape::Box(super::scene::Material::Ridge)) {
             continue;
         }
         let c = p.aabb.corners();
@@ -337,22 +448,27 @@ fn edge_marks<C: RayCamera>(prep: &Prepared, cam: &C, t_wc: &Isometry3<f64>, gri
 
 /// Linear radiance per pixel after anti-aliasing (before lighting, blur and noise). Inputs must
 /// have been validated.
-pub(crate) fn radiance<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f64>, opts: &RenderOptions) -> Vec<f32> {
+pub(crate) fn radiance<C: RayCamera>(
+    scene: &Scene,
+    cam: &C,
+    t_wc: &Isometry3<f64>,
+    opts: &RenderOptions,
+) -> Vec<f32> {
     let (w, h) = (cam.width(), cam.height());
-    let t0 = std::time::Instant::now();
-    let dbg = |what: &str| if std::env::var_os("DBG_TIMING").is_some() { eprintln!("DBG {what} {:?}", t0.elapsed()) };
     let prep = Prepared::new(scene, t_wc, opts.shading);
     let tiles = Tiles::new(&prep, cam, t_wc);
-    let caster = Caster { prep: &prep, cam, tiles };
+    let caster = Caster {
+        prep: &prep,
+        cam,
+        tiles,
+    };
 
     // 1. Coarse pass on every fourth row and column, 2. refinement to every second, then to
     //    every pixel.
     let coarse = Grid::trace(&caster, w, h, 4);
     let marks = edge_marks(&prep, cam, t_wc, &coarse);
-    dbg("coarse");
     let mid = coarse.refine(&caster, 2, Some(&marks));
     let Grid { keys, rad, .. } = mid.refine(&caster, 1, None);
-    dbg("fill");
     let mut rad = rad;
     let s = opts.supersample;
     if s == 1 {
@@ -366,30 +482,33 @@ pub(crate) fn radiance<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f6
     const FORWARD: [(i64, i64); 4] = [(1, 0), (-1, 1), (0, 1), (1, 1)];
     let mut own = vec![0u8; w * h];
     let mut other = vec![[0u8; 4]; w * h];
-    own.par_chunks_mut(w).zip(other.par_chunks_mut(w)).enumerate().for_each(|(v, (orow, nrow))| {
-        let mut sub = Subset::default();
-        for u in 0..w {
-            let (ka, la) = (keys[v * w + u], rad[v * w + u] as f64);
-            for (p, (du, dv)) in FORWARD.iter().enumerate() {
-                let (nu, nv) = (u as i64 + du, v as i64 + dv);
-                if nu < 0 || nu >= w as i64 || nv >= h as i64 {
-                    continue;
+    own.par_chunks_mut(w)
+        .zip(other.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(v, (orow, nrow))| {
+            let mut sub = Subset::default();
+            for u in 0..w {
+                let (ka, la) = (keys[v * w + u], rad[v * w + u] as f64);
+                for (p, (du, dv)) in FORWARD.iter().enumerate() {
+                    let (nu, nv) = (u as i64 + du, v as i64 + dv);
+                    if nu < 0 || nu >= w as i64 || nv >= h as i64 {
+                        continue;
+                    }
+                    let n = nv as usize * w + nu as usize;
+                    let (kn, ln) = (keys[n], rad[n] as f64);
+                    if !worth_midpoint(kn, ln, ka, la) {
+                        continue;
+                    }
+                    sub.clear();
+                    sub.add(ka, la);
+                    sub.add(kn, ln);
+                    let (um, vm) = (u as f64 + 0.5 * *du as f64, v as f64 + 0.5 * *dv as f64);
+                    let (lm, km) = caster.sample_subset(um, vm, u, v, &sub);
+                    orow[u] = orow[u].max(differs(km, lm, ka, la));
+                    nrow[u][p] = differs(km, lm, kn, ln);
                 }
-                let n = nv as usize * w + nu as usize;
-                let (kn, ln) = (keys[n], rad[n] as f64);
-                if differs(kn, ln, ka, la) == 0 {
-                    continue;
-                }
-                sub.clear();
-                sub.add(ka, la);
-                sub.add(kn, ln);
-                let (um, vm) = (u as f64 + 0.5 * *du as f64, v as f64 + 0.5 * *dv as f64);
-                let (lm, km) = caster.sample_subset(um, vm, u, v, &sub);
-                orow[u] = orow[u].max(differs(km, lm, ka, la));
-                nrow[u][p] = differs(km, lm, kn, ln);
             }
-        }
-    });
+        });
     let flags: Vec<u8> = (0..w * h)
         .into_par_iter()
         .map(|i| {
@@ -406,12 +525,6 @@ pub(crate) fn radiance<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f6
         })
         .collect();
 
-    dbg(&format!("flags ({} primary, {} mirror)", flags.iter().filter(|&&f| f == FLAG_PRIMARY).count(), flags.iter().filter(|&&f| f == FLAG_MIRROR).count()));
-    if std::env::var_os("DBG_FLAGS").is_some() {
-        let mut bytes = format!("P5\n{w} {h}\n255\n").into_bytes();
-        bytes.extend(flags.iter().map(|f| f * 120));
-        std::fs::write("/tmp/flags.pgm", bytes).ok();
-    }
     // 4. Anti-aliasing of the flagged pixels, traced against the surfaces their 3×3
     //    neighbourhood sees (a surface no neighbouring centre sees is narrower than the
     //    sampling resolves anyway), falling back to the tile when the sub-ray misses them.
@@ -436,7 +549,6 @@ pub(crate) fn radiance<C: RayCamera>(scene: &Scene, cam: &C, t_wc: &Isometry3<f6
             *px = caster.pixel_mean(u, v, offsets, &sub, &mut bundle) as f32;
         }
     });
-    dbg("aa");
     rad
 }
 
@@ -446,7 +558,12 @@ fn n_rooks(s: usize) -> Vec<(f64, f64)> {
     let sf = s as f64;
     (0..s)
         .flat_map(|a| (0..s).map(move |b| (a as f64, b as f64)))
-        .map(|(a, b)| ((a + (b + 0.5) / sf) / sf - 0.5, (b + (a + 0.5) / sf) / sf - 0.5))
+        .map(|(a, b)| {
+            (
+                (a + (b + 0.5) / sf) / sf - 0.5,
+                (b + (a + 0.5) / sf) / sf - 0.5,
+            )
+        })
         .collect()
 }
 
@@ -471,7 +588,12 @@ impl Tiles {
     pub(crate) fn new<C: RayCamera>(prep: &Prepared, cam: &C, t_wc: &Isometry3<f64>) -> Self {
         let (w, h) = (cam.width(), cam.height());
         let t_cw = t_wc.inverse();
-        let full = [f32::NEG_INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::INFINITY];
+        let full = [
+            f32::NEG_INFINITY,
+            f32::NEG_INFINITY,
+            f32::INFINITY,
+            f32::INFINITY,
+        ];
         let bounds: Vec<[f32; 4]> = prep
             .prims
             .par_iter()
@@ -479,7 +601,12 @@ impl Tiles {
                 if p.aabb.distance_to_point(&prep.cam_center) == 0.0 {
                     return full;
                 }
-                let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+                let mut b = [
+                    f64::INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::NEG_INFINITY,
+                ];
                 for x in prim_outline(prep, p) {
                     let pc = t_cw * nalgebra::Point3::from(x);
                     match cam.project(&pc.coords) {
@@ -538,7 +665,10 @@ fn prim_outline(prep: &Prepared, p: &trace::Prim) -> Vec<Vector3<f64>> {
             for z in [prep.half, -prep.half] {
                 for j in 0..BOUND_SAMPLES {
                     let phi = std::f64::consts::TAU * j as f64 / BOUND_SAMPLES as f64;
-                    out.push(pos + rot * Vector3::new(prep.radius * phi.cos(), prep.radius * phi.sin(), z));
+                    out.push(
+                        pos + rot
+                            * Vector3::new(prep.radius * phi.cos(), prep.radius * phi.sin(), z),
+                    );
                 }
             }
             out
@@ -561,4 +691,3 @@ fn prim_outline(prep: &Prepared, p: &trace::Prim) -> Vec<Vector3<f64>> {
         }
     }
 }
-

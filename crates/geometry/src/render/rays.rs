@@ -93,7 +93,17 @@ impl<'a> Rays<'a> {
         let kind = match cam.model() {
             CameraModel::Pinhole => {
                 let (fx, fy, cx, cy) = (cam.fx(), cam.fy(), cam.cx(), cam.cy());
-                Kind::Pinhole(Matrix3::new(1.0 / fx, 0.0, -cx / fx, 0.0, 1.0 / fy, -cy / fy, 0.0, 0.0, 1.0))
+                Kind::Pinhole(Matrix3::new(
+                    1.0 / fx,
+                    0.0,
+                    -cx / fx,
+                    0.0,
+                    1.0 / fy,
+                    -cy / fy,
+                    0.0,
+                    0.0,
+                    1.0,
+                ))
             }
             _ => Kind::Table(table(cam)),
         };

@@ -25,7 +25,10 @@ pub struct WaferShape {
 
 impl Default for WaferShape {
     fn default() -> Self {
-        Self { radius: 0.150, thickness: 0.001 }
+        Self {
+            radius: 0.150,
+            thickness: 0.001,
+        }
     }
 }
 
@@ -92,7 +95,10 @@ impl Carrier {
     /// Nominal pose of the wafer in slot `k` (1-based): centre `(0, 0, (k − 1)·pitch)`, level.
     pub fn slot_pose(&self, k: usize) -> Isometry3<f64> {
         let z = (k.max(1) - 1) as f64 * self.pitch;
-        Isometry3::from_parts(Translation3::new(0.0, 0.0, z), nalgebra::UnitQuaternion::identity())
+        Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, z),
+            nalgebra::UnitQuaternion::identity(),
+        )
     }
 
     /// Fails unless every length is finite and positive (or, for `x_front`, finite) and the
@@ -168,15 +174,25 @@ impl Carrier {
         ));
         // Side walls.
         for sign in [-1.0, 1.0] {
-            let (y0, y1) = if sign < 0.0 { (-y_out, -y_in) } else { (y_in, y_out) };
+            let (y0, y1) = if sign < 0.0 {
+                (-y_out, -y_in)
+            } else {
+                (y_in, y_out)
+            };
             out.push((
-                Aabb::new(Vector3::new(self.x_front, y0, z_lo), Vector3::new(self.x_rear, y1, z_hi)),
+                Aabb::new(
+                    Vector3::new(self.x_front, y0, z_lo),
+                    Vector3::new(self.x_rear, y1, z_hi),
+                ),
                 Material::Wall,
             ));
         }
         // Back wall.
         out.push((
-            Aabb::new(Vector3::new(self.back_wall_x, -y_out, z_lo), Vector3::new(x_back, y_out, z_hi)),
+            Aabb::new(
+                Vector3::new(self.back_wall_x, -y_out, z_lo),
+                Vector3::new(x_back, y_out, z_hi),
+            ),
             Material::Back,
         ));
         // Slot ridges: just below each slot's nominal wafer, attached to the side walls.
@@ -185,9 +201,16 @@ impl Carrier {
             let z_top = k as f64 * self.pitch - h - self.ridge_gap;
             let z_bot = z_top - self.ridge_height;
             for sign in [-1.0, 1.0] {
-                let (y0, y1) = if sign < 0.0 { (-y_in, -y_ridge) } else { (y_ridge, y_in) };
+                let (y0, y1) = if sign < 0.0 {
+                    (-y_in, -y_ridge)
+                } else {
+                    (y_ridge, y_in)
+                };
                 out.push((
-                    Aabb::new(Vector3::new(self.x_front, y0, z_bot), Vector3::new(self.x_rear, y1, z_top)),
+                    Aabb::new(
+                        Vector3::new(self.x_front, y0, z_bot),
+                        Vector3::new(self.x_rear, y1, z_top),
+                    ),
                     Material::Ridge,
                 ));
             }
@@ -210,7 +233,11 @@ pub struct Scene {
 impl Scene {
     /// A scene with the default wafer size and the default carrier.
     pub fn new(wafers: Vec<Isometry3<f64>>) -> Self {
-        Self { wafers, shape: WaferShape::default(), carrier: Some(Carrier::default()) }
+        Self {
+            wafers,
+            shape: WaferShape::default(),
+            carrier: Some(Carrier::default()),
+        }
     }
 
     /// Fails on a non-positive wafer size, an invalid carrier, or a non-finite pose.
@@ -227,7 +254,10 @@ impl Scene {
             c.validate(&self.shape)?;
         }
         for (index, pose) in self.wafers.iter().enumerate() {
-            validate_pose("wafer pose", pose).map_err(|e| GeometryError::AtIndex { index, source: Box::new(e) })?;
+            validate_pose("wafer pose", pose).map_err(|e| GeometryError::AtIndex {
+                index,
+                source: Box::new(e),
+            })?;
         }
         Ok(())
     }
@@ -240,7 +270,11 @@ pub(crate) fn validate_pose(what: &'static str, pose: &Isometry3<f64>) -> Result
     check_finite(what, q.coords.as_slice())?;
     let n = q.norm();
     if (n - 1.0).abs() > 1e-6 {
-        return Err(GeometryError::InvalidParameter { what, value: n, reason: "rotation quaternion is not unit" });
+        return Err(GeometryError::InvalidParameter {
+            what,
+            value: n,
+            reason: "rotation quaternion is not unit",
+        });
     }
     Ok(())
 }
@@ -250,7 +284,11 @@ fn positive(what: &'static str, value: f64) -> Result<()> {
         return Err(GeometryError::NonFinite { what, value });
     }
     if value <= 0.0 {
-        return Err(GeometryError::InvalidParameter { what, value, reason: "must be positive" });
+        return Err(GeometryError::InvalidParameter {
+            what,
+            value,
+            reason: "must be positive",
+        });
     }
     Ok(())
 }
@@ -277,7 +315,10 @@ pub(crate) struct Aabb {
 
 impl Aabb {
     pub fn new(a: Vector3<f64>, b: Vector3<f64>) -> Self {
-        Self { min: a.inf(&b), max: a.sup(&b) }
+        Self {
+            min: a.inf(&b),
+            max: a.sup(&b),
+        }
     }
 
     /// Euclidean distance from a point to the box (0 inside).

@@ -3,9 +3,9 @@
 
 use nalgebra::{Isometry3, Matrix3, Vector3};
 
-use super::scene::{Aabb, Material, Scene};
-use super::Shading;
 pub(crate) use super::RayCamera;
+use super::Shading;
+use super::scene::{Aabb, Material, Scene};
 
 /// Key of "no surface" (the ray escapes to the background). Surface keys are
 /// `8·primitive + face` below these special values (16 bits each).
@@ -30,7 +30,11 @@ pub(crate) struct Ray {
 impl Ray {
     #[inline]
     pub fn new(o: Vector3<f64>, d: Vector3<f64>) -> Self {
-        Self { o, d, inv: d.map(|x| 1.0 / x) }
+        Self {
+            o,
+            d,
+            inv: d.map(|x| 1.0 / x),
+        }
     }
 }
 
@@ -46,7 +50,12 @@ pub(crate) const FACE_SIDE: u8 = 2;
 pub(crate) enum Shape {
     /// A wafer: rotation and centre of `T_w,wafer`, the inverse rotation, and the camera centre
     /// in the wafer frame.
-    Wafer { rot: Matrix3<f64>, rot_t: Matrix3<f64>, pos: Vector3<f64>, cam_local: Vector3<f64> },
+    Wafer {
+        rot: Matrix3<f64>,
+        rot_t: Matrix3<f64>,
+        pos: Vector3<f64>,
+        cam_local: Vector3<f64>,
+    },
     /// A carrier box (the box itself is the primitive's `aabb`).
     Box(Material),
 }
@@ -110,23 +119,39 @@ impl Prepared {
             let rot_t = rot.transpose();
             let pos = pose.translation.vector;
             let cam_local = rot_t * (cam_center - pos);
-            prims.push(Prim { shape: Shape::Wafer { rot, rot_t, pos, cam_local }, aabb: wafer_aabb(&rot, &pos, r, h) });
+            prims.push(Prim {
+                shape: Shape::Wafer {
+                    rot,
+                    rot_t,
+                    pos,
+                    cam_local,
+                },
+                aabb: wafer_aabb(&rot, &pos, r, h),
+            });
         }
         let n_wafers = prims.len();
         if let Some(c) = &scene.carrier {
             for (aabb, m) in c.boxes(&scene.shape) {
-                prims.push(Prim { shape: Shape::Box(m), aabb });
+                prims.push(Prim {
+                    shape: Shape::Box(m),
+                    aabb,
+                });
             }
         }
         let mut by_distance: Vec<Cand> = prims
             .iter()
             .enumerate()
-            .map(|(i, p)| Cand { prim: i as u32, dmin: p.aabb.distance_to_point(&cam_center) })
+            .map(|(i, p)| Cand {
+                prim: i as u32,
+                dmin: p.aabb.distance_to_point(&cam_center),
+            })
             .collect();
         by_distance.sort_by(|a, b| a.dmin.total_cmp(&b.dmin));
         let mut mirror = Vec::with_capacity(n_wafers);
         for i in 0..n_wafers {
-            let Shape::Wafer { rot, pos, .. } = &prims[i].shape else { unreachable_wafer() };
+            let Shape::Wafer { rot, pos, .. } = &prims[i].shape else {
+                unreachable_wafer()
+            };
             let n = rot.column(2).into_owned();
             let lists = [1.0f64, -1.0].map(|sign| {
                 // Rays leave the face at z = ±h into the half-space sign·n·(x − pos) > h.
@@ -136,7 +161,10 @@ impl Prepared {
                     .iter()
                     .enumerate()
                     .filter(|(j, p)| *j != i && max_along(&p.aabb, &normal) > offset)
-                    .map(|(j, p)| Cand { prim: j as u32, dmin: (-max_along(&p.aabb, &-normal) - offset).max(0.0) })
+                    .map(|(j, p)| Cand {
+                        prim: j as u32,
+                        dmin: (-max_along(&p.aabb, &-normal) - offset).max(0.0),
+                    })
                     .collect();
                 list.sort_by(|a, b| a.dmin.total_cmp(&b.dmin));
                 list
@@ -174,7 +202,14 @@ impl Prepared {
     /// Closest hit of a ray among `cands` (sorted by `dmin`), skipping primitive `skip`; the
     /// search stops at the first candidate with `dmin ≥ scale·s` for the closest hit `s` so far.
     #[inline]
-    pub fn trace(&self, ray: &Ray, cands: &[Cand], skip: u32, s_min: f64, scale: f64) -> Option<Hit> {
+    pub fn trace(
+        &self,
+        ray: &Ray,
+        cands: &[Cand],
+        skip: u32,
+        s_min: f64,
+        scale: f64,
+    ) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut s_max = f64::INFINITY;
         for c in cands {
@@ -186,7 +221,11 @@ impl Prepared {
             }
             if let Some((s, face)) = self.intersect(c.prim, ray, s_min, s_max) {
                 s_max = s;
-                best = Some(Hit { s, prim: c.prim, face });
+                best = Some(Hit {
+                    s,
+                    prim: c.prim,
+                    face,
+                });
             }
         }
         best
@@ -213,7 +252,13 @@ impl Prepared {
     /// length; hit distances are in units of `|d|`) through image position `(u, v)` among
     /// `cands`, skipping those whose image box misses `(u, v)`.
     #[inline]
-    pub fn trace_primary(&self, d: &Vector3<f64>, cands: &[TileCand], u: f32, v: f32) -> Option<Hit> {
+    pub fn trace_primary(
+        &self,
+        d: &Vector3<f64>,
+        cands: &[TileCand],
+        u: f32,
+        v: f32,
+    ) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut s_max = f64::INFINITY;
         let inv = d.map(|x| 1.0 / x);
@@ -227,14 +272,18 @@ impl Prepared {
             }
             let p = &self.prims[c.prim as usize];
             let hit = match &p.shape {
-                Shape::Wafer { rot_t, cam_local, .. } => {
-                    intersect_slab(cam_local, &(rot_t * d), self.radius, self.half, 0.0, s_max)
-                }
+                Shape::Wafer {
+                    rot_t, cam_local, ..
+                } => intersect_slab(cam_local, &(rot_t * d), self.radius, self.half, 0.0, s_max),
                 Shape::Box(_) => intersect_box(&p.aabb, &self.cam_center, &inv, 0.0, s_max),
             };
             if let Some((s, face)) = hit {
                 s_max = s;
-                best = Some(Hit { s, prim: c.prim, face });
+                best = Some(Hit {
+                    s,
+                    prim: c.prim,
+                    face,
+                });
             }
         }
         best
@@ -248,10 +297,12 @@ impl Prepared {
         for &i in prims {
             let p = &self.prims[i as usize];
             let hit = match &p.shape {
-                Shape::Wafer { rot_t, cam_local, .. } => {
-                    intersect_slab(cam_local, &(rot_t * d), self.radius, self.half, 0.0, s_max)
+                Shape::Wafer {
+                    rot_t, cam_local, ..
+                } => intersect_slab(cam_local, &(rot_t * d), self.radius, self.half, 0.0, s_max),
+                Shape::Box(_) => {
+                    intersect_box(&p.aabb, &self.cam_center, &d.map(|x| 1.0 / x), 0.0, s_max)
                 }
-                Shape::Box(_) => intersect_box(&p.aabb, &self.cam_center, &d.map(|x| 1.0 / x), 0.0, s_max),
             };
             if let Some((s, face)) = hit {
                 s_max = s;
@@ -287,7 +338,13 @@ impl Prepared {
                     let dl = l[0] + l[1] * dx + l[2] * dy;
                     intersect_slab(cam_local, &dl, self.radius, self.half, 0.0, s_max)
                 }
-                _ => intersect_box(&self.prims[*i as usize].aabb, &self.cam_center, &d.map(|x| 1.0 / x), 0.0, s_max),
+                _ => intersect_box(
+                    &self.prims[*i as usize].aabb,
+                    &self.cam_center,
+                    &d.map(|x| 1.0 / x),
+                    0.0,
+                    s_max,
+                ),
             };
             if let Some((s, face)) = hit {
                 s_max = s;
@@ -301,7 +358,9 @@ impl Prepared {
     pub fn normal(&self, hit: &Hit, x: &Vector3<f64>) -> Vector3<f64> {
         let p = &self.prims[hit.prim as usize];
         match &p.shape {
-            Shape::Wafer { rot, rot_t, pos, .. } => match hit.face {
+            Shape::Wafer {
+                rot, rot_t, pos, ..
+            } => match hit.face {
                 FACE_TOP => rot.column(2).into_owned(),
                 FACE_BOTTOM => -rot.column(2).into_owned(),
                 _ => {
@@ -324,7 +383,9 @@ impl Prepared {
         let sh = &self.shading;
         let p = &self.prims[hit.prim as usize];
         let n = self.normal(hit, x);
-        let lambert = |albedo: f64, ambient: f64| albedo * (ambient + (1.0 - ambient) * n.dot(&sh.light_dir).max(0.0));
+        let lambert = |albedo: f64, ambient: f64| {
+            albedo * (ambient + (1.0 - ambient) * n.dot(&sh.light_dir).max(0.0))
+        };
         match &p.shape {
             Shape::Wafer { .. } => {
                 if hit.face == FACE_SIDE {
@@ -382,9 +443,15 @@ impl Prepared {
         match found {
             Some(h2) => {
                 let x2 = x + r * h2.s;
-                (sh.face_base + sh.reflectivity * self.direct(&h2, &x2), key2(hit.key(), h2.key()))
+                (
+                    sh.face_base + sh.reflectivity * self.direct(&h2, &x2),
+                    key2(hit.key(), h2.key()),
+                )
             }
-            None => (sh.face_base + sh.reflectivity * sh.background, key2(hit.key(), KEY_BACKGROUND)),
+            None => (
+                sh.face_base + sh.reflectivity * sh.background,
+                key2(hit.key(), KEY_BACKGROUND),
+            ),
         }
     }
 }
@@ -423,7 +490,15 @@ fn unreachable_wafer() -> ! {
 
 /// Largest value of `n·x` over the box.
 fn max_along(b: &Aabb, n: &Vector3<f64>) -> f64 {
-    (0..3).map(|k| if n[k] >= 0.0 { n[k] * b.max[k] } else { n[k] * b.min[k] }).sum()
+    (0..3)
+        .map(|k| {
+            if n[k] >= 0.0 {
+                n[k] * b.max[k]
+            } else {
+                n[k] * b.min[k]
+            }
+        })
+        .sum()
 }
 
 /// Exact world AABB of a slab of radius `r`, half-thickness `h`, axis `rot·e_z`, centre `pos`.
@@ -448,7 +523,11 @@ pub(crate) fn intersect_slab(
     // Flat face on the side the ray comes from. A ray enters a convex body at most once, so
     // an entry through this face is the answer.
     if d.z != 0.0 {
-        let (zf, f) = if d.z < 0.0 { (h, FACE_TOP) } else { (-h, FACE_BOTTOM) };
+        let (zf, f) = if d.z < 0.0 {
+            (h, FACE_TOP)
+        } else {
+            (-h, FACE_BOTTOM)
+        };
         let s = (zf - o.z) / d.z;
         if s > s_min && s < s_max {
             let x = o.x + s * d.x;
@@ -467,7 +546,11 @@ pub(crate) fn intersect_slab(
         if disc >= 0.0 {
             let sq = disc.sqrt();
             // Numerically stable smaller root.
-            let s = if b > 0.0 { (-b - sq) / a } else { c / (-b + sq) };
+            let s = if b > 0.0 {
+                (-b - sq) / a
+            } else {
+                c / (-b + sq)
+            };
             if s > s_min && s < s_max && (o.z + s * d.z).abs() <= h {
                 return Some((s, FACE_SIDE));
             }
@@ -480,7 +563,13 @@ pub(crate) fn intersect_slab(
 /// componentwise (±∞ for zero components); the face is `2·axis + (1 if the outward normal
 /// points to +axis)`.
 #[inline]
-pub(crate) fn intersect_box(b: &Aabb, o: &Vector3<f64>, inv: &Vector3<f64>, s_min: f64, s_max: f64) -> Option<(f64, u8)> {
+pub(crate) fn intersect_box(
+    b: &Aabb,
+    o: &Vector3<f64>,
+    inv: &Vector3<f64>,
+    s_min: f64,
+    s_max: f64,
+) -> Option<(f64, u8)> {
     let mut t0 = f64::NEG_INFINITY;
     let mut t1 = f64::INFINITY;
     let mut face = u8::MAX;
@@ -492,9 +581,17 @@ pub(crate) fn intersect_box(b: &Aabb, o: &Vector3<f64>, inv: &Vector3<f64>, s_mi
             continue;
         }
         let (near, far, f) = if inv[k] > 0.0 {
-            ((b.min[k] - o[k]) * inv[k], (b.max[k] - o[k]) * inv[k], 2 * k as u8)
+            (
+                (b.min[k] - o[k]) * inv[k],
+                (b.max[k] - o[k]) * inv[k],
+                2 * k as u8,
+            )
         } else {
-            ((b.max[k] - o[k]) * inv[k], (b.min[k] - o[k]) * inv[k], 2 * k as u8 + 1)
+            (
+                (b.max[k] - o[k]) * inv[k],
+                (b.min[k] - o[k]) * inv[k],
+                2 * k as u8 + 1,
+            )
         };
         if near > t0 {
             t0 = near;

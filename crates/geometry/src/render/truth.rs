@@ -93,7 +93,11 @@ impl<C: RayCamera> Tester<'_, C> {
     /// from the camera centre to it meets no surface (other wafers, the carrier, or the wafer
     /// itself) before it.
     fn test(&self, wafer: usize, rim: Rim, phi: f64) -> PointTest {
-        let hidden = PointTest { visible: false, pixel: Vector2::new(f64::NAN, f64::NAN), side_facing: false };
+        let hidden = PointTest {
+            visible: false,
+            pixel: Vector2::new(f64::NAN, f64::NAN),
+            side_facing: false,
+        };
         let super::trace::Shape::Wafer { rot, pos, .. } = &self.prep.prims[wafer].shape else {
             return hidden;
         };
@@ -115,17 +119,26 @@ impl<C: RayCamera> Tester<'_, C> {
         let side_facing = (rot * Vector3::new(c, s, 0.0)).dot(&to_cam) > 0.0;
         let flat_facing = (rot.column(2) * rim.sign()).dot(&to_cam) > 0.0;
         if !(side_facing || flat_facing) {
-            return PointTest { pixel: px, ..hidden };
+            return PointTest {
+                pixel: px,
+                ..hidden
+            };
         }
         let dist = to_cam.norm();
         let d = -to_cam / dist;
         let ray = super::trace::Ray::new(self.prep.cam_center, d);
-        let blocked = self.prep.trace(&ray, &self.prep.by_distance, u32::MAX, 0.0, 1.0);
+        let blocked = self
+            .prep
+            .trace(&ray, &self.prep.by_distance, u32::MAX, 0.0, 1.0);
         let visible = match blocked {
             Some(hit) => hit.s >= dist - EPS_OCCLUSION,
             None => true,
         };
-        PointTest { visible, pixel: px, side_facing }
+        PointTest {
+            visible,
+            pixel: px,
+            side_facing,
+        }
     }
 
     fn visible(&self, wafer: usize, rim: Rim, phi: f64) -> bool {
@@ -148,7 +161,9 @@ impl<C: RayCamera> Tester<'_, C> {
     fn truth(&self, wafer: usize, rim: Rim, pose: &Isometry3<f64>, n: usize) -> RimTruth {
         let tau = std::f64::consts::TAU;
         let step = tau / n as f64;
-        let tests: Vec<PointTest> = (0..n).map(|j| self.test(wafer, rim, step * j as f64)).collect();
+        let tests: Vec<PointTest> = (0..n)
+            .map(|j| self.test(wafer, rim, step * j as f64))
+            .collect();
         let vis: Vec<bool> = tests.iter().map(|t| t.visible).collect();
         let mut intervals = Vec::new();
         if vis.iter().all(|&v| v) {
@@ -192,7 +207,16 @@ impl<C: RayCamera> Tester<'_, C> {
         }
         let t_co = self.t_cw * pose * Translation3::new(0.0, 0.0, rim.sign() * self.prep.half);
         let ellipse = project_circle(&self.cam.k_matrix(), &t_co, self.prep.radius).ok();
-        RimTruth { wafer, rim, ellipse, intervals, fraction, angles, points, side_facing }
+        RimTruth {
+            wafer,
+            rim,
+            ellipse,
+            intervals,
+            fraction,
+            angles,
+            points,
+            side_facing,
+        }
     }
 }
 
@@ -226,10 +250,18 @@ pub fn rim_visibility(
         });
     }
     let prep = Prepared::new(scene, t_wc, Shading::default());
-    let tester = Tester { prep: &prep, cam, t_cw: t_wc.inverse() };
-    let jobs: Vec<(usize, Rim)> =
-        (0..scene.wafers.len()).flat_map(|i| [(i, Rim::Upper), (i, Rim::Lower)]).collect();
-    Ok(jobs.par_iter().map(|&(i, rim)| tester.truth(i, rim, &scene.wafers[i], n_samples)).collect())
+    let tester = Tester {
+        prep: &prep,
+        cam,
+        t_cw: t_wc.inverse(),
+    };
+    let jobs: Vec<(usize, Rim)> = (0..scene.wafers.len())
+        .flat_map(|i| [(i, Rim::Upper), (i, Rim::Lower)])
+        .collect();
+    Ok(jobs
+        .par_iter()
+        .map(|&(i, rim)| tester.truth(i, rim, &scene.wafers[i], n_samples))
+        .collect())
 }
 
 /// Visibility (the test of [`rim_visibility`]) of the points at circle angles `angles` of one
@@ -257,6 +289,13 @@ pub fn rim_points_visible(
     }
     crate::error::check_finite("angles", angles)?;
     let prep = Prepared::new(scene, t_wc, Shading::default());
-    let tester = Tester { prep: &prep, cam, t_cw: t_wc.inverse() };
-    Ok(angles.iter().map(|&phi| tester.visible(wafer, rim, phi)).collect())
+    let tester = Tester {
+        prep: &prep,
+        cam,
+        t_cw: t_wc.inverse(),
+    };
+    Ok(angles
+        .iter()
+        .map(|&phi| tester.visible(wafer, rim, phi))
+        .collect())
 }

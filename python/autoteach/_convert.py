@@ -1,0 +1,63 @@
+"""Conversion of user input to the float64 arrays and scalars the compiled module accepts.
+
+Shared by every friendly wrapper: each rejects what is not real numbers with
+:class:`~autoteach.errors.InvalidInputError` naming the argument. Shapes and finiteness of
+arrays are checked by the compiled functions, which name the argument too.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from autoteach.errors import InvalidInputError
+
+F64Array = NDArray[np.float64]
+
+
+def as_f64(value: ArrayLike, name: str) -> F64Array:
+    """Convert ``value`` to a float64 array, rejecting anything that is not real numbers.
+
+    Shapes and finiteness are checked by the compiled functions, which name the argument too.
+    """
+    if isinstance(value, (str, bytes)):
+        raise InvalidInputError(f"{name} must be an array of real numbers, got {type(value).__name__} {value!r}")
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as err:
+        raise InvalidInputError(f"{name} must be an array of real numbers: {err}") from None
+    if arr.dtype.kind not in "iuf":
+        raise InvalidInputError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
+    return arr.astype(np.float64, copy=False)
+
+
+def as_float(value: Any, name: str) -> float:
+    """Convert a real, finite scalar (Python or NumPy, or a 0-d array) to ``float``."""
+    if isinstance(value, (str, bytes, bool, np.bool_)):
+        raise InvalidInputError(f"{name} must be a real number, got {type(value).__name__} {value!r}")
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as err:
+        raise InvalidInputError(f"{name} must be a real number: {err}") from None
+    if arr.dtype.kind not in "iuf":
+        raise InvalidInputError(f"{name} must be a real number, got {type(value).__name__} of dtype {arr.dtype}")
+    if arr.shape != ():
+        raise InvalidInputError(f"{name} must be a real number (a scalar), got an array of shape {arr.shape}")
+    out = float(arr)
+    if not math.isfinite(out):
+        raise InvalidInputError(f"{name} must be finite, got {out}")
+    return out
+
+
+def as_int(value: Any, name: str) -> int:
+    """Convert an integer (Python or NumPy, not bool) to ``int``."""
+    if isinstance(value, (bool, np.bool_)):
+        raise InvalidInputError(f"{name} must be an integer, got {value!r}")
+    try:
+        return operator.index(value)
+    except TypeError:
+        raise InvalidInputError(f"{name} must be an integer, got {type(value).__name__} {value!r}") from None
