@@ -108,29 +108,23 @@ def setup_radar(kf):
 
 
 def radar_pair(alpha=0.1, beta=2.0, kappa=-1.0, **options):
-    fp = filterpy_kalman.UnscentedKalmanFilter(
-        dim_x=4,
-        dim_z=2,
-        dt=1.0,
-        hx=radar_hx,
-        fx=cv_fx,
-        points=filterpy_kalman.MerweScaledSigmaPoints(4, alpha, beta, kappa),
-        z_mean_fn=z_mean,
-        residual_z=residual_z,
-    )
-    at = est.UnscentedKalmanFilter(
-        dim_x=4,
-        dim_z=2,
-        dt=1.0,
-        hx=radar_hx,
-        fx=cv_fx,
-        points=est.MerweScaledSigmaPoints(4, alpha, beta, kappa),
-        z_mean_fn=z_mean,
-        residual_z=residual_z,
-        **options,
-    )
-    setup_radar(fp)
-    setup_radar(at)
+    def make(ukf_cls, points_cls, **extra):
+        kf = ukf_cls(
+            dim_x=4,
+            dim_z=2,
+            dt=1.0,
+            hx=radar_hx,
+            fx=cv_fx,
+            points=points_cls(4, alpha, beta, kappa),
+            z_mean_fn=z_mean,
+            residual_z=residual_z,
+            **extra,
+        )
+        setup_radar(kf)
+        return kf
+
+    fp = make(filterpy_kalman.UnscentedKalmanFilter, filterpy_kalman.MerweScaledSigmaPoints)
+    at = make(est.UnscentedKalmanFilter, est.MerweScaledSigmaPoints, **options)
     return fp, at
 
 

@@ -19,32 +19,35 @@ from autoteach.errors import InvalidInputError
 F64Array = NDArray[np.float64]
 
 
+def _real_array(value: Any, name: str, what: str, reject: tuple[type, ...], dtype_owner: str) -> np.ndarray:
+    """``np.asarray(value)`` if it is not one of the ``reject`` types and holds integers or floats.
+
+    Otherwise raises :class:`InvalidInputError` saying that ``name`` must be ``what``; the dtype
+    message reads ``got {dtype_owner}dtype ...``.
+    """
+    if isinstance(value, reject):
+        raise InvalidInputError(f"{name} must be {what}, got {type(value).__name__} {value!r}")
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as err:
+        raise InvalidInputError(f"{name} must be {what}: {err}") from None
+    if arr.dtype.kind not in "iuf":
+        raise InvalidInputError(f"{name} must be {what}, got {dtype_owner}dtype {arr.dtype}")
+    return arr
+
+
 def as_f64(value: ArrayLike, name: str) -> F64Array:
     """Convert ``value`` to a float64 array, rejecting anything that is not real numbers.
 
     Shapes and finiteness are checked by the compiled functions, which name the argument too.
     """
-    if isinstance(value, (str, bytes)):
-        raise InvalidInputError(f"{name} must be an array of real numbers, got {type(value).__name__} {value!r}")
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError) as err:
-        raise InvalidInputError(f"{name} must be an array of real numbers: {err}") from None
-    if arr.dtype.kind not in "iuf":
-        raise InvalidInputError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
+    arr = _real_array(value, name, "an array of real numbers", (str, bytes), "")
     return arr.astype(np.float64, copy=False)
 
 
 def as_float(value: Any, name: str) -> float:
     """Convert a real, finite scalar (Python or NumPy, or a 0-d array) to ``float``."""
-    if isinstance(value, (str, bytes, bool, np.bool_)):
-        raise InvalidInputError(f"{name} must be a real number, got {type(value).__name__} {value!r}")
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError) as err:
-        raise InvalidInputError(f"{name} must be a real number: {err}") from None
-    if arr.dtype.kind not in "iuf":
-        raise InvalidInputError(f"{name} must be a real number, got {type(value).__name__} of dtype {arr.dtype}")
+    arr = _real_array(value, name, "a real number", (str, bytes, bool, np.bool_), f"{type(value).__name__} of ")
     if arr.shape != ():
         raise InvalidInputError(f"{name} must be a real number (a scalar), got an array of shape {arr.shape}")
     out = float(arr)

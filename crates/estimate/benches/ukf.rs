@@ -9,17 +9,11 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::{DMatrix, DVector};
 use std::hint::black_box;
 
+#[path = "../src/ukf/fixtures.rs"]
+mod fixtures;
+
 fn model(dt: f64) -> LinearModel {
-    let mut f = DMatrix::identity(9, 9);
-    for i in 0..3 {
-        f[(i, 3 + i)] = dt;
-        f[(i, 6 + i)] = 0.5 * dt * dt;
-        f[(3 + i, 6 + i)] = dt;
-    }
-    let mut h = DMatrix::zeros(3, 9);
-    for i in 0..3 {
-        h[(i, i)] = 1.0;
-    }
+    let (f, h, _) = fixtures::constant_acceleration(dt);
     LinearModel::new(f, h, None).expect("valid model")
 }
 
@@ -38,23 +32,31 @@ fn setup<F: SigmaPointFilter>(f: &mut F) {
     f.set_r(DMatrix::identity(3, 3) * 1e-2).expect("R");
 }
 
+/// Times building a filter with `make`, setting it up and running it over `zs`.
+fn batch<F: SigmaPointFilter>(
+    c: &mut Criterion,
+    name: &str,
+    zs: &[Option<DVector<f64>>],
+    make: impl Fn() -> F,
+) {
+    c.bench_function(name, |b| {
+        b.iter(|| {
+            let mut f = make();
+            setup(&mut f);
+            black_box(f.batch(&BatchInputs::new(0.01, zs)).expect("batch"))
+        })
+    });
+}
+
 fn bench(c: &mut Criterion) {
     let zs = measurements(2000);
     let pts = MerweScaledSigmaPoints::new(9, 0.1, 2.0, -6.0).expect("points");
-    c.bench_function("ukf_batch_9state_2000", |b| {
-        b.iter(|| {
-            let mut f = UnscentedKalmanFilter::new(model(0.01), pts.clone()).expect("filter");
-            setup(&mut f);
-            black_box(f.batch(&BatchInputs::new(0.01, &zs)).expect("batch"))
-        })
+    batch(c, "ukf_batch_9state_2000", &zs, || {
+        UnscentedKalmanFilter::new(model(0.01), pts.clone()).expect("filter")
     });
     let pts_sr = MerweScaledSigmaPoints::new(9, 1.0, 2.0, 0.0).expect("points");
-    c.bench_function("srukf_batch_9state_2000", |b| {
-        b.iter(|| {
-            let mut f = SquareRootUkf::new(model(0.01), pts_sr.clone()).expect("filter");
-            setup(&mut f);
-            black_box(f.batch(&BatchInputs::new(0.01, &zs)).expect("batch"))
-        })
+    batch(c, "srukf_batch_9state_2000", &zs, || {
+        SquareRootUkf::new(model(0.01), pts_sr.clone()).expect("filter")
     });
     c.bench_function("ukf_step_9state", |b| {
         let mut f = UnscentedKalmanFilter::new(model(0.01), pts.clone()).expect("filter");

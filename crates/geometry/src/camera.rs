@@ -997,9 +997,14 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
+    /// A valid camera (test shorthand for `Camera::new(..).unwrap()`).
+    fn camera(model: CameraModel, params: &[f64], width: u32, height: u32) -> Camera {
+        Camera::new(model, params, width, height).unwrap()
+    }
+
     /// Mild barrel distortion, invertible over the whole 1280×960 image.
     fn bc_camera() -> Camera {
-        Camera::new(
+        camera(
             CameraModel::BrownConrady,
             &[
                 600.0, 580.0, 640.5, 479.25, -0.1, 0.01, 0.001, -0.0005, -0.0002,
@@ -1007,18 +1012,16 @@ mod tests {
             1280,
             960,
         )
-        .unwrap()
     }
 
     /// A fisheye whose image reaches past 90° from the axis (rays behind the camera).
     fn kb_camera() -> Camera {
-        Camera::new(
+        camera(
             CameraModel::KannalaBrandt,
             &[350.0, 345.0, 639.5, 481.0, -0.02, 0.004, -0.0005, 0.00002],
             1280,
             960,
         )
-        .unwrap()
     }
 
     fn pinhole_camera() -> Camera {
@@ -1150,13 +1153,12 @@ mod tests {
         // = 1.005025125; x'' = 0.2·radial + 2·0.001·(-0.02) + 0.002·(0.05 + 0.08) = 0.201225025;
         // y'' = -0.1·radial + 0.001·(0.05 + 0.02) + 2·0.002·(-0.02) = -0.1005125125.
         // (cv2.projectPoints gives the same two numbers.)
-        let cam = Camera::new(
+        let cam = camera(
             CameraModel::BrownConrady,
             &[500.0, 400.0, 320.0, 240.0, 0.1, 0.01, 0.001, 0.002, 0.001],
             640,
             480,
-        )
-        .unwrap();
+        );
         for scale in [1.0, 3.5, 0.01] {
             let px = cam
                 .project(&(Vector3::new(0.2, -0.1, 1.0) * scale))
@@ -1172,13 +1174,12 @@ mod tests {
     #[test]
     fn kannala_brandt_closed_form_values() {
         let (k1, k2) = (0.1, 0.01);
-        let cam = Camera::new(
+        let cam = camera(
             CameraModel::KannalaBrandt,
             &[400.0, 380.0, 320.0, 240.0, k1, k2, 0.0, 0.0],
             640,
             480,
-        )
-        .unwrap();
+        );
         let td = |t: f64| t * (1.0 + k1 * t.powi(2) + k2 * t.powi(4));
         // On the axis, at 45°, at 90° (z = 0) and at 135° (behind the camera).
         let cases = [
@@ -1212,13 +1213,12 @@ mod tests {
             );
         }
         // With k = 0 the model is the equidistant projection r = f θ.
-        let eq = Camera::new(
+        let eq = camera(
             CameraModel::KannalaBrandt,
             &[300.0, 300.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
             10,
             10,
-        )
-        .unwrap();
+        );
         let p = direction(1.2, 0.7);
         let px = eq.project(&p).unwrap();
         assert!((px - Vector2::new(0.7_f64.cos(), 0.7_f64.sin()) * 300.0 * 1.2).norm() < 1e-10);
@@ -1226,13 +1226,12 @@ mod tests {
 
     #[test]
     fn zero_distortion_brown_conrady_is_pinhole() {
-        let bc = Camera::new(
+        let bc = camera(
             CameraModel::BrownConrady,
             &[520.0, 515.0, 320.0, 240.0, 0.0, 0.0, 0.0, 0.0, 0.0],
             640,
             480,
-        )
-        .unwrap();
+        );
         let pin = pinhole_camera();
         let p = Vector3::new(-0.4, 0.25, 1.3);
         let (a, ja, jpa) = bc.project_jacobians(&p).unwrap();
@@ -1310,13 +1309,12 @@ mod tests {
     #[test]
     fn kannala_brandt_monotonic_limit_matches_closed_forms() {
         let kb = |k: [f64; 4]| {
-            Camera::new(
+            camera(
                 CameraModel::KannalaBrandt,
                 &[300.0, 300.0, 320.0, 240.0, k[0], k[1], k[2], k[3]],
                 640,
                 480,
             )
-            .unwrap()
         };
         // All terms increasing: monotonic up to π.
         assert_eq!(kb([0.1, 0.01, 0.001, 0.0001]).max_incidence_angle(), PI);
@@ -1455,8 +1453,7 @@ mod tests {
             &format!("{:?} d/dpoint at {p}", cam.model()),
         );
         let num_k = central_diff(cam.params(), |k| {
-            Camera::new(cam.model(), k, cam.width(), cam.height())
-                .unwrap()
+            camera(cam.model(), k, cam.width(), cam.height())
                 .project(&p)
                 .unwrap()
         });
@@ -1466,13 +1463,12 @@ mod tests {
 
     #[test]
     fn jacobians_match_finite_differences() {
-        let stronger_bc = Camera::new(
+        let stronger_bc = camera(
             CameraModel::BrownConrady,
             &[450.0, 470.0, 300.0, 250.0, 0.3, -0.2, 0.01, -0.02, 0.05],
             640,
             480,
-        )
-        .unwrap();
+        );
         let points = [
             Vector3::new(0.3, -0.2, 1.5),
             Vector3::new(-0.9, 0.6, 1.1),
@@ -1506,13 +1502,12 @@ mod tests {
         // x'' = x (1 - x²) on the x axis: radial > 0 and increasing only for x < 1/√3. For
         // x'' = 0.3 the roots of x³ - x + 0.3 = 0 are 2/√3 cos(φ/3 - 2πk/3) with
         // φ = arccos(-0.45 √3); the one in the invertible region is k = 1.
-        let cam = Camera::new(
+        let cam = camera(
             CameraModel::BrownConrady,
             &[100.0, 100.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0],
             64,
             64,
-        )
-        .unwrap();
+        );
         let phi = (-0.45 * 3.0_f64.sqrt()).acos();
         let root = 2.0 / 3.0_f64.sqrt() * (phi / 3.0 - 2.0 * PI / 3.0).cos();
         assert!(root > 0.0 && root < 1.0 / 3.0_f64.sqrt());
@@ -1527,13 +1522,12 @@ mod tests {
     fn brown_conrady_absurd_distortion_does_not_converge() {
         // k1 = -10: the distortion folds at r = 1/√30 where x'' ≈ 0.12; x'' = 0.5 has no
         // preimage in the invertible region (only one with a negative radial factor).
-        let cam = Camera::new(
+        let cam = camera(
             CameraModel::BrownConrady,
             &[100.0, 100.0, 0.0, 0.0, -10.0, 0.0, 0.0, 0.0, 0.0],
             64,
             64,
-        )
-        .unwrap();
+        );
         match cam.unproject(&Vector2::new(50.0, 0.0)) {
             Err(GeometryError::NoConvergence { residual, .. }) => {
                 assert!(residual > 0.1, "{residual}")

@@ -104,11 +104,6 @@ impl Default for RobotParams {
 }
 
 impl RobotParams {
-    /// Parameter names in the documented order of [`RobotParams::to_array`].
-    pub const NAMES: [&'static str; N_PARAMS] = [
-        "l1", "l2", "l3", "l4", "h01", "h02", "alpha1", "alpha2", "beta_c", "cam_d", "cam_h",
-    ];
-
     /// Checks that every value is finite, the link and blade lengths `l1..l4` are positive and
     /// the camera tilt and blade pitches satisfy `|β_c|, |α1|, |α2| < 90°` (a blade pitched by
     /// 90° or more is not a blade, and the inverse kinematics' yaw extraction needs it).
@@ -147,63 +142,41 @@ impl RobotParams {
         }
         Ok(())
     }
-
-    /// The parameters as an array in the documented order [`RobotParams::NAMES`].
-    pub fn to_array(&self) -> [f64; N_PARAMS] {
-        [
-            self.l1,
-            self.l2,
-            self.l3,
-            self.l4,
-            self.h01,
-            self.h02,
-            self.alpha1,
-            self.alpha2,
-            self.beta_c,
-            self.cam_d,
-            self.cam_h,
-        ]
-    }
-
-    /// Builds and validates parameters from a slice in the order [`RobotParams::NAMES`].
-    pub fn from_slice(values: &[f64]) -> Result<Self> {
-        let &[
-            l1,
-            l2,
-            l3,
-            l4,
-            h01,
-            h02,
-            alpha1,
-            alpha2,
-            beta_c,
-            cam_d,
-            cam_h,
-        ] = values
-        else {
-            return Err(GeometryError::WrongLength {
-                what: "robot parameters",
-                got: values.len(),
-                expected: N_PARAMS,
-            });
-        };
-        let params = Self {
-            l1,
-            l2,
-            l3,
-            l4,
-            h01,
-            h02,
-            alpha1,
-            alpha2,
-            beta_c,
-            cam_d,
-            cam_h,
-        };
-        params.validate()?;
-        Ok(params)
-    }
 }
+
+/// Generates [`RobotParams::NAMES`], [`RobotParams::to_array`] and [`RobotParams::from_slice`]
+/// from one ordered field list, so the three cannot disagree on the order.
+macro_rules! param_array {
+    ($($field:ident),+ $(,)?) => {
+        impl RobotParams {
+            /// Parameter names in the documented order of [`RobotParams::to_array`].
+            pub const NAMES: [&'static str; N_PARAMS] = [$(stringify!($field)),+];
+
+            /// The parameters as an array in the documented order [`RobotParams::NAMES`].
+            pub fn to_array(&self) -> [f64; N_PARAMS] {
+                [$(self.$field),+]
+            }
+
+            /// Builds and validates parameters from a slice in the order [`RobotParams::NAMES`].
+            pub fn from_slice(values: &[f64]) -> Result<Self> {
+                let &[$($field),+] = values else {
+                    return Err(GeometryError::WrongLength {
+                        what: "robot parameters",
+                        got: values.len(),
+                        expected: N_PARAMS,
+                    });
+                };
+                let params = Self { $($field),+ };
+                params.validate()?;
+                Ok(params)
+            }
+        }
+    };
+}
+
+param_array!(
+    l1, l2, l3, l4, h01, h02, alpha1, alpha2, beta_c, cam_d, cam_h
+);
 
 /// Which of the two blades (end effectors) of the robot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

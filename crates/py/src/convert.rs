@@ -175,16 +175,7 @@ pub fn isometries(
     obj: &Bound<'_, PyAny>,
     name: &'static str,
 ) -> PyResult<(Vec<nalgebra::Isometry3<f64>>, Vec<usize>)> {
-    let (data, lead) = finite_batch(obj, name, &[4, 4], "(..., 4, 4)")?;
-    let poses = data
-        .chunks_exact(16)
-        .enumerate()
-        .map(|(i, m)| {
-            let mat = nalgebra::Matrix4::from_row_slice(m);
-            matrix_to_isometry(&mat, name).map_err(|e| with_index(e, name, i, &lead))
-        })
-        .collect::<PyResult<Vec<_>>>()?;
-    Ok((poses, lead))
+    square_batch::<4, _>(obj, name, "(..., 4, 4)", matrix_to_isometry)
 }
 
 /// Reads a batch `(..., 3, 3)` of rotation matrices (each checked by [`matrix_to_rotation`]).
@@ -192,16 +183,27 @@ pub fn rotations(
     obj: &Bound<'_, PyAny>,
     name: &'static str,
 ) -> PyResult<(Vec<nalgebra::Rotation3<f64>>, Vec<usize>)> {
-    let (data, lead) = finite_batch(obj, name, &[3, 3], "(..., 3, 3)")?;
-    let rots = data
-        .chunks_exact(9)
+    square_batch::<3, _>(obj, name, "(..., 3, 3)", matrix_to_rotation)
+}
+
+/// Reads a batch `(..., N, N)` of row-major matrices, each converted by `convert` (an item's
+/// error is prefixed with its multi-index when batched).
+fn square_batch<const N: usize, T>(
+    obj: &Bound<'_, PyAny>,
+    name: &'static str,
+    expected: &str,
+    convert: impl Fn(&nalgebra::SMatrix<f64, N, N>, &str) -> PyResult<T>,
+) -> PyResult<(Vec<T>, Vec<usize>)> {
+    let (data, lead) = finite_batch(obj, name, &[N, N], expected)?;
+    let items = data
+        .chunks_exact(N * N)
         .enumerate()
         .map(|(i, m)| {
-            let mat = nalgebra::Matrix3::from_row_slice(m);
-            matrix_to_rotation(&mat, name).map_err(|e| with_index(e, name, i, &lead))
+            let mat = nalgebra::SMatrix::<f64, N, N>::from_row_slice(m);
+            convert(&mat, name).map_err(|e| with_index(e, name, i, &lead))
         })
         .collect::<PyResult<Vec<_>>>()?;
-    Ok((rots, lead))
+    Ok((items, lead))
 }
 
 /// Prefixes an error about item `flat` of a batch with its multi-index (when batched).

@@ -307,6 +307,117 @@ fn sigmas_out<'py>(py: Python<'py>, s: &DMatrix<f64>) -> PyResult<Bound<'py, PyA
     to_numpy(py, s.as_slice().to_vec(), &[s.ncols(), s.nrows()])
 }
 
+/// Clones the object held in a per-call slot, if any.
+fn cloned<T>(slot: &Mutex<Option<Py<T>>>) -> Option<Py<T>> {
+    lock(slot)
+        .as_ref()
+        .map(|f| Python::attach(|py| f.clone_ref(py)))
+}
+
+impl PyModel {
+    /// Calls the user's `fx` or `hx` (`f`, or the per-call override in `over`) with the
+    /// per-call keyword arguments in `kwargs`.
+    fn call_user(
+        &self,
+        function: &'static str,
+        f: &Py<PyAny>,
+        over: &Mutex<Option<Py<PyAny>>>,
+        kwargs: &Mutex<Option<Py<PyDict>>>,
+        args: impl FnOnce(Python<'_>) -> PyResult<Bound<'_, PyTuple>>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        let over = cloned(over);
+        let kwargs = cloned(kwargs);
+        let f = over.as_ref().unwrap_or(f);
+        self.call(function, f, args, kwargs.as_ref(), out)
+    }
+
+    /// Calls `fx(x, dt, [w], **fx_args)`.
+    fn call_fx(
+        &self,
+        args: impl FnOnce(Python<'_>) -> PyResult<Bound<'_, PyTuple>>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        let s = &self.shared;
+        self.call_user("fx", &self.fx, &s.fx_override, &s.fx_kwargs, args, out)
+    }
+
+    /// Calls `hx(x, [v], **hx_args)`.
+    fn call_hx(
+        &self,
+        args: impl FnOnce(Python<'_>) -> PyResult<Bound<'_, PyTuple>>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        let s = &self.shared;
+        self.call_user("hx", &self.hx, &s.hx_override, &s.hx_kwargs, args, out)
+    }
+
+    /// Calls the optional hook `hook(*args)` or, without one, computes `default(out)`.
+    fn hook(
+        &self,
+        function: &'static str,
+        hook: &Option<Py<PyAny>>,
+        default: impl FnOnce(&mut DVector<f64>),
+        args: impl FnOnce(Python<'_>) -> PyResult<Bound<'_, PyTuple>>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        match hook {
+            None => {
+                default(out);
+                Ok(())
+            }
+            Some(f) => self.call(function, f, args, None, out),
+        }
+    }
+
+    /// A weighted mean: `hook(sigmas, wm)` or `sigmas · wm`.
+    fn mean(
+        &self,
+        function: &'static str,
+        hook: &Option<Py<PyAny>>,
+        sigmas: &DMatrix<f64>,
+        wm: &DVector<f64>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        self.hook(
+            function,
+            hook,
+            |out| out.gemv(1.0, sigmas, wm, 0.0),
+            |py| {
+                PyTuple::new(
+                    py,
+                    [
+                        sigmas_out(py, sigmas)?.into_any(),
+                        vec_out(py, wm).into_any(),
+                    ],
+                )
+            },
+            out,
+        )
+    }
+
+    /// A residual: `hook(a, b)` or `a - b`.
+    fn residual(
+        &self,
+        function: &'static str,
+        hook: &Option<Py<PyAny>>,
+        a: DVectorView<'_, f64>,
+        b: DVectorView<'_, f64>,
+        out: &mut DVector<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        self.hook(
+            function,
+            hook,
+            |out| {
+                out.copy_from(&a);
+                *out -= b;
+            },
+            |py| PyTuple::new(py, [view_out(py, a), view_out(py, b)]),
+            out,
+        )
+    }
+}
+
 impl UkfModel for PyModel {
     fn dim_x(&self) -> usize {
         self.dim_x
@@ -331,23 +442,13 @@ impl UkfModel for PyModel {
         _u: Option<&DVector<f64>>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        let over = lock(&self.shared.fx_override)
-            .as_ref()
-            .map(|f| Python::attach(|py| f.clone_ref(py)));
-        let kwargs = lock(&self.shared.fx_kwargs)
-            .as_ref()
-            .map(|k| Python::attach(|py| k.clone_ref(py)));
-        let f = over.as_ref().unwrap_or(&self.fx);
-        self.call(
-            "fx",
-            f,
+        self.call_fx(
             |py| {
                 PyTuple::new(
                     py,
                     [view_out(py, x).into_any(), dt.into_pyobject(py)?.into_any()],
                 )
             },
-            kwargs.as_ref(),
             out,
         )
     }
@@ -357,20 +458,7 @@ impl UkfModel for PyModel {
         x: DVectorView<'_, f64>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        let over = lock(&self.shared.hx_override)
-            .as_ref()
-            .map(|f| Python::attach(|py| f.clone_ref(py)));
-        let kwargs = lock(&self.shared.hx_kwargs)
-            .as_ref()
-            .map(|k| Python::attach(|py| k.clone_ref(py)));
-        let f = over.as_ref().unwrap_or(&self.hx);
-        self.call(
-            "hx",
-            f,
-            |py| PyTuple::new(py, [view_out(py, x)]),
-            kwargs.as_ref(),
-            out,
-        )
+        self.call_hx(|py| PyTuple::new(py, [view_out(py, x)]), out)
     }
 
     fn fx_noise(
@@ -381,16 +469,7 @@ impl UkfModel for PyModel {
         _u: Option<&DVector<f64>>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        let over = lock(&self.shared.fx_override)
-            .as_ref()
-            .map(|f| Python::attach(|py| f.clone_ref(py)));
-        let kwargs = lock(&self.shared.fx_kwargs)
-            .as_ref()
-            .map(|k| Python::attach(|py| k.clone_ref(py)));
-        let f = over.as_ref().unwrap_or(&self.fx);
-        self.call(
-            "fx",
-            f,
+        self.call_fx(
             |py| {
                 PyTuple::new(
                     py,
@@ -401,7 +480,6 @@ impl UkfModel for PyModel {
                     ],
                 )
             },
-            kwargs.as_ref(),
             out,
         )
     }
@@ -412,18 +490,8 @@ impl UkfModel for PyModel {
         v: DVectorView<'_, f64>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        let over = lock(&self.shared.hx_override)
-            .as_ref()
-            .map(|f| Python::attach(|py| f.clone_ref(py)));
-        let kwargs = lock(&self.shared.hx_kwargs)
-            .as_ref()
-            .map(|k| Python::attach(|py| k.clone_ref(py)));
-        let f = over.as_ref().unwrap_or(&self.hx);
-        self.call(
-            "hx",
-            f,
+        self.call_hx(
             |py| PyTuple::new(py, [view_out(py, x), view_out(py, v)]),
-            kwargs.as_ref(),
             out,
         )
     }
@@ -434,27 +502,7 @@ impl UkfModel for PyModel {
         wm: &DVector<f64>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        match &self.hooks.x_mean {
-            None => {
-                out.gemv(1.0, sigmas, wm, 0.0);
-                Ok(())
-            }
-            Some(f) => self.call(
-                "x_mean_fn",
-                f,
-                |py| {
-                    PyTuple::new(
-                        py,
-                        [
-                            sigmas_out(py, sigmas)?.into_any(),
-                            vec_out(py, wm).into_any(),
-                        ],
-                    )
-                },
-                None,
-                out,
-            ),
-        }
+        self.mean("x_mean_fn", &self.hooks.x_mean, sigmas, wm, out)
     }
 
     fn z_mean(
@@ -463,27 +511,7 @@ impl UkfModel for PyModel {
         wm: &DVector<f64>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        match &self.hooks.z_mean {
-            None => {
-                out.gemv(1.0, sigmas, wm, 0.0);
-                Ok(())
-            }
-            Some(f) => self.call(
-                "z_mean_fn",
-                f,
-                |py| {
-                    PyTuple::new(
-                        py,
-                        [
-                            sigmas_out(py, sigmas)?.into_any(),
-                            vec_out(py, wm).into_any(),
-                        ],
-                    )
-                },
-                None,
-                out,
-            ),
-        }
+        self.mean("z_mean_fn", &self.hooks.z_mean, sigmas, wm, out)
     }
 
     fn x_residual(
@@ -492,20 +520,7 @@ impl UkfModel for PyModel {
         b: DVectorView<'_, f64>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        match &self.hooks.residual_x {
-            None => {
-                out.copy_from(&a);
-                *out -= b;
-                Ok(())
-            }
-            Some(f) => self.call(
-                "residual_x",
-                f,
-                |py| PyTuple::new(py, [view_out(py, a), view_out(py, b)]),
-                None,
-                out,
-            ),
-        }
+        self.residual("residual_x", &self.hooks.residual_x, a, b, out)
     }
 
     fn z_residual(
@@ -514,20 +529,7 @@ impl UkfModel for PyModel {
         b: DVectorView<'_, f64>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        match &self.hooks.residual_z {
-            None => {
-                out.copy_from(&a);
-                *out -= b;
-                Ok(())
-            }
-            Some(f) => self.call(
-                "residual_z",
-                f,
-                |py| PyTuple::new(py, [view_out(py, a), view_out(py, b)]),
-                None,
-                out,
-            ),
-        }
+        self.residual("residual_z", &self.hooks.residual_z, a, b, out)
     }
 
     fn x_add(
@@ -536,20 +538,16 @@ impl UkfModel for PyModel {
         dx: DVectorView<'_, f64>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        match &self.hooks.state_add {
-            None => {
+        self.hook(
+            "state_add",
+            &self.hooks.state_add,
+            |out| {
                 out.copy_from(&x);
                 *out += dx;
-                Ok(())
-            }
-            Some(f) => self.call(
-                "state_add",
-                f,
-                |py| PyTuple::new(py, [view_out(py, x), view_out(py, dx)]),
-                None,
-                out,
-            ),
-        }
+            },
+            |py| PyTuple::new(py, [view_out(py, x), view_out(py, dx)]),
+            out,
+        )
     }
 
     fn sigma_add(
@@ -558,28 +556,24 @@ impl UkfModel for PyModel {
         offset: DVectorView<'_, f64>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
-        match &self.hooks.subtract {
-            None => {
+        self.hook(
+            "subtract",
+            &self.hooks.subtract,
+            |out| {
                 out.copy_from(&x);
                 *out += offset;
-                Ok(())
-            }
-            Some(f) => self.call(
-                "subtract",
-                f,
-                |py| {
-                    PyTuple::new(
-                        py,
-                        [
-                            view_out(py, x),
-                            PyArray1::from_iter(py, offset.iter().map(|v| -v)),
-                        ],
-                    )
-                },
-                None,
-                out,
-            ),
-        }
+            },
+            |py| {
+                PyTuple::new(
+                    py,
+                    [
+                        view_out(py, x),
+                        PyArray1::from_iter(py, offset.iter().map(|v| -v)),
+                    ],
+                )
+            },
+            out,
+        )
     }
 
     fn sqrt_cov(

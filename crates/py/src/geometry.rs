@@ -106,6 +106,24 @@ where
     }
 }
 
+/// [`map_items`] over a batch with leading shape `lead`, returned as a NumPy array of shape
+/// `lead + item_shape` (each item writes `item_shape.iter().product()` values).
+fn map_batch<'py, T, F>(
+    py: Python<'py>,
+    items: &[T],
+    lead: &[usize],
+    item_shape: &[usize],
+    f: F,
+) -> Array<'py>
+where
+    T: Sync,
+    F: Fn(&T, &mut [f64]) -> autoteach_geometry::Result<()> + Sync,
+{
+    let out_len = item_shape.iter().product();
+    let out = map_items(py, items, !lead.is_empty(), out_len, f)?;
+    to_numpy(py, out, &batched_shape(lead, item_shape))
+}
+
 /// Splits validated row-major data into items of `n` values.
 fn chunks(data: &[f64], n: usize) -> Vec<&[f64]> {
     data.chunks_exact(n).collect()
@@ -167,11 +185,10 @@ fn pose_array<'py>(py: Python<'py>, t: &Isometry3<f64>) -> Array<'py> {
 #[pyfunction]
 fn so3_exp<'py>(py: Python<'py>, omega: &Bound<'py, PyAny>) -> Array<'py> {
     let (w, lead) = vectors::<3>(omega, "omega", "(..., 3)")?;
-    let out = map_items(py, &w, !lead.is_empty(), 9, |w, o| {
+    map_batch(py, &w, &lead, &[3, 3], |w, o| {
         write_rows(lie::so3_exp(w).matrix(), o);
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[3, 3]))
+    })
 }
 
 /// Rotation vectors `Log(R)`: `(..., 3, 3)` → `(..., 3)`.
@@ -180,22 +197,20 @@ fn so3_exp<'py>(py: Python<'py>, omega: &Bound<'py, PyAny>) -> Array<'py> {
 #[allow(non_snake_case)]
 fn so3_log<'py>(py: Python<'py>, R: &Bound<'py, PyAny>) -> Array<'py> {
     let (r, lead) = convert::rotations(R, "R")?;
-    let out = map_items(py, &r, !lead.is_empty(), 3, |r, o| {
+    map_batch(py, &r, &lead, &[3], |r, o| {
         o.copy_from_slice(lie::so3_log(r).as_slice());
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[3]))
+    })
 }
 
 /// Poses `Exp(ξ)`, `ξ = [ω; ρ]`: `(..., 6)` → `(..., 4, 4)`.
 #[pyfunction]
 fn se3_exp<'py>(py: Python<'py>, xi: &Bound<'py, PyAny>) -> Array<'py> {
     let (x, lead) = vectors::<6>(xi, "xi", "(..., 6)")?;
-    let out = map_items(py, &x, !lead.is_empty(), 16, |x, o| {
+    map_batch(py, &x, &lead, &[4, 4], |x, o| {
         write_rows(&lie::se3_exp(x).to_homogeneous(), o);
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[4, 4]))
+    })
 }
 
 /// Twists `Log(T)`: `(..., 4, 4)` → `(..., 6)`.
@@ -204,11 +219,10 @@ fn se3_exp<'py>(py: Python<'py>, xi: &Bound<'py, PyAny>) -> Array<'py> {
 #[allow(non_snake_case)]
 fn se3_log<'py>(py: Python<'py>, T: &Bound<'py, PyAny>) -> Array<'py> {
     let (t, lead) = convert::isometries(T, "T")?;
-    let out = map_items(py, &t, !lead.is_empty(), 6, |t, o| {
+    map_batch(py, &t, &lead, &[6], |t, o| {
         o.copy_from_slice(lie::se3_log(t).as_slice());
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[6]))
+    })
 }
 
 /// Fails unless two batch shapes are equal (the Python wrappers broadcast first).
@@ -233,11 +247,10 @@ fn se3_plus<'py>(py: Python<'py>, T: &Bound<'py, PyAny>, xi: &Bound<'py, PyAny>)
     let (x, lead_x) = vectors::<6>(xi, "xi", "(..., 6)")?;
     same_batch(&lead, "T", &lead_x, "xi")?;
     let pairs: Vec<(Isometry3<f64>, Vector6<f64>)> = t.into_iter().zip(x).collect();
-    let out = map_items(py, &pairs, !lead.is_empty(), 16, |(t, x), o| {
+    map_batch(py, &pairs, &lead, &[4, 4], |(t, x), o| {
         write_rows(&lie::se3_plus(t, x).to_homogeneous(), o);
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[4, 4]))
+    })
 }
 
 /// `Y ⊖ X = Log(X⁻¹·Y)`: two `(..., 4, 4)` (same leading shape) → `(..., 6)`.
@@ -249,11 +262,10 @@ fn se3_minus<'py>(py: Python<'py>, Y: &Bound<'py, PyAny>, X: &Bound<'py, PyAny>)
     let (x, lead_x) = convert::isometries(X, "X")?;
     same_batch(&lead, "Y", &lead_x, "X")?;
     let pairs: Vec<(Isometry3<f64>, Isometry3<f64>)> = y.into_iter().zip(x).collect();
-    let out = map_items(py, &pairs, !lead.is_empty(), 6, |(y, x), o| {
+    map_batch(py, &pairs, &lead, &[6], |(y, x), o| {
         o.copy_from_slice(lie::se3_minus(y, x).as_slice());
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[6]))
+    })
 }
 
 /// Rotation matrices of quaternions `(w, x, y, z)`: `(..., 4)` → `(..., 3, 3)`.
@@ -261,12 +273,11 @@ fn se3_minus<'py>(py: Python<'py>, Y: &Bound<'py, PyAny>, X: &Bound<'py, PyAny>)
 fn quat_to_matrix<'py>(py: Python<'py>, q: &Bound<'py, PyAny>) -> Array<'py> {
     let (data, lead) = finite_batch(q, "q", &[4], "(..., 4)")?;
     let items = chunks(&data, 4);
-    let out = map_items(py, &items, !lead.is_empty(), 9, |q, o| {
+    map_batch(py, &items, &lead, &[3, 3], |q, o| {
         let wxyz = [q[0], q[1], q[2], q[3]];
         write_rows(lie::quat_from_wxyz(&wxyz)?.to_rotation_matrix().matrix(), o);
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[3, 3]))
+    })
 }
 
 /// Unit quaternions `(w, x, y, z)`, `w ≥ 0`, of rotation matrices: `(..., 3, 3)` → `(..., 4)`.
@@ -275,7 +286,7 @@ fn quat_to_matrix<'py>(py: Python<'py>, q: &Bound<'py, PyAny>) -> Array<'py> {
 #[allow(non_snake_case)]
 fn matrix_to_quat<'py>(py: Python<'py>, R: &Bound<'py, PyAny>) -> Array<'py> {
     let (r, lead) = convert::rotations(R, "R")?;
-    let out = map_items(py, &r, !lead.is_empty(), 4, |r, o| {
+    map_batch(py, &r, &lead, &[4], |r, o| {
         let q = lie::quat_to_wxyz(&nalgebra::UnitQuaternion::from_rotation_matrix(r));
         // q and −q are the same rotation: report the one with w ≥ 0.
         let sign = if q[0] < 0.0 { -1.0 } else { 1.0 };
@@ -283,19 +294,17 @@ fn matrix_to_quat<'py>(py: Python<'py>, R: &Bound<'py, PyAny>) -> Array<'py> {
             *o = sign * v;
         }
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[4]))
+    })
 }
 
 /// Rotation matrices `Rz(yaw)·Ry(pitch)·Rx(roll)`: `(..., 3)` → `(..., 3, 3)`.
 #[pyfunction]
 fn euler_zyx_to_matrix<'py>(py: Python<'py>, angles: &Bound<'py, PyAny>) -> Array<'py> {
     let (a, lead) = vectors::<3>(angles, "angles", "(..., 3)")?;
-    let out = map_items(py, &a, !lead.is_empty(), 9, |a, o| {
+    map_batch(py, &a, &lead, &[3, 3], |a, o| {
         write_rows(lie::rotation_from_euler_zyx(a[0], a[1], a[2]).matrix(), o);
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[3, 3]))
+    })
 }
 
 /// `(yaw, pitch, roll)` of rotation matrices: `(..., 3, 3)` → `(..., 3)`.
@@ -304,23 +313,21 @@ fn euler_zyx_to_matrix<'py>(py: Python<'py>, angles: &Bound<'py, PyAny>) -> Arra
 #[allow(non_snake_case)]
 fn matrix_to_euler_zyx<'py>(py: Python<'py>, R: &Bound<'py, PyAny>) -> Array<'py> {
     let (r, lead) = convert::rotations(R, "R")?;
-    let out = map_items(py, &r, !lead.is_empty(), 3, |r, o| {
+    map_batch(py, &r, &lead, &[3], |r, o| {
         let (yaw, pitch, roll) = lie::euler_zyx(r);
         o.copy_from_slice(&[yaw, pitch, roll]);
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[3]))
+    })
 }
 
 /// Rotation matrices `Rx(a)·Ry(b)·Rz(c)`: `(..., 3)` → `(..., 3, 3)`.
 #[pyfunction]
 fn euler_xyz_to_matrix<'py>(py: Python<'py>, angles: &Bound<'py, PyAny>) -> Array<'py> {
     let (a, lead) = vectors::<3>(angles, "angles", "(..., 3)")?;
-    let out = map_items(py, &a, !lead.is_empty(), 9, |a, o| {
+    map_batch(py, &a, &lead, &[3, 3], |a, o| {
         write_rows(lie::rotation_from_euler_xyz(a[0], a[1], a[2]).matrix(), o);
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[3, 3]))
+    })
 }
 
 /// `(a, b, c)` of rotation matrices `Rx(a)·Ry(b)·Rz(c)`: `(..., 3, 3)` → `(..., 3)`.
@@ -329,12 +336,11 @@ fn euler_xyz_to_matrix<'py>(py: Python<'py>, angles: &Bound<'py, PyAny>) -> Arra
 #[allow(non_snake_case)]
 fn matrix_to_euler_xyz<'py>(py: Python<'py>, R: &Bound<'py, PyAny>) -> Array<'py> {
     let (r, lead) = convert::rotations(R, "R")?;
-    let out = map_items(py, &r, !lead.is_empty(), 3, |r: &Rotation3<f64>, o| {
+    map_batch(py, &r, &lead, &[3], |r: &Rotation3<f64>, o| {
         let (a, b, c) = lie::euler_xyz(r);
         o.copy_from_slice(&[a, b, c]);
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[3]))
+    })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -446,11 +452,10 @@ impl PyWaferRobot {
     fn blade_pose<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, blade: i64) -> Array<'py> {
         let blade = blade_arg(blade)?;
         let (qs, lead) = joints(q, "q")?;
-        let out = map_items(py, &qs, !lead.is_empty(), 16, |q, o| {
+        map_batch(py, &qs, &lead, &[4, 4], |q, o| {
             write_rows(&self.inner.blade_pose(q, blade).to_homogeneous(), o);
             Ok(())
-        })?;
-        to_numpy(py, out, &batched_shape(&lead, &[4, 4]))
+        })
     }
 
     /// World camera poses `T_wc`: `(..., 5)` → `(..., 4, 4)`.
@@ -470,32 +475,29 @@ impl PyWaferRobot {
     /// Camera poses in the base `T_bc`: `(..., 5)` → `(..., 4, 4)`.
     fn camera_pose_in_base<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> Array<'py> {
         let (qs, lead) = joints(q, "q")?;
-        let out = map_items(py, &qs, !lead.is_empty(), 16, |q, o| {
+        map_batch(py, &qs, &lead, &[4, 4], |q, o| {
             write_rows(&self.inner.camera_pose_in_base(q).to_homogeneous(), o);
             Ok(())
-        })?;
-        to_numpy(py, out, &batched_shape(&lead, &[4, 4]))
+        })
     }
 
     /// Blade Jacobians: `(..., 5)` → `(..., 4, 5)`.
     fn jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, blade: i64) -> Array<'py> {
         let blade = blade_arg(blade)?;
         let (qs, lead) = joints(q, "q")?;
-        let out = map_items(py, &qs, !lead.is_empty(), 20, |q, o| {
+        map_batch(py, &qs, &lead, &[4, 5], |q, o| {
             write_rows(&self.inner.jacobian(q, blade), o);
             Ok(())
-        })?;
-        to_numpy(py, out, &batched_shape(&lead, &[4, 5]))
+        })
     }
 
     /// Camera-pose Jacobians (right-perturbation twists per joint): `(..., 5)` → `(..., 6, 5)`.
     fn camera_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> Array<'py> {
         let (qs, lead) = joints(q, "q")?;
-        let out = map_items(py, &qs, !lead.is_empty(), 30, |q, o| {
+        map_batch(py, &qs, &lead, &[6, 5], |q, o| {
             write_rows(&self.inner.camera_jacobian(q), o);
             Ok(())
-        })?;
-        to_numpy(py, out, &batched_shape(&lead, &[6, 5]))
+        })
     }
 
     /// Blade accelerations: three `(..., 5)` (same leading shape) → `(..., 4)`.
@@ -519,11 +521,10 @@ impl PyWaferRobot {
             .zip(qdds)
             .map(|((a, b), c)| (a, b, c))
             .collect();
-        let out = map_items(py, &items, !lead.is_empty(), 4, |(q, qd, qdd), o| {
+        map_batch(py, &items, &lead, &[4], |(q, qd, qdd), o| {
             o.copy_from_slice(self.inner.acceleration(q, qd, qdd, blade).as_slice());
             Ok(())
-        })?;
-        to_numpy(py, out, &batched_shape(&lead, &[4]))
+        })
     }
 
     /// All joint vectors reaching the blade pose `T` (base frame): `(k, 5)`.
@@ -586,11 +587,10 @@ fn joints_from_encoders<'py>(
 ) -> Array<'py> {
     let (qs, lead) = joints(q_enc, "q_enc")?;
     let offsets: Vector5<f64> = vector::<5>(offsets, "offsets")?;
-    let out = map_items(py, &qs, !lead.is_empty(), 5, |q, o| {
+    map_batch(py, &qs, &lead, &[5], |q, o| {
         o.copy_from_slice(robot::joints_from_encoders(q, &offsets).as_slice());
         Ok(())
-    })?;
-    to_numpy(py, out, &batched_shape(&lead, &[5]))
+    })
 }
 
 /// Extracts the core robot from a compiled `_core.WaferRobot` or a Python wrapper holding one
@@ -925,11 +925,10 @@ impl PyEllipse {
     /// Points at eccentric angles: `(...)` → `(..., 2)`.
     fn point_at<'py>(&self, py: Python<'py>, t: &Bound<'py, PyAny>) -> Array<'py> {
         let (ts, lead) = finite_batch(t, "t", &[], "(...)")?;
-        let out = map_items(py, &ts, !lead.is_empty(), 2, |t, o| {
+        map_batch(py, &ts, &lead, &[2], |t, o| {
             o.copy_from_slice(self.inner.point_at(*t).as_slice());
             Ok(())
-        })?;
-        to_numpy(py, out, &batched_shape(&lead, &[2]))
+        })
     }
 
     /// `n` points at evenly spaced eccentric angles from `t0` to `t1`: `(n, 2)`.

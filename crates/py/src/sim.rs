@@ -58,6 +58,21 @@ fn scene(
     })
 }
 
+/// Reads the arguments shared by the frame functions, in the order they are validated: the
+/// camera `(model, params, width, height)`, the scene (`wafer_poses` and
+/// `(radius, thickness, carrier)`) and the camera pose `t_wc`.
+fn frame(
+    wafer_poses: &Bound<'_, PyAny>,
+    (model, params, width, height): (&str, &Bound<'_, PyAny>, i64, i64),
+    t_wc: &Bound<'_, PyAny>,
+    (radius, thickness, carrier): (f64, f64, bool),
+) -> PyResult<(Scene, Camera, Isometry3<f64>)> {
+    let cam = camera(model, params, width, height)?;
+    let scene = scene(wafer_poses, radius, thickness, carrier)?;
+    let t_wc = convert::isometry(t_wc, "t_wc")?;
+    Ok((scene, cam, t_wc))
+}
+
 /// Renders one grayscale frame of the simulated wafer carrier.
 ///
 /// Wafers are discs of `wafer_radius` and `wafer_thickness` (metres) at poses `wafer_poses`
@@ -90,9 +105,12 @@ fn render_frame<'py>(
     supersample: i64,
     seed: i128,
 ) -> PyResult<Bound<'py, PyArray2<u8>>> {
-    let cam = camera(camera_model, camera_params, width, height)?;
-    let scene = scene(wafer_poses, wafer_radius, wafer_thickness, carrier)?;
-    let t_wc = convert::isometry(t_wc, "t_wc")?;
+    let (scene, cam, t_wc) = frame(
+        wafer_poses,
+        (camera_model, camera_params, width, height),
+        t_wc,
+        (wafer_radius, wafer_thickness, carrier),
+    )?;
     if !(1..=16).contains(&supersample) {
         return Err(errors::invalid_input(format!(
             "supersample must be in 1..=16, got {supersample}"
@@ -162,9 +180,12 @@ fn rim_visibility<'py>(
     carrier: bool,
     n_samples: i64,
 ) -> PyResult<Bound<'py, PyList>> {
-    let cam = camera(camera_model, camera_params, width, height)?;
-    let scene = scene(wafer_poses, wafer_radius, wafer_thickness, carrier)?;
-    let t_wc = convert::isometry(t_wc, "t_wc")?;
+    let (scene, cam, t_wc) = frame(
+        wafer_poses,
+        (camera_model, camera_params, width, height),
+        t_wc,
+        (wafer_radius, wafer_thickness, carrier),
+    )?;
     if !(3..=1_000_000).contains(&n_samples) {
         return Err(errors::invalid_input(format!(
             "n_samples must be in 3..=1000000, got {n_samples}"
@@ -203,9 +224,12 @@ fn rim_points_visible<'py>(
     wafer_thickness: f64,
     carrier: bool,
 ) -> PyResult<Bound<'py, PyArray1<bool>>> {
-    let cam = camera(camera_model, camera_params, width, height)?;
-    let scene = scene(wafer_poses, wafer_radius, wafer_thickness, carrier)?;
-    let t_wc: Isometry3<f64> = convert::isometry(t_wc, "t_wc")?;
+    let (scene, cam, t_wc) = frame(
+        wafer_poses,
+        (camera_model, camera_params, width, height),
+        t_wc,
+        (wafer_radius, wafer_thickness, carrier),
+    )?;
     let rim = match rim {
         "upper" => Rim::Upper,
         "lower" => Rim::Lower,

@@ -225,20 +225,23 @@ def simulate_session(
     rims: list[list[dict[str, Any]]] = []
     params = np.asarray(config.camera_params, dtype=np.float64)
     slots = np.array(config.slots, dtype=np.int64)
+    scene_kwargs = {
+        "wafer_radius": config.wafer_radius,
+        "wafer_thickness": config.wafer_thickness,
+        "carrier": config.carrier,
+    }
+
+    def frame_args(i: int) -> tuple[Any, ...]:
+        """Positional arguments (scene, camera, pose) of the per-frame compiled calls."""
+        return (poses, config.camera_model, params, config.width, config.height, camera_poses[i])
+
     t_render = t_vis = 0.0
     for i in tqdm(range(frames), desc="rendering", unit="frame", disable=not progress, leave=False):
         t0 = time.perf_counter()
         if render:
             images[i] = _core.render_frame(
-                poses,
-                config.camera_model,
-                params,
-                config.width,
-                config.height,
-                camera_poses[i],
-                wafer_radius=config.wafer_radius,
-                wafer_thickness=config.wafer_thickness,
-                carrier=config.carrier,
+                *frame_args(i),
+                **scene_kwargs,
                 gain=float(gains[i]),
                 gradient=(float(gradients[i, 0]), float(gradients[i, 1])),
                 blur_sigma=config.blur_sigma,
@@ -248,15 +251,8 @@ def simulate_session(
             )
         t1 = time.perf_counter()
         vis = _core.rim_visibility(
-            poses,
-            config.camera_model,
-            params,
-            config.width,
-            config.height,
-            camera_poses[i],
-            wafer_radius=config.wafer_radius,
-            wafer_thickness=config.wafer_thickness,
-            carrier=config.carrier,
+            *frame_args(i),
+            **scene_kwargs,
             n_samples=config.n_rim_samples,
         )
         rims.append([_normalise_rim(r, slots) for r in vis])

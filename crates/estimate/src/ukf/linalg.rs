@@ -262,6 +262,85 @@ pub(crate) fn psd_sqrt(m: &DMatrix<f64>, what: &str) -> Result<DMatrix<f64>> {
     Ok(&eig.eigenvectors * DMatrix::from_diagonal(&d))
 }
 
+/// A validated noise covariance (Q or R) of size `d × d` and its square root
+/// ([`psd_sqrt`]); the setters of both filters use it.
+pub(crate) fn noise_input(
+    m: &DMatrix<f64>,
+    d: usize,
+    what: &str,
+) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+    let m = validate_covariance_input(m, d, what)?;
+    let sqrt = psd_sqrt(&m, what)?;
+    Ok((m, sqrt))
+}
+
+/// A validated user covariance P of size `n × n` and its Cholesky factor. A P that is not
+/// positive definite fails, or (repair policy) is replaced by its eigenvalue-clipped form
+/// (`repairs` is incremented). Returns (P as used, its lower factor).
+pub(crate) fn covariance_input(
+    p: &DMatrix<f64>,
+    n: usize,
+    policy: CovariancePolicy,
+    repairs: &mut usize,
+) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+    let p = validate_covariance_input(p, n, "covariance P")?;
+    if let Some(l) = cholesky(&p) {
+        return Ok((p, l));
+    }
+    if policy == CovariancePolicy::Repair {
+        let fixed = clip_eigenvalues(&p).and_then(|f| {
+            let l = cholesky(&f)?;
+            Some((f, l))
+        });
+        return match fixed {
+            Some(fl) => {
+                *repairs += 1;
+                Ok(fl)
+            }
+            None => Err(EstimateError::InvalidCovariance {
+                what: "covariance P".to_string(),
+                asymmetry: 0.0,
+                min_eigenvalue: min_eigenvalue(&p),
+            }),
+        };
+    }
+    Err(EstimateError::InvalidCovariance {
+        what: "covariance P (must be positive definite)".to_string(),
+        asymmetry: 0.0,
+        min_eigenvalue: min_eigenvalue(&p),
+    })
+}
+
+/// Checks a user state `x` against the length `n` and for finiteness.
+pub(crate) fn state_input(x: &DVector<f64>, n: usize) -> Result<()> {
+    check_len(x, n, "state x")?;
+    check_finite_input(x.as_slice(), "state x")
+}
+
+/// Checks the inputs of a prediction: a finite time step `dt` and an optional control input
+/// `u` for a model taking `du` inputs (0: none).
+pub(crate) fn check_predict_inputs(dt: f64, u: Option<&DVector<f64>>, du: usize) -> Result<()> {
+    if !dt.is_finite() {
+        return Err(EstimateError::NonFiniteInput {
+            what: "time step dt".to_string(),
+            index: 0,
+            value: dt,
+        });
+    }
+    if let Some(u) = u {
+        if du == 0 {
+            return Err(EstimateError::DimensionMismatch {
+                what: "input u (the model takes no input)".to_string(),
+                expected: vec![0],
+                got: vec![u.len()],
+            });
+        }
+        check_len(u, du, "input u")?;
+        check_finite_input(u.as_slice(), "input u")?;
+    }
+    Ok(())
+}
+
 /// Rank-1 update (`sign = +1`) or downdate (`sign = −1`) of a lower Cholesky factor in place:
 /// `L Lᵀ ← L Lᵀ + sign · x xᵀ` (`x` is overwritten). Returns `false` (leaving `l` partly
 /// modified) when a downdate would lose positive definiteness. Golub & Van Loan, "Matrix

@@ -49,4 +49,6 @@ pub use sqrt::SquareRootUkf;
 pub use standard::UnscentedKalmanFilter;
 
 #[cfg(test)]
+mod fixtures;
+#[cfg(test)]
 mod tests;

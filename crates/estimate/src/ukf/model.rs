@@ -88,23 +88,19 @@ pub trait UkfModel {
         u: Option<&DVector<f64>>,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
-        let mut tmp = DVector::zeros(out.nrows());
-        for i in 0..sigmas.ncols() {
-            self.fx(sigmas.column(i), dt, u, &mut tmp)?;
-            out.set_column(i, &tmp);
-        }
-        Ok(())
+        let len = out.nrows();
+        columnwise(len, sigmas.ncols(), out, |i, tmp| {
+            self.fx(sigmas.column(i), dt, u, tmp)
+        })
     }
 
     /// `h` applied to every column of `sigmas`, into the columns of `out` (`dim_z × N`).
     /// The default calls [`hx`](Self::hx) per column.
     fn hx_sigmas(&self, sigmas: &DMatrix<f64>, out: &mut DMatrix<f64>) -> Result<()> {
-        let mut tmp = DVector::zeros(out.nrows());
-        for i in 0..sigmas.ncols() {
-            self.hx(sigmas.column(i), &mut tmp)?;
-            out.set_column(i, &tmp);
-        }
-        Ok(())
+        let len = out.nrows();
+        columnwise(len, sigmas.ncols(), out, |i, tmp| {
+            self.hx(sigmas.column(i), tmp)
+        })
     }
 
     /// `sigmas[:, i] ⊖ mean` for every column, into `out`. The default calls
@@ -115,12 +111,10 @@ pub trait UkfModel {
         mean: &DVector<f64>,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
-        let mut tmp = DVector::zeros(out.nrows());
-        for i in 0..sigmas.ncols() {
-            self.x_residual(sigmas.column(i), mean.column(0), &mut tmp)?;
-            out.set_column(i, &tmp);
-        }
-        Ok(())
+        let len = out.nrows();
+        columnwise(len, sigmas.ncols(), out, |i, tmp| {
+            self.x_residual(sigmas.column(i), mean.column(0), tmp)
+        })
     }
 
     /// `sigmas[:, i] ⊖ mean` for measurement sigma points. The default calls
@@ -131,12 +125,10 @@ pub trait UkfModel {
         mean: &DVector<f64>,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
-        let mut tmp = DVector::zeros(out.nrows());
-        for i in 0..sigmas.ncols() {
-            self.z_residual(sigmas.column(i), mean.column(0), &mut tmp)?;
-            out.set_column(i, &tmp);
-        }
-        Ok(())
+        let len = out.nrows();
+        columnwise(len, sigmas.ncols(), out, |i, tmp| {
+            self.z_residual(sigmas.column(i), mean.column(0), tmp)
+        })
     }
 
     /// The process function with explicit noise (augmented form): default `f(x, dt, u) ⊕ w`,
@@ -175,13 +167,7 @@ pub trait UkfModel {
         wm: &DVector<f64>,
         out: &mut DVector<f64>,
     ) -> Result<()> {
-        kernels::weighted_sum(
-            sigmas.nrows(),
-            sigmas.as_slice(),
-            wm.as_slice(),
-            out.as_mut_slice(),
-        );
-        Ok(())
+        weighted_mean(sigmas, wm, out)
     }
 
     /// Weighted mean of the measurement sigma points. Default: `sigmas · wm`.
@@ -191,13 +177,7 @@ pub trait UkfModel {
         wm: &DVector<f64>,
         out: &mut DVector<f64>,
     ) -> Result<()> {
-        kernels::weighted_sum(
-            sigmas.nrows(),
-            sigmas.as_slice(),
-            wm.as_slice(),
-            out.as_mut_slice(),
-        );
-        Ok(())
+        weighted_mean(sigmas, wm, out)
     }
 
     /// State residual `a ⊖ b`. Default: `a − b`.
@@ -207,9 +187,7 @@ pub trait UkfModel {
         b: DVectorView<'_, f64>,
         out: &mut DVector<f64>,
     ) -> Result<()> {
-        out.copy_from(&a);
-        *out -= b;
-        Ok(())
+        difference(a, b, out)
     }
 
     /// Measurement residual `a ⊖ b`. Default: `a − b`.
@@ -219,9 +197,7 @@ pub trait UkfModel {
         b: DVectorView<'_, f64>,
         out: &mut DVector<f64>,
     ) -> Result<()> {
-        out.copy_from(&a);
-        *out -= b;
-        Ok(())
+        difference(a, b, out)
     }
 
     /// State update `x ⊕ δ`. Default: `x + δ`.
@@ -257,12 +233,9 @@ pub trait UkfModel {
         offsets: &DMatrix<f64>,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
-        let mut tmp = DVector::zeros(x.len());
-        for i in 0..offsets.ncols() {
-            self.sigma_add(x.column(0), offsets.column(i), &mut tmp)?;
-            out.set_column(i, &tmp);
-        }
-        Ok(())
+        columnwise(x.len(), offsets.ncols(), out, |i, tmp| {
+            self.sigma_add(x.column(0), offsets.column(i), tmp)
+        })
     }
 
     /// An optional custom matrix square root: `Some(A)` with `A Aᵀ = scale · p` whose
@@ -273,6 +246,44 @@ pub trait UkfModel {
         let _ = (p, scale);
         None
     }
+}
+
+/// Fills the first `ncols` columns of `out` with `f(i, tmp)` (`tmp` of length `len`): the
+/// per-column defaults of [`UkfModel`].
+fn columnwise(
+    len: usize,
+    ncols: usize,
+    out: &mut DMatrix<f64>,
+    mut f: impl FnMut(usize, &mut DVector<f64>) -> Result<()>,
+) -> Result<()> {
+    let mut tmp = DVector::zeros(len);
+    for i in 0..ncols {
+        f(i, &mut tmp)?;
+        out.set_column(i, &tmp);
+    }
+    Ok(())
+}
+
+/// `out = sigmas · wm` (the default weighted means).
+fn weighted_mean(sigmas: &DMatrix<f64>, wm: &DVector<f64>, out: &mut DVector<f64>) -> Result<()> {
+    kernels::weighted_sum(
+        sigmas.nrows(),
+        sigmas.as_slice(),
+        wm.as_slice(),
+        out.as_mut_slice(),
+    );
+    Ok(())
+}
+
+/// `out = a − b` (the default residuals).
+fn difference(
+    a: DVectorView<'_, f64>,
+    b: DVectorView<'_, f64>,
+    out: &mut DVector<f64>,
+) -> Result<()> {
+    out.copy_from(&a);
+    *out -= b;
+    Ok(())
 }
 
 macro_rules! forward_model {

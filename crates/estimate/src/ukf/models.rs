@@ -7,24 +7,59 @@ use super::linalg;
 use super::model::UkfModel;
 use crate::{EstimateError, Result};
 
-/// `out[:, i] = x + offsets[:, i]`.
-fn vector_sigma_points(x: &DVector<f64>, offsets: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-    kernels::add_columns(
-        x.len(),
-        x.as_slice(),
-        offsets.as_slice(),
-        out.as_mut_slice(),
-    );
+/// The whole-matrix overrides of [`UkfModel`] for models whose state and measurement are
+/// plain vectors: `out[:, i] = sigmas[:, i] − mean` for both residuals and
+/// `out[:, i] = x + offsets[:, i]` for the sigma points.
+macro_rules! vector_space_methods {
+    () => {
+        fn x_residuals(
+            &self,
+            sigmas: &DMatrix<f64>,
+            mean: &DVector<f64>,
+            out: &mut DMatrix<f64>,
+        ) -> Result<()> {
+            vector_residuals(sigmas, mean, out)
+        }
+
+        fn z_residuals(
+            &self,
+            sigmas: &DMatrix<f64>,
+            mean: &DVector<f64>,
+            out: &mut DMatrix<f64>,
+        ) -> Result<()> {
+            vector_residuals(sigmas, mean, out)
+        }
+
+        fn sigma_points(
+            &self,
+            x: &DVector<f64>,
+            offsets: &DMatrix<f64>,
+            out: &mut DMatrix<f64>,
+        ) -> Result<()> {
+            kernels::add_columns(
+                x.len(),
+                x.as_slice(),
+                offsets.as_slice(),
+                out.as_mut_slice(),
+            );
+            Ok(())
+        }
+    };
 }
 
 /// `out[:, i] = sigmas[:, i] − mean`.
-fn vector_residuals(sigmas: &DMatrix<f64>, mean: &DVector<f64>, out: &mut DMatrix<f64>) {
+fn vector_residuals(
+    sigmas: &DMatrix<f64>,
+    mean: &DVector<f64>,
+    out: &mut DMatrix<f64>,
+) -> Result<()> {
     kernels::sub_columns(
         mean.len(),
         sigmas.as_slice(),
         mean.as_slice(),
         out.as_mut_slice(),
     );
+    Ok(())
 }
 
 /// The linear model `x' = F x + B u`, `z = H x` (noise additive). With it the UKF reproduces
@@ -163,35 +198,7 @@ impl UkfModel for LinearModel {
         Ok(())
     }
 
-    fn x_residuals(
-        &self,
-        sigmas: &DMatrix<f64>,
-        mean: &DVector<f64>,
-        out: &mut DMatrix<f64>,
-    ) -> Result<()> {
-        vector_residuals(sigmas, mean, out);
-        Ok(())
-    }
-
-    fn z_residuals(
-        &self,
-        sigmas: &DMatrix<f64>,
-        mean: &DVector<f64>,
-        out: &mut DMatrix<f64>,
-    ) -> Result<()> {
-        vector_residuals(sigmas, mean, out);
-        Ok(())
-    }
-
-    fn sigma_points(
-        &self,
-        x: &DVector<f64>,
-        offsets: &DMatrix<f64>,
-        out: &mut DMatrix<f64>,
-    ) -> Result<()> {
-        vector_sigma_points(x, offsets, out);
-        Ok(())
-    }
+    vector_space_methods!();
 }
 
 /// The constant-velocity model in `dim` dimensions: state `[p; v]` (positions first, `2·dim`
@@ -293,33 +300,5 @@ impl UkfModel for ConstantVelocityModel {
         Ok(())
     }
 
-    fn x_residuals(
-        &self,
-        sigmas: &DMatrix<f64>,
-        mean: &DVector<f64>,
-        out: &mut DMatrix<f64>,
-    ) -> Result<()> {
-        vector_residuals(sigmas, mean, out);
-        Ok(())
-    }
-
-    fn z_residuals(
-        &self,
-        sigmas: &DMatrix<f64>,
-        mean: &DVector<f64>,
-        out: &mut DMatrix<f64>,
-    ) -> Result<()> {
-        vector_residuals(sigmas, mean, out);
-        Ok(())
-    }
-
-    fn sigma_points(
-        &self,
-        x: &DVector<f64>,
-        offsets: &DMatrix<f64>,
-        out: &mut DMatrix<f64>,
-    ) -> Result<()> {
-        vector_sigma_points(x, offsets, out);
-        Ok(())
-    }
+    vector_space_methods!();
 }

@@ -161,22 +161,6 @@ impl<M: UkfModel> SquareRootUkf<M> {
         &self.sz
     }
 
-    fn check_u(&self, u: Option<&DVector<f64>>) -> Result<()> {
-        if let Some(u) = u {
-            let du = self.model.dim_u();
-            if du == 0 {
-                return Err(EstimateError::DimensionMismatch {
-                    what: "input u (the model takes no input)".to_string(),
-                    expected: vec![0],
-                    got: vec![u.len()],
-                });
-            }
-            linalg::check_len(u, du, "input u")?;
-            linalg::check_finite_input(u.as_slice(), "input u")?;
-        }
-        Ok(())
-    }
-
     /// `tria([√Wc₁ D₁…, extra])` followed by the rank-1 correction with `Wc₀ D₀`, where D
     /// are the deviation columns. On a failed downdate: error, or (repair policy) the
     /// eigenvalue-clipped factor of the reconstructed matrix.
@@ -262,41 +246,13 @@ impl<M: UkfModel> SigmaPointFilter for SquareRootUkf<M> {
     }
 
     fn set_x(&mut self, x: DVector<f64>) -> Result<()> {
-        linalg::check_len(&x, self.x.len(), "state x")?;
-        linalg::check_finite_input(x.as_slice(), "state x")?;
+        linalg::state_input(&x, self.x.len())?;
         self.x = x;
         Ok(())
     }
 
     fn set_p(&mut self, p: DMatrix<f64>) -> Result<()> {
-        let n = self.x.len();
-        let p = linalg::validate_covariance_input(&p, n, "covariance P")?;
-        let l = match linalg::cholesky(&p) {
-            Some(l) => l,
-            None if self.policy == CovariancePolicy::Repair => {
-                let l = linalg::clip_eigenvalues(&p).and_then(|f| linalg::cholesky(&f));
-                match l {
-                    Some(l) => {
-                        self.repairs += 1;
-                        l
-                    }
-                    None => {
-                        return Err(EstimateError::InvalidCovariance {
-                            what: "covariance P".to_string(),
-                            asymmetry: 0.0,
-                            min_eigenvalue: linalg::min_eigenvalue(&p),
-                        });
-                    }
-                }
-            }
-            None => {
-                return Err(EstimateError::InvalidCovariance {
-                    what: "covariance P (must be positive definite)".to_string(),
-                    asymmetry: 0.0,
-                    min_eigenvalue: linalg::min_eigenvalue(&p),
-                });
-            }
-        };
+        let (_, l) = linalg::covariance_input(&p, self.x.len(), self.policy, &mut self.repairs)?;
         self.sf = l;
         Ok(())
     }
@@ -307,8 +263,8 @@ impl<M: UkfModel> SigmaPointFilter for SquareRootUkf<M> {
 
     fn set_q(&mut self, q: DMatrix<f64>) -> Result<()> {
         let d = self.q.nrows();
-        let q = linalg::validate_covariance_input(&q, d, "process noise Q")?;
-        self.q_sqrt = linalg::psd_sqrt(&q, "process noise Q")?;
+        let (q, sqrt) = linalg::noise_input(&q, d, "process noise Q")?;
+        self.q_sqrt = sqrt;
         self.q = q;
         Ok(())
     }
@@ -319,22 +275,15 @@ impl<M: UkfModel> SigmaPointFilter for SquareRootUkf<M> {
 
     fn set_r(&mut self, r: DMatrix<f64>) -> Result<()> {
         let d = self.r.nrows();
-        let r = linalg::validate_covariance_input(&r, d, "measurement noise R")?;
-        self.r_sqrt = linalg::psd_sqrt(&r, "measurement noise R")?;
+        let (r, sqrt) = linalg::noise_input(&r, d, "measurement noise R")?;
+        self.r_sqrt = sqrt;
         self.r = r;
         Ok(())
     }
 
     fn predict(&mut self, dt: f64, u: Option<&DVector<f64>>) -> Result<()> {
         let step = self.steps;
-        if !dt.is_finite() {
-            return Err(EstimateError::NonFiniteInput {
-                what: "time step dt".to_string(),
-                index: 0,
-                value: dt,
-            });
-        }
-        self.check_u(u)?;
+        linalg::check_predict_inputs(dt, u, self.model.dim_u())?;
         let augmented = self.noise == NoiseForm::Augmented;
         let mut ws = std::mem::replace(&mut self.pred_ws, Workspace::new(0, 0, 0, 0));
         let result = (|| {
@@ -393,11 +342,7 @@ impl<M: UkfModel> SigmaPointFilter for SquareRootUkf<M> {
         linalg::check_finite_input(z.as_slice(), "measurement z")?;
         let augmented = self.noise == NoiseForm::Augmented;
         let r_sqrt = match r {
-            Some(r) => {
-                let rv =
-                    linalg::validate_covariance_input(r, self.r.nrows(), "measurement noise R")?;
-                linalg::psd_sqrt(&rv, "measurement noise R")?
-            }
+            Some(r) => linalg::noise_input(r, self.r.nrows(), "measurement noise R")?.1,
             None => self.r_sqrt.clone(),
         };
         let mut ws = std::mem::replace(&mut self.upd_ws, Workspace::new(0, 0, 0, 0));

@@ -215,22 +215,6 @@ impl<M: UkfModel> UnscentedKalmanFilter<M> {
         &self.upd_ws.sig
     }
 
-    fn check_u(&self, u: Option<&DVector<f64>>) -> Result<()> {
-        if let Some(u) = u {
-            let du = self.model.dim_u();
-            if du == 0 {
-                return Err(EstimateError::DimensionMismatch {
-                    what: "input u (the model takes no input)".to_string(),
-                    expected: vec![0],
-                    got: vec![u.len()],
-                });
-            }
-            linalg::check_len(u, du, "input u")?;
-            linalg::check_finite_input(u.as_slice(), "input u")?;
-        }
-        Ok(())
-    }
-
     /// The sigma-point offsets for (x, P): a custom square root of `(n+λ)P` from the model,
     /// or the cached Cholesky factor.
     fn custom_offsets(&self, step: usize) -> Result<Option<DMatrix<f64>>> {
@@ -271,45 +255,13 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
     }
 
     fn set_x(&mut self, x: DVector<f64>) -> Result<()> {
-        linalg::check_len(&x, self.x.len(), "state x")?;
-        linalg::check_finite_input(x.as_slice(), "state x")?;
+        linalg::state_input(&x, self.x.len())?;
         self.x = x;
         Ok(())
     }
 
     fn set_p(&mut self, p: DMatrix<f64>) -> Result<()> {
-        let n = self.x.len();
-        let mut p = linalg::validate_covariance_input(&p, n, "covariance P")?;
-        let l = match linalg::cholesky(&p) {
-            Some(l) => l,
-            None if self.policy == CovariancePolicy::Repair => {
-                let fixed = linalg::clip_eigenvalues(&p).and_then(|f| {
-                    let l = linalg::cholesky(&f)?;
-                    Some((f, l))
-                });
-                match fixed {
-                    Some((f, l)) => {
-                        p = f;
-                        self.repairs += 1;
-                        l
-                    }
-                    None => {
-                        return Err(EstimateError::InvalidCovariance {
-                            what: "covariance P".to_string(),
-                            asymmetry: 0.0,
-                            min_eigenvalue: linalg::min_eigenvalue(&p),
-                        });
-                    }
-                }
-            }
-            None => {
-                return Err(EstimateError::InvalidCovariance {
-                    what: "covariance P (must be positive definite)".to_string(),
-                    asymmetry: 0.0,
-                    min_eigenvalue: linalg::min_eigenvalue(&p),
-                });
-            }
-        };
+        let (p, l) = linalg::covariance_input(&p, self.x.len(), self.policy, &mut self.repairs)?;
         self.p = p;
         self.l = l;
         Ok(())
@@ -321,8 +273,7 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
 
     fn set_q(&mut self, q: DMatrix<f64>) -> Result<()> {
         let d = self.q.nrows();
-        let q = linalg::validate_covariance_input(&q, d, "process noise Q")?;
-        let sqrt = linalg::psd_sqrt(&q, "process noise Q")?;
+        let (q, sqrt) = linalg::noise_input(&q, d, "process noise Q")?;
         if self.noise == NoiseForm::Augmented {
             self.q_sqrt = Some(sqrt);
         }
@@ -336,8 +287,7 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
 
     fn set_r(&mut self, r: DMatrix<f64>) -> Result<()> {
         let d = self.r.nrows();
-        let r = linalg::validate_covariance_input(&r, d, "measurement noise R")?;
-        let sqrt = linalg::psd_sqrt(&r, "measurement noise R")?;
+        let (r, sqrt) = linalg::noise_input(&r, d, "measurement noise R")?;
         if self.noise == NoiseForm::Augmented {
             self.r_sqrt = Some(sqrt);
         }
@@ -347,14 +297,7 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
 
     fn predict(&mut self, dt: f64, u: Option<&DVector<f64>>) -> Result<()> {
         let step = self.steps;
-        if !dt.is_finite() {
-            return Err(EstimateError::NonFiniteInput {
-                what: "time step dt".to_string(),
-                index: 0,
-                value: dt,
-            });
-        }
-        self.check_u(u)?;
+        linalg::check_predict_inputs(dt, u, self.model.dim_u())?;
         let augmented = self.noise == NoiseForm::Augmented;
         let custom = self.custom_offsets(step)?;
         let offsets = match &custom {
@@ -415,12 +358,11 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
         linalg::check_finite_input(z.as_slice(), "measurement z")?;
         let augmented = self.noise == NoiseForm::Augmented;
         let r_given = match r {
-            Some(r) => {
-                let rv =
-                    linalg::validate_covariance_input(r, self.r.nrows(), "measurement noise R")?;
-                let sqrt = linalg::psd_sqrt(&rv, "measurement noise R")?;
-                Some((rv, sqrt))
-            }
+            Some(r) => Some(linalg::noise_input(
+                r,
+                self.r.nrows(),
+                "measurement noise R",
+            )?),
             None => None,
         };
         let (r_mat, r_sqrt) = match &r_given {

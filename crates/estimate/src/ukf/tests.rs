@@ -8,6 +8,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64;
 
+use super::fixtures::constant_acceleration;
 use super::*;
 use crate::{EstimateError, Result};
 
@@ -16,25 +17,6 @@ fn normal(rng: &mut Pcg64, n: usize, sigma: f64) -> DVector<f64> {
         let v: f64 = StandardNormal.sample(rng);
         sigma * v
     })
-}
-
-/// 3-D constant-acceleration model: state [p; v; a] (9 entries), input = jerk·dt, z = p.
-fn constant_acceleration(dt: f64) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
-    let mut f = DMatrix::identity(9, 9);
-    for i in 0..3 {
-        f[(i, 3 + i)] = dt;
-        f[(i, 6 + i)] = 0.5 * dt * dt;
-        f[(3 + i, 6 + i)] = dt;
-    }
-    let mut h = DMatrix::zeros(3, 9);
-    for i in 0..3 {
-        h[(i, i)] = 1.0;
-    }
-    let mut b = DMatrix::zeros(9, 3);
-    for i in 0..3 {
-        b[(6 + i, i)] = 1.0;
-    }
-    (f, h, b)
 }
 
 fn spd(n: usize, scale: f64, rng: &mut Pcg64) -> DMatrix<f64> {

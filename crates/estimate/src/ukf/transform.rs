@@ -2,7 +2,7 @@
 //! points (optionally augmented with noise), pushing them through the model, and their
 //! weighted mean, deviations and covariance.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, DVectorView};
 
 use super::kernels;
 use super::linalg;
@@ -155,6 +155,20 @@ fn check_columns(m: &DMatrix<f64>, what: &str, step: usize) -> Result<()> {
     )
 }
 
+/// `ws.out[:, i] = g(ws.sig[:, i], ws.noise[:, i])` for every sigma point (the augmented
+/// form of [`propagate_f`] and [`propagate_h`]); a model error is tagged with `step`.
+fn noisy_columns(
+    ws: &mut Workspace,
+    step: usize,
+    mut g: impl FnMut(DVectorView<'_, f64>, DVectorView<'_, f64>, &mut DVector<f64>) -> Result<()>,
+) -> Result<()> {
+    for i in 0..ws.sig.ncols() {
+        g(ws.sig.column(i), ws.noise.column(i), &mut ws.tmp_out).map_err(|e| at_step(e, step))?;
+        ws.out.set_column(i, &ws.tmp_out);
+    }
+    Ok(())
+}
+
 /// `ws.out[:, i] = f(ws.sig[:, i], dt, u)` (or `f(sig, noise, dt, u)` when augmented).
 pub(crate) fn propagate_f<M: UkfModel + ?Sized>(
     model: &M,
@@ -165,12 +179,7 @@ pub(crate) fn propagate_f<M: UkfModel + ?Sized>(
     step: usize,
 ) -> Result<()> {
     if augmented {
-        for i in 0..ws.sig.ncols() {
-            model
-                .fx_noise(ws.sig.column(i), ws.noise.column(i), dt, u, &mut ws.tmp_out)
-                .map_err(|e| at_step(e, step))?;
-            ws.out.set_column(i, &ws.tmp_out);
-        }
+        noisy_columns(ws, step, |x, w, out| model.fx_noise(x, w, dt, u, out))?;
     } else {
         model
             .fx_sigmas(&ws.sig, dt, u, &mut ws.out)
@@ -188,12 +197,7 @@ pub(crate) fn propagate_h<M: UkfModel + ?Sized>(
     step: usize,
 ) -> Result<()> {
     if augmented {
-        for i in 0..ws.sig.ncols() {
-            model
-                .hx_noise(ws.sig.column(i), ws.noise.column(i), &mut ws.tmp_out)
-                .map_err(|e| at_step(e, step))?;
-            ws.out.set_column(i, &ws.tmp_out);
-        }
+        noisy_columns(ws, step, |x, v, out| model.hx_noise(x, v, out))?;
     } else {
         model
             .hx_sigmas(&ws.sig, &mut ws.out)

@@ -146,6 +146,26 @@ impl Carrier {
         Ok(())
     }
 
+    /// Pushes the pair of boxes spanning `x_front..x_rear` and `z` that mirror each other in
+    /// the centre plane: `y ∈ [-y.1, -y.0]` (the −y side first), then `y ∈ [y.0, y.1]`.
+    fn push_mirrored(
+        &self,
+        out: &mut Vec<(Aabb, Material)>,
+        y: (f64, f64),
+        z: (f64, f64),
+        material: Material,
+    ) {
+        for (y0, y1) in [(-y.1, -y.0), (y.0, y.1)] {
+            out.push((
+                Aabb::new(
+                    Vector3::new(self.x_front, y0, z.0),
+                    Vector3::new(self.x_rear, y1, z.1),
+                ),
+                material,
+            ));
+        }
+    }
+
     /// The carrier's parts as axis-aligned boxes with their material, for a wafer of `wafer`.
     pub(crate) fn boxes(&self, wafer: &WaferShape) -> Vec<(Aabb, Material)> {
         let r = wafer.radius;
@@ -173,20 +193,7 @@ impl Carrier {
             Material::Plate,
         ));
         // Side walls.
-        for sign in [-1.0, 1.0] {
-            let (y0, y1) = if sign < 0.0 {
-                (-y_out, -y_in)
-            } else {
-                (y_in, y_out)
-            };
-            out.push((
-                Aabb::new(
-                    Vector3::new(self.x_front, y0, z_lo),
-                    Vector3::new(self.x_rear, y1, z_hi),
-                ),
-                Material::Wall,
-            ));
-        }
+        self.push_mirrored(&mut out, (y_in, y_out), (z_lo, z_hi), Material::Wall);
         // Back wall.
         out.push((
             Aabb::new(
@@ -200,20 +207,7 @@ impl Carrier {
         for k in 0..self.slots {
             let z_top = k as f64 * self.pitch - h - self.ridge_gap;
             let z_bot = z_top - self.ridge_height;
-            for sign in [-1.0, 1.0] {
-                let (y0, y1) = if sign < 0.0 {
-                    (-y_in, -y_ridge)
-                } else {
-                    (y_ridge, y_in)
-                };
-                out.push((
-                    Aabb::new(
-                        Vector3::new(self.x_front, y0, z_bot),
-                        Vector3::new(self.x_rear, y1, z_top),
-                    ),
-                    Material::Ridge,
-                ));
-            }
+            self.push_mirrored(&mut out, (y_ridge, y_in), (z_bot, z_top), Material::Ridge);
         }
         out
     }

@@ -210,42 +210,54 @@ impl Prepared {
         s_min: f64,
         scale: f64,
     ) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        let mut s_max = f64::INFINITY;
-        for c in cands {
-            if c.dmin >= s_max * scale {
-                break;
-            }
-            if c.prim == skip {
-                continue;
-            }
-            if let Some((s, face)) = self.intersect(c.prim, ray, s_min, s_max) {
-                s_max = s;
-                best = Some(Hit {
-                    s,
-                    prim: c.prim,
-                    face,
-                });
-            }
-        }
-        best
+        closest_hit(
+            cands,
+            |c| c.prim,
+            |c, s_max| c.dmin >= s_max * scale,
+            |c, s_max| {
+                if c.prim == skip {
+                    None
+                } else {
+                    self.intersect(c.prim, ray, s_min, s_max)
+                }
+            },
+        )
     }
 
     /// Closest hit of a ray among the primitives `prims` (any order), skipping `skip`.
     #[inline]
     pub fn trace_subset(&self, ray: &Ray, prims: &[u32], skip: u32, s_min: f64) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        let mut s_max = f64::INFINITY;
-        for &i in prims {
-            if i == skip {
-                continue;
-            }
-            if let Some((s, face)) = self.intersect(i, ray, s_min, s_max) {
-                s_max = s;
-                best = Some(Hit { s, prim: i, face });
-            }
+        closest_hit(
+            prims,
+            |&i| i,
+            |_, _| false,
+            |&i, s_max| {
+                if i == skip {
+                    None
+                } else {
+                    self.intersect(i, ray, s_min, s_max)
+                }
+            },
+        )
+    }
+
+    /// Hit of a camera ray (origin at the camera centre, direction `d`, componentwise inverse
+    /// `inv`) with primitive `i` at a distance in `(0, s_max)` (units of `|d|`), and its face.
+    #[inline]
+    fn intersect_primary(
+        &self,
+        i: u32,
+        d: &Vector3<f64>,
+        inv: &Vector3<f64>,
+        s_max: f64,
+    ) -> Option<(f64, u8)> {
+        let p = &self.prims[i as usize];
+        match &p.shape {
+            Shape::Wafer {
+                rot_t, cam_local, ..
+            } => intersect_slab(cam_local, &(rot_t * d), self.radius, self.half, 0.0, s_max),
+            Shape::Box(_) => intersect_box(&p.aabb, &self.cam_center, inv, 0.0, s_max),
         }
-        best
     }
 
     /// Closest hit of a camera ray (origin at the camera centre, direction `d` of any positive
@@ -259,57 +271,32 @@ impl Prepared {
         u: f32,
         v: f32,
     ) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        let mut s_max = f64::INFINITY;
         let inv = d.map(|x| 1.0 / x);
         let len = d.norm();
-        for c in cands {
-            if c.dmin >= s_max * len {
-                break;
-            }
-            if u < c.bounds[0] || v < c.bounds[1] || u > c.bounds[2] || v > c.bounds[3] {
-                continue;
-            }
-            let p = &self.prims[c.prim as usize];
-            let hit = match &p.shape {
-                Shape::Wafer {
-                    rot_t, cam_local, ..
-                } => intersect_slab(cam_local, &(rot_t * d), self.radius, self.half, 0.0, s_max),
-                Shape::Box(_) => intersect_box(&p.aabb, &self.cam_center, &inv, 0.0, s_max),
-            };
-            if let Some((s, face)) = hit {
-                s_max = s;
-                best = Some(Hit {
-                    s,
-                    prim: c.prim,
-                    face,
-                });
-            }
-        }
-        best
+        closest_hit(
+            cands,
+            |c| c.prim,
+            |c, s_max| c.dmin >= s_max * len,
+            |c, s_max| {
+                if u < c.bounds[0] || v < c.bounds[1] || u > c.bounds[2] || v > c.bounds[3] {
+                    None
+                } else {
+                    self.intersect_primary(c.prim, d, &inv, s_max)
+                }
+            },
+        )
     }
 
     /// Closest hit of a camera ray among the primitives `prims` (any order).
     #[inline]
     pub fn trace_primary_subset(&self, d: &Vector3<f64>, prims: &[u32]) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        let mut s_max = f64::INFINITY;
-        for &i in prims {
-            let p = &self.prims[i as usize];
-            let hit = match &p.shape {
-                Shape::Wafer {
-                    rot_t, cam_local, ..
-                } => intersect_slab(cam_local, &(rot_t * d), self.radius, self.half, 0.0, s_max),
-                Shape::Box(_) => {
-                    intersect_box(&p.aabb, &self.cam_center, &d.map(|x| 1.0 / x), 0.0, s_max)
-                }
-            };
-            if let Some((s, face)) = hit {
-                s_max = s;
-                best = Some(Hit { s, prim: i, face });
-            }
-        }
-        best
+        let inv = d.map(|x| 1.0 / x);
+        closest_hit(
+            prims,
+            |&i| i,
+            |_, _| false,
+            |&i, s_max| self.intersect_primary(i, d, &inv, s_max),
+        )
     }
 
     /// Prepares the camera rays over one pixel, `d(dx, dy) = d[0] + dx·d[1] + dy·d[2]` (world),
@@ -330,10 +317,11 @@ impl Prepared {
     /// `(dx, dy)`, whose world direction is `d`.
     #[inline]
     pub fn trace_bundle(&self, b: &Bundle, dx: f64, dy: f64, d: &Vector3<f64>) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        let mut s_max = f64::INFINITY;
-        for (i, local) in &b.prims {
-            let hit = match (local, &self.prims[*i as usize].shape) {
+        closest_hit(
+            &b.prims,
+            |(i, _)| *i,
+            |_, _| false,
+            |(i, local), s_max| match (local, &self.prims[*i as usize].shape) {
                 (Some(l), Shape::Wafer { cam_local, .. }) => {
                     let dl = l[0] + l[1] * dx + l[2] * dy;
                     intersect_slab(cam_local, &dl, self.radius, self.half, 0.0, s_max)
@@ -345,13 +333,8 @@ impl Prepared {
                     0.0,
                     s_max,
                 ),
-            };
-            if let Some((s, face)) = hit {
-                s_max = s;
-                best = Some(Hit { s, prim: *i, face });
-            }
-        }
-        best
+            },
+        )
     }
 
     /// World normal of the surface at a hit point `x`.
@@ -506,6 +489,34 @@ pub(crate) fn wafer_aabb(rot: &Matrix3<f64>, pos: &Vector3<f64>, r: f64, h: f64)
     let n = rot.column(2);
     let ext = Vector3::from_fn(|k, _| r * (1.0 - n[k] * n[k]).max(0.0).sqrt() + h * n[k].abs());
     Aabb::new(pos - ext, pos + ext)
+}
+
+/// The closest hit over `items` in order, shared by the `trace*` methods: `hit(item, s_max)`
+/// is the item's hit nearer than `s_max` (the closest hit so far, or infinity), `prim(item)`
+/// its primitive, and the search stops before the first item with `stop(item, s_max)`.
+#[inline(always)]
+fn closest_hit<'a, T: 'a>(
+    items: impl IntoIterator<Item = &'a T>,
+    prim: impl Fn(&T) -> u32,
+    stop: impl Fn(&T, f64) -> bool,
+    hit: impl Fn(&T, f64) -> Option<(f64, u8)>,
+) -> Option<Hit> {
+    let mut best: Option<Hit> = None;
+    let mut s_max = f64::INFINITY;
+    for item in items {
+        if stop(item, s_max) {
+            break;
+        }
+        if let Some((s, face)) = hit(item, s_max) {
+            s_max = s;
+            best = Some(Hit {
+                s,
+                prim: prim(item),
+                face,
+            });
+        }
+    }
+    best
 }
 
 /// Entry of the ray `o + s·d` (wafer frame) into the slab `x² + y² ≤ r², |z| ≤ h`, for
