@@ -513,3 +513,27 @@ class UkfFilter:
     def Wm(self) -> F64Array: ...  # noqa: N802
     @property
     def Wc(self) -> F64Array: ...  # noqa: N802
+
+# --- wafers (detect) ---
+# --- end wafers ---
+
+# --- registration (cpd, global voting) ---
+# --- end registration ---
+
+# --- polygon ---
+# --- end polygon ---
+
+# --- track ---
+# --- end track ---
+
+# --- lsq (estimate) ---
+# --- end lsq ---
+
+# --- calib ---
+# --- end calib ---
+
+# --- handeye ---
+# --- end handeye ---
+
+# --- active ---
+# --- end active ---

@@ -83,6 +83,13 @@ def _parser() -> argparse.ArgumentParser:
 
     info = sub.add_parser("info", parents=[common], help="describe an MCAP session log")
     info.add_argument("log", type=Path, help="the MCAP file")
+
+    import importlib
+
+    from autoteach.commands import MODULES
+
+    for name in MODULES:
+        importlib.import_module(name).register(sub, common)
     return parser
 
 
@@ -194,7 +201,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     commands = {"simulate": _cmd_simulate, "demo": _cmd_demo, "info": _cmd_info}
     try:
-        return commands[args.command](args)
+        command = commands.get(args.command) or args.func
+        return int(command(args))
     except InternalError as exc:
         print(f"autoteach: internal error (please report): {exc}", file=sys.stderr)
         return 1

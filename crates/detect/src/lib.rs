@@ -25,9 +25,16 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod assembly;
 pub mod assignment;
+pub mod cpd;
+pub mod edges;
 pub mod ellipse;
 pub mod error;
+pub mod polygon;
+pub mod track;
+pub mod voting;
+pub mod wafers;
 
 pub use error::DetectError;
 

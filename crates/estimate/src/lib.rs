@@ -20,7 +20,11 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod active;
+pub mod calib;
 pub mod error;
+pub mod handeye;
+pub mod lsq;
 pub mod ukf;
 
 pub use error::EstimateError;

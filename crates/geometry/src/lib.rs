@@ -19,6 +19,7 @@
 #![deny(missing_docs)]
 
 pub mod camera;
+pub mod collision;
 pub mod conic;
 pub mod error;
 pub mod lie;

@@ -6,12 +6,20 @@
 
 use pyo3::prelude::*;
 
+mod active;
+mod calib;
 pub mod convert;
 mod detect;
 pub mod errors;
 mod estimate;
 mod geometry;
+mod handeye;
+mod lsq;
+mod polygon;
+mod registration;
 mod sim;
+mod track;
+mod wafers;
 
 /// The compiled module `autoteach._core`.
 #[pymodule]
@@ -21,6 +29,14 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sim::register(m)?;
     detect::register(m)?;
     estimate::register(m)?;
+    wafers::register(m)?;
+    registration::register(m)?;
+    polygon::register(m)?;
+    track::register(m)?;
+    lsq::register(m)?;
+    calib::register(m)?;
+    handeye::register(m)?;
+    active::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -1,0 +1,8 @@
+//! Bindings of the registration functions (see the matching module of the Rust crates).
+
+use pyo3::prelude::*;
+
+/// Adds the registration functions and classes to the module.
+pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+    Ok(())
+}
