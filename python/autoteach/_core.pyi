@@ -515,25 +515,546 @@ class UkfFilter:
     def Wc(self) -> F64Array: ...  # noqa: N802
 
 # --- wafers (detect) ---
+class WaferEdge:
+    """One detected wafer rim; see :class:`autoteach.detect.WaferEdge`."""
+
+    @property
+    def ellipse(self) -> Ellipse: ...
+    @property
+    def points(self) -> F64Array: ...
+    @property
+    def residual(self) -> float: ...
+    @property
+    def covariance(self) -> F64Array | None: ...
+    @property
+    def kind(self) -> str: ...
+    @property
+    def wafer_id(self) -> int: ...
+
+def wafer_detect(
+    image: NDArray[np.uint8] | NDArray[np.float32] | NDArray[np.float64],
+    *,
+    canny_low: float = 6.0,
+    canny_high: float = 15.0,
+    blur_sigma: float = 0.0,
+    min_arc_points: int = 16,
+    residual_threshold: float = 0.25,
+    max_gap: float = 60.0,
+    up: tuple[float, float] = (0.0, -1.0),
+    max_rim_offset: float = 10.0,
+    max_rim_axis_difference: float = 0.03,
+    min_contrast_ratio: float = 0.45,
+    semi_major_range: tuple[float, float] | None = None,
+    semi_minor_range: tuple[float, float] | None = None,
+) -> list[WaferEdge]:
+    """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`."""
+
 # --- end wafers ---
 
 # --- registration (cpd, global voting) ---
+class CpdRigidResult:
+    @property
+    def R(self) -> NDArray[np.float64]: ...
+    @property
+    def t(self) -> NDArray[np.float64]: ...
+    @property
+    def s(self) -> float: ...
+    @property
+    def transformed(self) -> NDArray[np.float64]: ...
+    @property
+    def sigma2(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def P(self) -> NDArray[np.float64] | None: ...
+
+class CpdAffineResult:
+    @property
+    def B(self) -> NDArray[np.float64]: ...
+    @property
+    def t(self) -> NDArray[np.float64]: ...
+    @property
+    def transformed(self) -> NDArray[np.float64]: ...
+    @property
+    def sigma2(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def P(self) -> NDArray[np.float64] | None: ...
+
+class CpdNonrigidResult:
+    @property
+    def W(self) -> NDArray[np.float64]: ...
+    @property
+    def transformed(self) -> NDArray[np.float64]: ...
+    @property
+    def energy(self) -> float: ...
+    @property
+    def sigma2(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def rank(self) -> int | None: ...
+    @property
+    def P(self) -> NDArray[np.float64] | None: ...
+
+class GlobalCpdHypothesis:
+    @property
+    def transformed(self) -> NDArray[np.float64]: ...
+    @property
+    def energy(self) -> float: ...
+    @property
+    def votes(self) -> int: ...
+    @property
+    def pair_votes(self) -> int: ...
+    @property
+    def R(self) -> NDArray[np.float64]: ...
+    @property
+    def t(self) -> NDArray[np.float64]: ...
+    @property
+    def W(self) -> NDArray[np.float64]: ...
+    @property
+    def sigma2(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+
+def cpd_rigid(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    w: float = 0.0,
+    scale: bool = True,
+    max_iterations: int = 100,
+    tolerance: float = 1e-3,
+    sigma2: float | None = None,
+    e_step: str = "auto",
+    return_p: bool = False,
+) -> CpdRigidResult: ...
+def cpd_affine(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    w: float = 0.0,
+    max_iterations: int = 100,
+    tolerance: float = 1e-3,
+    sigma2: float | None = None,
+    e_step: str = "auto",
+    return_p: bool = False,
+) -> CpdAffineResult: ...
+def cpd_nonrigid(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    beta: float = 2.0,
+    lam: float = 2.0,
+    low_rank: int | None = None,
+    power_iterations: int | None = None,
+    w: float = 0.0,
+    max_iterations: int = 100,
+    tolerance: float = 1e-3,
+    sigma2: float | None = None,
+    e_step: str = "auto",
+    return_p: bool = False,
+) -> CpdNonrigidResult: ...
+def global_cpd(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    k: int = 3,
+    beta: float = 2.0,
+    lam: float = 2.0,
+    w: float = 0.5,
+    low_rank: int | None = None,
+    max_iterations: int = 100,
+    tolerance: float = 1e-3,
+    sigma2: float | None = None,
+    neighbours: int = 10,
+    angle_bin: float = 0.2,
+    translation_bin: float | None = None,
+    count: str = "y",
+    min_votes: int = 3,
+    max_points: int = 1000,
+) -> list[GlobalCpdHypothesis]: ...
+
 # --- end registration ---
 
 # --- polygon ---
+def polygon_global_voting(
+    x: F64Array, y: F64Array, options: Mapping[str, object] | None = None
+) -> tuple[F64Array, F64Array, NDArray[np.int64], NDArray[np.int64]]:
+    """Global voting: (R (K, D, D), t (K, D), votes (K,), pair_votes (K,)), best first."""
+
+def polygon_vote_cells(
+    x: F64Array, y: F64Array, options: Mapping[str, object] | None = None
+) -> tuple[F64Array, F64Array, NDArray[np.int64], NDArray[np.int64]]:
+    """Every populated vote cell, sorted by the chosen count."""
+
+def polygon_detect_segments(image: NDArray[np.uint8], options: Mapping[str, object] | None = None) -> F64Array:
+    """Line segments (N, 4) [ax, ay, bx, by], dark side on the left."""
+
+def polygon_detect(
+    template: F64Array,
+    homography: F64Array,
+    image: NDArray[np.uint8] | None = None,
+    segments: F64Array | None = None,
+    options: Mapping[str, object] | None = None,
+    segment_options: Mapping[str, object] | None = None,
+) -> dict[str, object]:
+    """Polygon detection; keys pose, coarse, votes, support, segments, centre_image, rms, vote_map, ..."""
+
+def polygon_render_opening(
+    width: int,
+    height: int,
+    homography: F64Array,
+    plate: float,
+    polygons: list[tuple[F64Array, float]],
+    lines: F64Array,
+    occluders: list[tuple[F64Array, float]],
+    supersample: int = 4,
+    blur_sigma: float = 0.0,
+    noise_sigma: float = 0.0,
+    seed: int = 0,
+) -> NDArray[np.uint8]:
+    """Chamber-opening image (height, width)."""
+
 # --- end polygon ---
 
 # --- track ---
+class TrackWaferTracker:
+    """Multi-wafer tracker (000_3b1454b2b2194811.txt Algorithms 4–5); see ``autoteach.track.WaferTracker``."""
+
+    def __init__(
+        self,
+        *,
+        sigma: float = 3.0,
+        omega: float = 1e-4,
+        knn: int = 8,
+        gate: float = 5.0,
+        min_score: float = 0.0,
+        associator: str = "hierarchical",
+        greedy_gate: float = 40.0,
+        max_points_per_segment: int = 48,
+        max_missed: int = 30,
+        min_hits: int = 2,
+        rim_merge_distance: float = 4.0,
+        image_size: tuple[float, float] | None = None,
+        intrinsics: NDArray[np.float64] | None = None,
+        wafer_radius: float = 0.15,
+        normal_prior: tuple[float, float, float] | None = None,
+        circle_window: int = 10,
+        prefer_projection: bool = False,
+    ) -> None: ...
+    def update(
+        self,
+        edges: list[tuple[NDArray[np.float64], NDArray[np.float64], str, int, float]],
+        camera_pose: NDArray[np.float64] | None = None,
+    ) -> list[int | None]: ...
+    def tracks(self) -> list[dict[str, object]]: ...
+    def retired(self) -> list[dict[str, object]]: ...
+    @property
+    def frame(self) -> int: ...
+
 # --- end track ---
 
 # --- lsq (estimate) ---
+def lsq_bundle_adjust(
+    k: NDArray[np.float64],
+    poses: NDArray[np.float64],
+    points: NDArray[np.float64],
+    observations: NDArray[np.float64],
+    pose_index: list[int],
+    point_index: list[int],
+    loss_name: str = "linear",
+    f_scale: float = 1.0,
+    fixed_poses: list[int] = ...,
+    method: str = "lm",
+    linear_solver: str = "auto",
+    max_iterations: int = 100,
+    function_tolerance: float = 1e-10,
+    gradient_tolerance: float = 1e-10,
+    parameter_tolerance: float = 1e-10,
+    initial_damping: float = 1e-4,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], dict[str, object]]: ...
+
+class LsqProblem:
+    def __init__(self) -> None: ...
+    def add_block(self, values: NDArray[np.float64], manifold: str) -> int: ...
+    def add_pose(self, t: NDArray[np.float64]) -> int: ...
+    def pose(self, block: int) -> NDArray[np.float64]: ...
+    def manifold(self, block: int) -> str: ...
+    @property
+    def num_blocks(self) -> int: ...
+    @property
+    def num_residuals(self) -> int: ...
+    def set_fixed(self, block: int, fixed: bool) -> None: ...
+    def set_eliminate(self, block: int, eliminate: bool | None = None) -> None: ...
+    def values(self, block: int) -> NDArray[np.float64]: ...
+    def set_values(self, block: int, values: NDArray[np.float64]) -> None: ...
+    def add_reprojections(
+        self,
+        k: NDArray[np.float64],
+        observations: NDArray[np.float64],
+        pose_blocks: list[int],
+        point_blocks: list[int],
+        sigma: float = 1.0,
+        loss_name: str = "linear",
+        f_scale: float = 1.0,
+    ) -> list[int]: ...
+    def add_prior(self, block: int, mean: NDArray[np.float64], covariance: NDArray[np.float64]) -> int: ...
+    def add_relative_pose(
+        self,
+        a: int,
+        b: int,
+        t_ab: NDArray[np.float64],
+        covariance: NDArray[np.float64],
+        loss_name: str = "linear",
+        f_scale: float = 1.0,
+    ) -> int: ...
+    def add_point_to_conic(
+        self,
+        k: NDArray[np.float64],
+        radius: float,
+        observations: NDArray[np.float64],
+        camera_block: int,
+        object_block: int,
+        weight: float = 1.0,
+        loss_name: str = "linear",
+        f_scale: float = 1.0,
+    ) -> list[int]: ...
+    def solve(
+        self,
+        method: str = "lm",
+        linear_solver: str = "auto",
+        max_iterations: int = 100,
+        function_tolerance: float = 1e-10,
+        gradient_tolerance: float = 1e-10,
+        parameter_tolerance: float = 1e-10,
+        initial_damping: float = 1e-4,
+    ) -> dict[str, object]: ...
+    def marginal_covariance(self, blocks: list[int]) -> NDArray[np.float64]: ...
+
 # --- end lsq ---
 
 # --- calib ---
+
+class CalibResult:
+    """A camera calibration (see :class:`autoteach.calib.Calibration`)."""
+
+    @staticmethod
+    def from_parts(
+        model: str,
+        params: F64Array,
+        width: int,
+        height: int,
+        covariance: F64Array,
+        free: list[bool],
+        poses: F64Array,
+        object_points: list[F64Array],
+        image_points: list[F64Array],
+        sigma_z: float,
+    ) -> CalibResult: ...
+    @property
+    def model(self) -> str: ...
+    @property
+    def params(self) -> F64Array: ...
+    @property
+    def image_size(self) -> tuple[int, int]: ...
+    @property
+    def free(self) -> list[bool]: ...
+    @property
+    def covariance(self) -> F64Array: ...
+    @property
+    def poses(self) -> F64Array: ...
+    @property
+    def view_rms(self) -> list[float]: ...
+    @property
+    def rms(self) -> float: ...
+    @property
+    def outliers(self) -> list[tuple[int, int]]: ...
+    @property
+    def sigma_z(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def final_cost(self) -> float: ...
+    def information(self) -> F64Array: ...
+    def views(self) -> list[tuple[F64Array, F64Array, list[int]]]: ...
+    def max_ere(self, samples: int = 200, grid: int = 5, seed: int = 0) -> tuple[float, tuple[float, float]]: ...
+    def error_map(self, step: int = 1, samples: int = 100, seed: int = 0) -> F64Array: ...
+    def suggest_next_view(
+        self, target: F64Array, candidates: F64Array | None = None, samples: int = 100, grid: int = 5, seed: int = 0
+    ) -> dict[str, object]: ...
+    def test_errors(self, object_points: list[F64Array], image_points: list[F64Array]) -> list[list[float]]: ...
+
+def calib_calibrate(
+    object_points: list[F64Array],
+    image_points: list[F64Array],
+    model: str,
+    width: int,
+    height: int,
+    *,
+    sigma_z: float | None = None,
+    loss: str = "trivial",
+    loss_scale: float | None = None,
+    outlier_threshold: float | None = None,
+    bootstrap: bool = True,
+    initial_params: F64Array | None = None,
+    max_iterations: int = 100,
+) -> CalibResult: ...
+def calib_select_model(
+    object_points: list[F64Array],
+    image_points: list[F64Array],
+    models: list[str],
+    width: int,
+    height: int,
+    *,
+    sigma_z: float | None = None,
+) -> list[tuple[str, CalibResult | None, float, str | None]]: ...
+def calib_candidate_poses(model: str, params: F64Array, width: int, height: int, target: F64Array) -> F64Array: ...
+def calib_random_poses(
+    model: str,
+    params: F64Array,
+    width: int,
+    height: int,
+    target: F64Array,
+    count: int,
+    *,
+    max_tilt: float = 0.7,
+    seed: int = 0,
+) -> F64Array: ...
+def calib_synthesize_view(
+    model: str,
+    params: F64Array,
+    width: int,
+    height: int,
+    pose: F64Array,
+    target: F64Array,
+    *,
+    sigma: float = 0.0,
+    seed: int = 0,
+) -> tuple[F64Array, F64Array, list[int]] | None: ...
+
 # --- end calib ---
 
 # --- handeye ---
+def handeye_slam_mot(
+    k: NDArray[np.float64],
+    robot_params: NDArray[np.float64],
+    wafer_radius: float,
+    wafer_thickness: float,
+    encoders: NDArray[np.float64],
+    obs_frames: list[int],
+    obs_wafers: list[int],
+    obs_rims: list[int],
+    obs_start: list[int],
+    points: NDArray[np.float64],
+    initial_base: NDArray[np.float64],
+    initial_offsets: NDArray[np.float64],
+    initial_wafers: NDArray[np.float64],
+    *,
+    pixel_sigma: float = 0.5,
+    estimate_offsets: list[int] = [1, 3],
+    reference_wafer: int = 0,
+    huber: float | None = 3.0,
+    factor: str = "conic",
+    n_model: int = 360,
+    rounds: int = 3,
+    max_iterations: int = 50,
+    window: int = 0,
+    init_heights: tuple[float, float, float] | None = None,
+    prior_sigmas: tuple[float, float, float] = (0.035, 0.02, 0.035),
+    encoder_sigma: tuple[float, float, float, float] | None = None,
+) -> dict[str, object]:
+    """SLAM-MOT calibration (000_3b1454b2b2194811.txt §5.3): batch (and sliding-window) solve with covariances."""
+
+def handeye_ukf(
+    robot_params: NDArray[np.float64],
+    base_pose: NDArray[np.float64],
+    encoders: NDArray[np.float64],
+    increments: NDArray[np.float64],
+    noise: list[float] | None = None,
+    offset_std0: float = 0.035,
+) -> dict[str, object]:
+    """UKF fusion of visual odometry and encoders, eqs. (5.1)–(5.2); offsets of joint1, joint2, joint4."""
+
+def handeye_resolution(
+    k: NDArray[np.float64],
+    t_wc: NDArray[np.float64],
+    wafer: NDArray[np.float64],
+    wafer_radius: float,
+    wafer_thickness: float,
+    n: int = 180,
+) -> NDArray[np.float64]:
+    """Theoretical resolution (eq. (5.14)): px/mm of cx, cy, cz and px/deg of rx, ry."""
+
 # --- end handeye ---
 
 # --- active ---
+
+ACTIVE_PARAM_NAMES: list[str]
+
+def active_fisher_information(jacobians: list[F64Array], sigmas: F64Array, weights: F64Array) -> F64Array:
+    """Fisher information ``Σ ω_i/σ_i² J_iᵀJ_i`` (eq. (6.6)); see :func:`autoteach.active.fisher_information`."""
+
+def active_observability_indices(information: F64Array, power: float = 2.0) -> dict[str, float]:
+    """O1-O6 (Table 6.2) and ``log_det``; see :func:`autoteach.active.observability_indices`."""
+
+def active_d_optimal_design(
+    candidates: list[F64Array], tol: float = 1e-6, max_iterations: int = 100000
+) -> dict[str, _Any]:
+    """Approximate D-optimal weights; see :func:`autoteach.active.d_optimal_design`."""
+
+def active_directional_derivatives(candidates: list[F64Array], weights: F64Array) -> F64Array:
+    """``p − tr(M⁻¹ F_iᵀF_i)`` (eq. (6.8)); see :func:`autoteach.active.directional_derivatives`."""
+
+def active_detmax(
+    candidates: list[F64Array],
+    n: int,
+    prior: F64Array | None = None,
+    max_excursion: int = 3,
+    allow_repeats: bool = False,
+    seed: int = 0,
+) -> dict[str, _Any]:
+    """DETMAX selection (eq. (6.10)); see :func:`autoteach.active.detmax`."""
+
+def active_run_trials(
+    trials: int,
+    seed: int = 0,
+    mode: str = "reduced",
+    steps: int | None = None,
+    sigma_px: float | None = None,
+    power: float | None = None,
+    estimate: list[str] | None = None,
+) -> dict[str, _Any]:
+    """Closed loop of Fig. 6.1 on simulation; see :func:`autoteach.active.run_trials`."""
+
+class ActiveSystem:
+    """Hand-eye estimator and planning scene; see :class:`autoteach.active.ActiveState`."""
+
+    def __init__(
+        self, sigma_px: float | None = None, power: float | None = None, estimate: list[str] | None = None
+    ) -> None: ...
+    @property
+    def names(self) -> list[str]: ...
+    @property
+    def sigma_px(self) -> float: ...
+    def estimate(self) -> dict[str, F64Array]: ...
+    def information(self) -> F64Array: ...
+    def set_information(self, information: F64Array) -> None: ...
+    def covariance(self) -> F64Array: ...
+    def indices(self, power: float | None = None) -> dict[str, float]: ...
+    def project(self, joints: F64Array) -> F64Array: ...
+    def jacobian(self, joints: F64Array) -> F64Array: ...
+    def update(self, joints: F64Array, pixels: F64Array) -> dict[str, float]: ...
+    def plan(
+        self,
+        candidates: F64Array | None = None,
+        criterion: str = "D",
+        method: str = "reduced",
+        samples: int | None = None,
+        seed: int = 0,
+    ) -> dict[str, _Any]: ...
+
 # --- end active ---

@@ -3,7 +3,7 @@
 Commands::
 
     autoteach simulate --seed 7 --frames 200 --out session.mcap   # simulate and write a log
-    autoteach demo [--seed N] [--frames N] [--out DIR] [--json]  # simulate, write, summarise
+    autoteach demo [--seed N] [--frames N] [--out DIR] [--json]  # simulate, auto-teach, report
     autoteach info LOG.mcap [--json]                              # describe a log
 
 User errors (bad arguments, unreadable logs, invalid configurations) print one line to stderr
@@ -80,6 +80,9 @@ def _parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--out", type=Path, default=Path("autoteach-report"), help="report folder (default ./autoteach-report)"
     )
+    demo.add_argument(
+        "--no-autoteach", dest="autoteach", action="store_false", help="only simulate, do not run auto-teaching"
+    )
 
     info = sub.add_parser("info", parents=[common], help="describe an MCAP session log")
     info.add_argument("log", type=Path, help="the MCAP file")
@@ -125,14 +128,41 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 def _cmd_demo(args: argparse.Namespace) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     out = args.out / f"session_seed{args.seed}.mcap"
-    _, summary = _simulate_and_write(args, out)
+    t_start = time.perf_counter()
+    session, summary = _simulate_and_write(args, out)
     summary_path = args.out / f"session_seed{args.seed}.json"
     summary_path.write_text(json.dumps(summary, indent=2) + "\n")
     summary["summary_file"] = str(summary_path)
+    table = None
+    if getattr(args, "autoteach", True):
+        from autoteach.pipeline import autoteach
+        from autoteach.report import format_table, write_report
+
+        try:
+            result = autoteach(session, seed=args.seed, baseline=True, progress=_progress_enabled(args))
+        except AutoteachError as exc:
+            # Too few frames (or nothing seen) to calibrate: the simulation summary still stands.
+            summary["autoteach"] = {"skipped": str(exc)}
+        else:
+            files = write_report(result, args.out, session)
+            d = result.to_dict()
+            summary["autoteach"] = d
+            summary["errors"] = d["errors"]
+            summary["estimates"] = d["estimates"]
+            summary["report"] = str(args.out)
+            summary["report_files"] = files
+            table = format_table(result)
+    summary["runtime_s"] = time.perf_counter() - t_start
     if args.json:
         print(json.dumps(summary))
     else:
         print(format_summary(summary))
+        if table is not None:
+            print()
+            print(table)
+            print(f"report: {args.out}")
+        elif "autoteach" in summary:
+            print(f"auto-teaching skipped: {summary['autoteach']['skipped']}")
     return 0
 
 

@@ -7,6 +7,12 @@ lists, tuples or NumPy arrays of any real dtype.
   (Levenberg–Marquardt on the orthogonal distances, accurate on partial arcs) ellipse fitting,
   with the mean residual in pixels and the 5×5 parameter covariance: the ``FitEllipse`` of the
   seed's arc-merging Algorithms 1–2.
+- :func:`detect_wafers` -- wafer-rim detection in a grayscale image (ch. 3.2): sub-pixel Canny
+  edges, arcs, the two-arc combination rule with Algorithms 1–2, upper/lower rim pairing.
+- :func:`cpd_rigid`, :func:`cpd_affine`, :func:`cpd_nonrigid`, :func:`global_cpd` -- coherent point
+  drift and global-CPD (ch. 3.4), from :mod:`autoteach.registration`.
+- :func:`global_voting`, :func:`detect_polygon` -- global voting of rigid transforms (Algorithm 3)
+  and chamber-opening polygon detection (ch. 3.3), from :mod:`autoteach.polygon`.
 - :func:`linear_sum_assignment` -- drop-in for ``scipy.optimize.linear_sum_assignment``
   (Jonker–Volgenant shortest augmenting path), with ``inf`` marking forbidden pairs.
 - :func:`assign_with_unassigned` -- assignment that may leave rows and columns unassigned at a
@@ -19,8 +25,7 @@ Errors: bad input raises :class:`~autoteach.errors.InvalidInputError`; degenerat
 Example:
     >>> import numpy as np
     >>> from autoteach.detect import fit_ellipse
-    >>> from autoteach._convert import as_f64
-from autoteach.geometry import Ellipse
+    >>> from autoteach.geometry import Ellipse
     >>> arc = Ellipse(320.0, 240.0, 300.0, 120.0, 0.4).sample(200, 0.3, 0.3 + np.radians(120))
     >>> fit = fit_ellipse(arc, method="geometric")
     >>> round(fit.ellipse.cx, 6), round(fit.ellipse.b, 6)
@@ -40,8 +45,23 @@ from autoteach import _core
 from autoteach._convert import as_f64
 from autoteach.errors import InvalidInputError
 from autoteach.geometry import Ellipse
+from autoteach.polygon import detect_polygon, global_voting
+from autoteach.registration import cpd_affine, cpd_nonrigid, cpd_rigid, global_cpd
 
-__all__ = ["EllipseFit", "assign_with_unassigned", "fit_ellipse", "linear_sum_assignment"]
+__all__ = [
+    "EllipseFit",
+    "WaferEdge",
+    "assign_with_unassigned",
+    "cpd_affine",
+    "cpd_nonrigid",
+    "cpd_rigid",
+    "detect_polygon",
+    "detect_wafers",
+    "fit_ellipse",
+    "global_cpd",
+    "global_voting",
+    "linear_sum_assignment",
+]
 
 FitMethod = Literal["direct", "geometric"]
 
@@ -162,3 +182,108 @@ def assign_with_unassigned(
         as_f64(row_unassigned_cost, "row_unassigned_cost"),
         as_f64(col_unassigned_cost, "col_unassigned_cost"),
     )
+
+
+@dataclass(frozen=True)
+class WaferEdge:
+    """One detected wafer rim (an elliptic edge segment), see :func:`detect_wafers`.
+
+    Attributes:
+        ellipse: The fitted ellipse (pixels).
+        points: The supporting sub-pixel edge points, shape ``(N, 2)``, ``(u, v)``.
+        residual: Mean orthogonal distance of the points to the ellipse (pixels).
+        kind: ``"upper"`` or ``"lower"``: which surface's rim.
+        wafer_id: Groups the two rims of one wafer in this image (0, 1, … topmost first).
+        covariance: Covariance of ``(cx, cy, a, b, theta)``, shape ``(5, 5)``, or ``None``.
+
+    """
+
+    ellipse: Ellipse
+    points: NDArray[np.float64]
+    residual: float
+    kind: Literal["upper", "lower"]
+    wafer_id: int
+    covariance: NDArray[np.float64] | None
+
+
+def detect_wafers(
+    image: ArrayLike,
+    *,
+    canny_low: float = 6.0,
+    canny_high: float = 15.0,
+    blur_sigma: float = 0.0,
+    min_arc_points: int = 16,
+    residual_threshold: float = 0.25,
+    max_gap: float = 60.0,
+    up: tuple[float, float] = (0.0, -1.0),
+    max_rim_offset: float = 10.0,
+    max_rim_axis_difference: float = 0.03,
+    min_contrast_ratio: float = 0.45,
+    semi_major_range: tuple[float, float] | None = None,
+    semi_minor_range: tuple[float, float] | None = None,
+) -> list[WaferEdge]:
+    """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
+
+    Sub-pixel Canny edges are linked into arcs, split at corners, inflections and quadrant
+    changes, screened (short, straight, too curved), combined in pairs by the two-arc rule and
+    Algorithm 1 (bipartite matching per connected component), merged by Algorithm 2, validated,
+    labelled upper/lower by the side of the bright wafer edge face, cleaned of faint reflections
+    and paired into wafers. Runs without the GIL.
+
+    Args:
+        image: ``(height, width)`` grayscale, dtype uint8 (0–255), float32 or float64 (0–1).
+        canny_low: Hysteresis low threshold (grey levels per pixel on the 0–255 scale).
+        canny_high: Hysteresis high threshold.
+        blur_sigma: Optional Gaussian pre-blur (pixels); 0 for none.
+        min_arc_points: Fewest edge points of an arc.
+        residual_threshold: Largest mean orthogonal residual (pixels) of a combination.
+        max_gap: Largest gap (pixels) between combined arcs.
+        up: Image direction of the wafer normal (upper surface side); ``(0, -1)`` for an upright
+            camera.
+        max_rim_offset: Largest centre distance (pixels) of the two rims of one wafer.
+        max_rim_axis_difference: Largest relative semi-axis difference of the two rims.
+        min_contrast_ratio: Rims with less than this fraction of the contrast of the strongest
+            rim of similar size are rejected as reflections (0 disables).
+        semi_major_range: Optional prior ``(low, high)`` on the semi-major axis (pixels).
+        semi_minor_range: Optional prior ``(low, high)`` on the semi-minor axis (pixels).
+
+    Returns:
+        The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
+
+    Raises:
+        InvalidInputError: Not 2-D, empty, unsupported dtype, NaN/inf pixels, bad parameters.
+
+    """
+    arr = np.asarray(image)
+    if arr.ndim != 2:
+        raise InvalidInputError(f"image must be 2-D (height, width) grayscale, got shape {arr.shape}")
+    if arr.size == 0:
+        raise InvalidInputError(f"image is empty, shape {arr.shape}")
+    if arr.dtype not in (np.uint8, np.float32, np.float64):
+        raise InvalidInputError(f"image must have dtype uint8, float32 or float64, got {arr.dtype}")
+    edges = _core.wafer_detect(
+        np.ascontiguousarray(arr),
+        canny_low=float(canny_low),
+        canny_high=float(canny_high),
+        blur_sigma=float(blur_sigma),
+        min_arc_points=int(min_arc_points),
+        residual_threshold=float(residual_threshold),
+        max_gap=float(max_gap),
+        up=(float(up[0]), float(up[1])),
+        max_rim_offset=float(max_rim_offset),
+        max_rim_axis_difference=float(max_rim_axis_difference),
+        min_contrast_ratio=float(min_contrast_ratio),
+        semi_major_range=None if semi_major_range is None else tuple(map(float, semi_major_range)),
+        semi_minor_range=None if semi_minor_range is None else tuple(map(float, semi_minor_range)),
+    )
+    return [
+        WaferEdge(
+            ellipse=Ellipse._wrap(e.ellipse),
+            points=e.points,
+            residual=e.residual,
+            kind=e.kind,
+            wafer_id=e.wafer_id,
+            covariance=e.covariance,
+        )
+        for e in edges
+    ]

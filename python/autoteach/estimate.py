@@ -48,6 +48,7 @@ import math
 import sys
 from collections.abc import Callable, Sequence
 from copy import deepcopy
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
@@ -57,10 +58,13 @@ from autoteach import _core
 from autoteach.errors import InvalidInputError
 
 __all__ = [
+    "BundleAdjustResult",
     "ConstantVelocityModel",
+    "LeastSquaresProblem",
     "LinearModel",
     "MerweScaledSigmaPoints",
     "UnscentedKalmanFilter",
+    "bundle_adjust",
 ]
 
 F64Array = NDArray[np.float64]
@@ -643,3 +647,311 @@ class UnscentedKalmanFilter:
         return (
             f"UnscentedKalmanFilter({kind}dim_x={self._dim_x}, dim_z={self._dim_z}, model={model}, noise={self.noise})"
         )
+
+
+# ---------------------------------------------------------------------------------------------
+# Sparse nonlinear least squares on manifolds (seed 000_3b1454b2b2194811.txt ch. 5.3;
+# 004_815695db12a6b16c.txt ch. 3, 5, eq. 5.1-5.5). Computed in Rust (autoteach_estimate::lsq):
+# Levenberg-Marquardt or Gauss-Newton on block-sparse normal equations, faer sparse Cholesky
+# with a fill-reducing ordering (Schur elimination of point blocks), the GIL released.
+# ---------------------------------------------------------------------------------------------
+
+_LOSSES = ("linear", "huber", "cauchy", "tukey")
+
+
+def _solver_kwargs(
+    method: str, linear_solver: str, max_iterations: int, ftol: float, gtol: float, xtol: float
+) -> dict[str, Any]:
+    return {
+        "method": method,
+        "linear_solver": linear_solver,
+        "max_iterations": int(max_iterations),
+        "function_tolerance": float(ftol),
+        "gradient_tolerance": float(gtol),
+        "parameter_tolerance": float(xtol),
+    }
+
+
+def _index_array(a: ArrayLike, name: str) -> list[int]:
+    arr = np.asarray(a)
+    if arr.ndim != 1 or (arr.size and not np.issubdtype(arr.dtype, np.integer)):
+        raise InvalidInputError(f"{name} must be a 1-D array of integers, got dtype {arr.dtype}, shape {arr.shape}")
+    return [int(v) for v in arr]
+
+
+@dataclass
+class BundleAdjustResult:
+    """Result of :func:`bundle_adjust`."""
+
+    poses: F64Array
+    """Optimised world-to-camera poses, N×6 (rotation vector, translation)."""
+    points: F64Array
+    """Optimised world points, M×3."""
+    final_cost: float
+    """½ Σ ρ(‖r‖²) with r the pixel reprojection errors (scipy's ``cost``)."""
+    iterations: int
+    """Solver iterations (trial steps)."""
+    summary: dict[str, Any] = field(default_factory=dict)
+    """Solver summary: iterations, initial/final cost, termination, message, time_s, …"""
+
+
+def bundle_adjust(
+    K: ArrayLike,  # noqa: N803 - the conventional name of the intrinsic matrix
+    poses: ArrayLike,
+    points: ArrayLike,
+    observations: ArrayLike,
+    pose_index: ArrayLike,
+    point_index: ArrayLike,
+    loss: str = "linear",
+    fixed_poses: Sequence[int] = (),
+    *,
+    f_scale: float = 1.0,
+    method: Literal["lm", "gn"] = "lm",
+    linear_solver: Literal["auto", "dense", "sparse", "schur"] = "auto",
+    max_iterations: int = 100,
+    ftol: float = 1e-10,
+    gtol: float = 1e-10,
+    xtol: float = 1e-10,
+) -> BundleAdjustResult:
+    """Bundle adjustment: refine world-to-camera poses and world points.
+
+    Minimises ½ Σ_k ρ(‖π(K (R_i X_j + t_i)) − z_k‖²) with ``i = pose_index[k]``,
+    ``j = point_index[k]``, ``z_k = observations[k]`` (pixels, OpenCV convention), poses on
+    SE(3). ``loss`` is ``"linear"``, ``"huber"``, ``"cauchy"`` or ``"tukey"`` with scale
+    ``f_scale`` (pixels; same parameterisation as :func:`scipy.optimize.least_squares`).
+    Poses in ``fixed_poses`` are held; fix the first pose and one more (or a scale) to remove
+    the gauge freedom.
+
+    Args:
+        K: 3×3 intrinsic matrix.
+        poses: N×6 world-to-camera poses, rotation vector then translation.
+        points: M×3 world points.
+        observations: K×2 pixel observations.
+        pose_index: K pose indices.
+        point_index: K point indices.
+        loss: robust loss name.
+        fixed_poses: indices of poses held constant.
+        f_scale: loss scale (pixels).
+        method: ``"lm"`` (Levenberg-Marquardt) or ``"gn"`` (Gauss-Newton).
+        linear_solver: ``"auto"``, ``"dense"``, ``"sparse"`` or ``"schur"``.
+        max_iterations: iteration limit.
+        ftol: relative cost-decrease tolerance.
+        gtol: gradient (max |Jᵀr|) tolerance.
+        xtol: relative step tolerance.
+
+    Returns:
+        The optimised poses and points, final cost, iterations and the solver summary.
+
+    Raises:
+        InvalidInputError: wrong shapes, NaN/inf, indices out of range, unknown loss.
+        ConvergenceError: a point behind a camera at the start or a non-finite residual.
+    """
+    if loss not in _LOSSES:
+        raise InvalidInputError(f"loss must be one of {_LOSSES}, got {loss!r}")
+    poses_m, points_m, obs_m = _matrix(poses, "poses"), _matrix(points, "points"), _matrix(observations, "observations")
+    pi, xi = _index_array(pose_index, "pose_index"), _index_array(point_index, "point_index")
+    fixed = [int(i) for i in fixed_poses]
+    for name, idx, n in (
+        ("pose_index", pi, len(poses_m)),
+        ("point_index", xi, len(points_m)),
+        ("fixed_poses", fixed, len(poses_m)),
+    ):
+        if name != "fixed_poses" and len(idx) != len(obs_m):
+            raise InvalidInputError(f"{name} must have one entry per observation ({len(obs_m)}), got {len(idx)}")
+        bad = [k for k, i in enumerate(idx) if not 0 <= i < n]
+        if bad:
+            raise InvalidInputError(f"{name}[{bad[0]}] = {idx[bad[0]]} is out of range (there are {n})")
+    poses_a, points_a, summary = _core.lsq_bundle_adjust(
+        _matrix(K, "K"),
+        poses_m,
+        points_m,
+        obs_m,
+        pi,
+        xi,
+        loss,
+        float(f_scale),
+        fixed,
+        **_solver_kwargs(method, linear_solver, max_iterations, ftol, gtol, xtol),
+    )
+    return BundleAdjustResult(
+        poses=poses_a,
+        points=points_a,
+        final_cost=float(summary["final_cost"]),
+        iterations=int(summary["iterations"]),
+        summary=dict(summary),
+    )
+
+
+class LeastSquaresProblem:
+    """A nonlinear least-squares problem on manifolds, stated from NumPy.
+
+    Blocks are Euclidean vectors, rotations (``"so3"``: 3×3 matrices, ``"quaternion"``:
+    ``[w, x, y, z]``) or poses (``"se3"``, given and returned as 4×4 matrices by
+    :meth:`add_pose` / :meth:`pose`; stored as ``[qw, qx, qy, qz, tx, ty, tz]``). Tangent
+    vectors are rotation first, ``[ω; ρ]``, with the right perturbation ``X·Exp(δ)``.
+    Residuals are the built-in ones: reprojection, prior, relative pose and point-to-conic.
+
+    Example::
+
+        p = LeastSquaresProblem()
+        cam = p.add_pose(np.eye(4))
+        pts = [p.add_block(x, "euclidean") for x in points]
+        p.add_reprojections(K, uv, [cam] * len(pts), pts)
+        p.set_fixed(cam, True)
+        summary = p.solve()
+        cov = p.marginal_covariance([pts[0]])
+    """
+
+    def __init__(self) -> None:
+        """Create an empty problem."""
+        self._inner = _core.LsqProblem()
+
+    @property
+    def num_blocks(self) -> int:
+        """Number of parameter blocks."""
+        return int(self._inner.num_blocks)
+
+    @property
+    def num_residuals(self) -> int:
+        """Number of residual blocks."""
+        return int(self._inner.num_residuals)
+
+    def add_block(self, values: ArrayLike, manifold: str = "euclidean") -> int:
+        """Add a block with stored ``values`` on ``manifold``; returns its id."""
+        return int(self._inner.add_block(_vector(values, "values"), manifold))
+
+    def add_pose(self, T: ArrayLike) -> int:  # noqa: N803 - a transform
+        """Add an SE(3) block from a 4×4 homogeneous transform; returns its id."""
+        return int(self._inner.add_pose(_matrix(T, "T")))
+
+    def add_rotation(self, R: ArrayLike) -> int:  # noqa: N803 - a rotation matrix
+        """Add an SO(3) block from a 3×3 rotation matrix; returns its id."""
+        r = _matrix(R, "R")
+        if r.shape != (3, 3):
+            raise InvalidInputError(f"R must have shape (3, 3), got {r.shape}")
+        return int(self._inner.add_block(r.reshape(-1, order="F"), "so3"))
+
+    def set_fixed(self, block: int, fixed: bool = True) -> None:
+        """Hold a block constant (or release it)."""
+        self._inner.set_fixed(int(block), bool(fixed))
+
+    def set_eliminate(self, block: int, eliminate: bool | None = None) -> None:
+        """Mark a block for Schur elimination (``None``: automatic, 3-vectors tied to poses)."""
+        self._inner.set_eliminate(int(block), eliminate)
+
+    def values(self, block: int) -> F64Array:
+        """The stored values of a block."""
+        return np.asarray(self._inner.values(int(block)))
+
+    def set_values(self, block: int, values: ArrayLike) -> None:
+        """Overwrite the stored values of a block."""
+        self._inner.set_values(int(block), _vector(values, "values"))
+
+    def pose(self, block: int) -> F64Array:
+        """The 4×4 transform of an SE(3) block."""
+        return np.asarray(self._inner.pose(int(block)))
+
+    def rotation(self, block: int) -> F64Array:
+        """The 3×3 rotation matrix of an SO(3) block."""
+        if self._inner.manifold(int(block)) != "so3":
+            raise InvalidInputError(f"block {block} is not an SO(3) block")
+        return self.values(block).reshape(3, 3, order="F")
+
+    def add_reprojections(
+        self,
+        K: ArrayLike,  # noqa: N803 - the intrinsic matrix
+        observations: ArrayLike,
+        pose_blocks: ArrayLike,
+        point_blocks: ArrayLike,
+        sigma: float = 1.0,
+        loss: str = "linear",
+        f_scale: float = 1.0,
+    ) -> list[int]:
+        """Add pinhole reprojection residuals (σ-whitened pixels) of points in cameras.
+
+        ``pose_blocks[k]`` is an SE(3) world-to-camera block, ``point_blocks[k]`` a
+        3-vector block, ``observations[k]`` its pixel.
+        """
+        return list(
+            self._inner.add_reprojections(
+                _matrix(K, "K"),
+                _matrix(observations, "observations"),
+                _index_array(pose_blocks, "pose_blocks"),
+                _index_array(point_blocks, "point_blocks"),
+                float(sigma),
+                loss,
+                float(f_scale),
+            )
+        )
+
+    def add_prior(self, block: int, mean: ArrayLike, covariance: ArrayLike) -> int:
+        """Add a Gaussian prior: whitened ``x ⊖ mean`` (mean in the stored layout, or 4×4 for SE(3))."""
+        m = np.asarray(mean, dtype=np.float64)
+        if m.shape == (4, 4):
+            tmp = _core.LsqProblem()
+            m = np.asarray(tmp.values(tmp.add_pose(m)))
+        elif m.shape == (3, 3):
+            m = m.reshape(-1, order="F")
+        return int(self._inner.add_prior(int(block), _vector(m, "mean"), _matrix(covariance, "covariance")))
+
+    def add_relative_pose(
+        self,
+        a: int,
+        b: int,
+        T_ab: ArrayLike,  # noqa: N803 - a transform
+        covariance: ArrayLike,
+        loss: str = "linear",
+        f_scale: float = 1.0,
+    ) -> int:
+        """Add the relative-pose residual ``Log(T_ab⁻¹ A⁻¹ B)`` (whitened by ``covariance``, 6×6)."""
+        return int(
+            self._inner.add_relative_pose(
+                int(a), int(b), _matrix(T_ab, "T_ab"), _matrix(covariance, "covariance"), loss, float(f_scale)
+            )
+        )
+
+    def add_point_to_conic(
+        self,
+        K: ArrayLike,  # noqa: N803 - the intrinsic matrix
+        radius: float,
+        observations: ArrayLike,
+        camera_block: int,
+        object_block: int,
+        weight: float = 1.0,
+        loss: str = "linear",
+        f_scale: float = 1.0,
+    ) -> list[int]:
+        """Add point-to-conic residuals ``w·pᵀ H⁻ᵀ C₀ H⁻¹ p`` (seed eq. 5.13) of rim pixels."""
+        return list(
+            self._inner.add_point_to_conic(
+                _matrix(K, "K"),
+                float(radius),
+                _matrix(observations, "observations"),
+                int(camera_block),
+                int(object_block),
+                float(weight),
+                loss,
+                float(f_scale),
+            )
+        )
+
+    def solve(
+        self,
+        method: Literal["lm", "gn"] = "lm",
+        linear_solver: Literal["auto", "dense", "sparse", "schur"] = "auto",
+        max_iterations: int = 100,
+        ftol: float = 1e-10,
+        gtol: float = 1e-10,
+        xtol: float = 1e-10,
+    ) -> dict[str, Any]:
+        """Solve (GIL released); returns the summary dict (``termination``, ``message``, costs, …)."""
+        return dict(self._inner.solve(**_solver_kwargs(method, linear_solver, max_iterations, ftol, gtol, xtol)))
+
+    def marginal_covariance(self, blocks: Sequence[int]) -> F64Array:
+        """Joint tangent covariance of ``blocks`` from (JᵀJ)⁻¹.
+
+        Raises:
+            DegenerateGeometryError: the information matrix is rank deficient (the message names the
+                unconstrained blocks and directions).
+        """
+        return np.asarray(self._inner.marginal_covariance([int(b) for b in blocks]))

@@ -111,4 +111,94 @@ pub enum EstimateError {
         /// The model's error message.
         message: String,
     },
+
+    /// A least-squares problem is malformed (unknown block id, wrong number of values or
+    /// blocks, a residual of dimension zero, …).
+    #[error("invalid least-squares problem: {0}")]
+    InvalidProblem(String),
+
+    /// A residual evaluated to NaN or ±inf (at the initial values; during the solve a
+    /// non-finite trial step is rejected instead).
+    #[error("residual {residual} is not finite (value {value} at component {index}){context}")]
+    NonFiniteResidual {
+        /// The residual id.
+        residual: usize,
+        /// The offending component.
+        index: usize,
+        /// The offending value.
+        value: f64,
+        /// Extra context (e.g. `" in its Jacobian w.r.t. block 3"`), possibly empty.
+        context: String,
+    },
+
+    /// The information matrix JᵀJ of a least-squares problem is singular (gauge freedom, an
+    /// unconstrained block): the directions are named instead of returning wrong numbers.
+    #[error("rank-deficient information matrix ({what}): unconstrained directions: {directions}")]
+    RankDeficient {
+        /// What was being computed (e.g. `"marginal covariance"`).
+        what: String,
+        /// The unconstrained tangent directions, as `block b (tangent components …)` lists.
+        directions: String,
+    },
+
+    /// A linear solve failed for a reason other than rank deficiency.
+    #[error("linear solver failed: {0}")]
+    LinearSolver(String),
+
+    /// A calibration view has too few usable points (after dropping missing NaN rows) to
+    /// constrain its target pose.
+    #[error("view {view}: {got} usable points, at least {needed} are needed")]
+    TooFewPoints {
+        /// The view index.
+        view: usize,
+        /// Usable points in it.
+        got: usize,
+        /// The minimum.
+        needed: usize,
+    },
+
+    /// The calibration data cannot determine the camera (e.g. every view fronto-parallel, so
+    /// focal length and target distance are inseparable); the message says why and what to
+    /// change.
+    #[error("degenerate calibration data: {0}")]
+    DegenerateCalibration(String),
+    /// An information (or covariance) matrix is singular or not positive definite where a
+    /// regular one is required (e.g. the log-determinant or inverse of a Fisher information
+    /// matrix without a prior).
+    #[error(
+        "{what} is singular or not positive definite (eigenvalues in [{min_eigenvalue:.6e}, {max_eigenvalue:.6e}])"
+    )]
+    SingularInformation {
+        /// Which matrix.
+        what: String,
+        /// Its smallest eigenvalue.
+        min_eigenvalue: f64,
+        /// Its largest eigenvalue.
+        max_eigenvalue: f64,
+    },
+
+    /// The measurement-pose planner found no pose satisfying the constraints of
+    /// 000_3b1454b2b2194811.txt eq. (6.21); `binding` names the constraint that rejected the
+    /// most candidates and `counts` lists the rejections per constraint.
+    #[error(
+        "no feasible measurement pose among {evaluated} candidates; binding constraint: {binding}; rejections: {counts}"
+    )]
+    NoFeasiblePose {
+        /// Number of candidate poses evaluated.
+        evaluated: usize,
+        /// The constraint rejecting the most candidates.
+        binding: String,
+        /// Rejections per constraint, e.g. `"visibility (6.17): 120, collision (6.20): 3"`.
+        counts: String,
+    },
+    /// An iterative design or estimation algorithm did not converge.
+    #[error("{what} did not converge after {iterations} iterations (residual {residual:.6e})")]
+    NoConvergence {
+        /// What was iterated.
+        what: String,
+        /// Iterations run.
+        iterations: usize,
+        /// The final convergence measure.
+        residual: f64,
+    },
 }

@@ -131,11 +131,21 @@ pub fn estimate(err: autoteach_estimate::EstimateError) -> PyErr {
         | E::NonFiniteInput { .. }
         | E::InvalidCovariance { .. }
         | E::Model { .. } => invalid_input(err.to_string()),
+        E::InvalidProblem(_) | E::TooFewPoints { .. } => invalid_input(err.to_string()),
+        // An unconstrained direction (gauge freedom), a singular information matrix, a
+        // calibration that the views cannot determine, no pose meeting the constraints.
+        E::RankDeficient { .. } | E::SingularInformation { .. } | E::DegenerateCalibration(_) => {
+            new_err("DegenerateGeometryError", err.to_string())
+        }
+        E::NoFeasiblePose { .. } => new_err("UnreachablePoseError", err.to_string()),
+        E::NotPositiveDefinite { .. }
+        | E::NotSymmetric { .. }
+        | E::NonFinite { .. }
+        | E::NonFiniteResidual { .. }
+        | E::LinearSolver(_)
+        | E::NoConvergence { .. } => new_err("ConvergenceError", err.to_string()),
         // `EstimateError` is `#[non_exhaustive]`: variants added later default to a numerical
         // failure until they get their own arm.
-        E::NotPositiveDefinite { .. } | E::NotSymmetric { .. } | E::NonFinite { .. } => {
-            new_err("ConvergenceError", err.to_string())
-        }
         _ => new_err("ConvergenceError", err.to_string()),
     }
 }

@@ -1,8 +1,352 @@
-//! Bindings of the handeye functions (see the matching module of the Rust crates).
+//! Bindings of `autoteach_estimate::handeye`: the UKF auto-teaching filter, the SLAM-MOT
+//! calibration (batch, sliding window, nearest-point baseline) and the theoretical resolution.
+//! Python-visible names carry the `handeye_` prefix; the friendly API is
+//! `autoteach.pipeline.autoteach`.
 
+use autoteach_estimate::handeye::{
+    EdgeFactor, EdgeObservation, PriorSigmas, Rim, SlamMot, SlamMotConfig, SlamMotSolution,
+    SlamMotState, UkfNoise, WaferGeometry, WindowRecord, run_autoteach_ukf, theoretical_resolution,
+};
+use autoteach_geometry::lie::se3_log;
+use autoteach_geometry::robot::{Joints, RobotParams, WaferRobot};
+use nalgebra::{Matrix3, Vector2, Vector5};
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
 
-/// Adds the handeye functions and classes to the module.
-pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+use crate::convert::{self, to_numpy};
+use crate::errors;
+
+/// Adds the handeye functions to the module.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(handeye_slam_mot, m)?)?;
+    m.add_function(wrap_pyfunction!(handeye_ukf, m)?)?;
+    m.add_function(wrap_pyfunction!(handeye_resolution, m)?)?;
     Ok(())
+}
+
+fn rows(obj: &Bound<'_, PyAny>, name: &'static str, width: usize) -> PyResult<Vec<Vec<f64>>> {
+    let a = convert::finite_array(obj, name)?;
+    let shape = a.shape().to_vec();
+    if shape.len() != 2 || shape[1] != width {
+        return Err(errors::invalid_input(format!(
+            "{name} must have shape (N, {width}), got {}",
+            convert::shape_str(&shape)
+        )));
+    }
+    let data = a.exact(&shape)?;
+    Ok(data.chunks(width).map(|c| c.to_vec()).collect())
+}
+
+fn k_matrix(obj: &Bound<'_, PyAny>) -> PyResult<Matrix3<f64>> {
+    let v = convert::finite_array(obj, "K")?.exact(&[3, 3])?;
+    Ok(Matrix3::from_row_slice(&v))
+}
+
+fn read_robot_params(obj: &Bound<'_, PyAny>) -> PyResult<RobotParams> {
+    let v = convert::finite_array(obj, "robot_params")?.exact(&[11])?;
+    RobotParams::from_slice(&v).map_err(errors::geometry)
+}
+
+fn joints(rows: Vec<Vec<f64>>) -> Vec<Joints> {
+    rows.into_iter()
+        .map(|r| Joints::from_column_slice(&r))
+        .collect()
+}
+
+fn pose_array<'py>(
+    py: Python<'py>,
+    poses: &[nalgebra::Isometry3<f64>],
+) -> PyResult<Bound<'py, PyAny>> {
+    let mut data = Vec::with_capacity(poses.len() * 16);
+    for p in poses {
+        for row in convert::isometry_rows(p) {
+            data.extend_from_slice(&row);
+        }
+    }
+    Ok(to_numpy(py, data, &[poses.len(), 4, 4])?.into_any())
+}
+
+fn state_dict<'py>(py: Python<'py>, s: &SlamMotState) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("base_pose", pose_array(py, &[s.base])?.get_item(0)?)?;
+    d.set_item(
+        "joint_offsets",
+        to_numpy(py, s.offsets.as_slice().to_vec(), &[5])?,
+    )?;
+    let w: Vec<f64> = s.wafers.iter().flat_map(|w| w.iter().copied()).collect();
+    d.set_item("wafers", to_numpy(py, w, &[s.wafers.len(), 5])?)?;
+    Ok(d)
+}
+
+fn solution_dict<'py>(
+    py: Python<'py>,
+    slam: &SlamMot,
+    sol: &SlamMotSolution,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = state_dict(py, &sol.state)?;
+    match &sol.uncertainty.covariance {
+        Some(c) => d.set_item(
+            "covariance",
+            to_numpy(
+                py,
+                c.transpose().as_slice().to_vec(),
+                &[c.nrows(), c.ncols()],
+            )?,
+        )?,
+        None => d.set_item("covariance", py.None())?,
+    }
+    d.set_item("covariance_wafers", sol.uncertainty.wafer_order.clone())?;
+    d.set_item("unobservable", sol.uncertainty.unobservable.clone())?;
+    d.set_item("initial_cost", sol.initial_cost)?;
+    d.set_item("final_cost", sol.final_cost)?;
+    d.set_item("iterations", sol.iterations)?;
+    d.set_item("rms_px", sol.rms_px)?;
+    d.set_item("n_residuals", sol.n_residuals)?;
+    d.set_item(
+        "camera_poses",
+        pose_array(py, &slam.camera_poses(&sol.state))?,
+    )?;
+    Ok(d)
+}
+
+fn history_list<'py>(py: Python<'py>, hist: &[WindowRecord]) -> PyResult<Bound<'py, PyList>> {
+    let out = PyList::empty(py);
+    for h in hist {
+        let d = state_dict(py, &h.state)?;
+        d.set_item("last_frame", h.last_frame)?;
+        d.set_item("std", to_numpy(py, h.std.clone(), &[h.std.len()])?)?;
+        d.set_item(
+            "base_log",
+            to_numpy(py, se3_log(&h.state.base).as_slice().to_vec(), &[6])?,
+        )?;
+        out.append(d)?;
+    }
+    Ok(out)
+}
+
+/// SLAM-MOT calibration (000_3b1454b2b2194811.txt §5.3). Edge points of observation `i` are
+/// `points[obs_start[i]:obs_start[i+1]]`; `obs_rims` is 0 for the upper rim, 1 for the lower.
+/// With `window > 0` the sliding-window run precedes the batch solve and its history is
+/// returned; with `init_heights = (z_min, z_max, step)` the non-reference wafers' heights are
+/// first found by a 1-D search. Returns a dict (see `autoteach.pipeline`).
+#[pyfunction]
+#[pyo3(signature = (k, robot_params, wafer_radius, wafer_thickness, encoders, obs_frames, obs_wafers, obs_rims,
+    obs_start, points, initial_base, initial_offsets, initial_wafers, *, pixel_sigma=0.5, estimate_offsets=vec![1, 3],
+    reference_wafer=0, huber=Some(3.0), factor="conic", n_model=360, rounds=3, max_iterations=50, window=0,
+    init_heights=None, prior_sigmas=(0.035, 0.02, 0.035), encoder_sigma=None))]
+#[allow(clippy::too_many_arguments)]
+fn handeye_slam_mot<'py>(
+    py: Python<'py>,
+    k: &Bound<'py, PyAny>,
+    robot_params: &Bound<'py, PyAny>,
+    wafer_radius: f64,
+    wafer_thickness: f64,
+    encoders: &Bound<'py, PyAny>,
+    obs_frames: Vec<usize>,
+    obs_wafers: Vec<usize>,
+    obs_rims: Vec<u8>,
+    obs_start: Vec<usize>,
+    points: &Bound<'py, PyAny>,
+    initial_base: &Bound<'py, PyAny>,
+    initial_offsets: &Bound<'py, PyAny>,
+    initial_wafers: &Bound<'py, PyAny>,
+    pixel_sigma: f64,
+    estimate_offsets: Vec<usize>,
+    reference_wafer: usize,
+    huber: Option<f64>,
+    factor: &str,
+    n_model: usize,
+    rounds: usize,
+    max_iterations: usize,
+    window: usize,
+    init_heights: Option<(f64, f64, f64)>,
+    prior_sigmas: (f64, f64, f64),
+    encoder_sigma: Option<[f64; 4]>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let k = k_matrix(k)?;
+    let params = read_robot_params(robot_params)?;
+    let geometry = WaferGeometry::new(wafer_radius, wafer_thickness).map_err(errors::estimate)?;
+    let enc = joints(rows(encoders, "encoders", 5)?);
+    let pts = rows(points, "points", 2)?;
+    let m = obs_frames.len();
+    if obs_wafers.len() != m || obs_rims.len() != m || obs_start.len() != m + 1 {
+        return Err(errors::invalid_input(format!(
+            "obs_frames, obs_wafers, obs_rims need one entry per observation ({m}) and obs_start {} entries; got {}, {}, {}",
+            m + 1,
+            obs_wafers.len(),
+            obs_rims.len(),
+            obs_start.len()
+        )));
+    }
+    let mut observations = Vec::with_capacity(m);
+    for i in 0..m {
+        let (a, b) = (obs_start[i], obs_start[i + 1]);
+        if a > b || b > pts.len() {
+            return Err(errors::invalid_input(format!(
+                "obs_start is not a non-decreasing index into points at observation {i}: {a}..{b} of {}",
+                pts.len()
+            )));
+        }
+        let rim = match obs_rims[i] {
+            0 => Rim::Upper,
+            1 => Rim::Lower,
+            r => {
+                return Err(errors::invalid_input(format!(
+                    "obs_rims must be 0 (upper) or 1 (lower), got {r} at {i}"
+                )));
+            }
+        };
+        observations.push(EdgeObservation {
+            frame: obs_frames[i],
+            wafer: obs_wafers[i],
+            rim,
+            points: pts[a..b].iter().map(|p| Vector2::new(p[0], p[1])).collect(),
+        });
+    }
+    let base = convert::isometry(initial_base, "initial_base")?;
+    let offsets = Joints::from_column_slice(
+        &convert::finite_array(initial_offsets, "initial_offsets")?.exact(&[5])?,
+    );
+    let wafers: Vec<Vector5<f64>> = rows(initial_wafers, "initial_wafers", 5)?
+        .iter()
+        .map(|r| Vector5::from_column_slice(r))
+        .collect();
+    let mut config = SlamMotConfig::new(k, params, geometry);
+    config.pixel_sigma = pixel_sigma;
+    config.estimate_offsets = estimate_offsets;
+    config.reference_wafer = reference_wafer;
+    config.huber = huber;
+    config.max_iterations = max_iterations;
+    config.encoder_sigma = encoder_sigma;
+    config.factor = match factor {
+        "conic" => EdgeFactor::Conic,
+        "point" => EdgeFactor::NearestPoint { n_model, rounds },
+        other => {
+            return Err(errors::invalid_input(format!(
+                "factor must be 'conic' or 'point', got {other:?}"
+            )));
+        }
+    };
+    let n_wafers = wafers.len();
+    let (sol, hist, slam, init) = convert::detached(py, move || {
+        let slam = SlamMot::new(config, enc, observations, n_wafers).map_err(errors::estimate)?;
+        let mut state = SlamMotState {
+            base,
+            offsets,
+            wafers,
+        };
+        if let Some((lo, hi, step)) = init_heights {
+            state.wafers = slam
+                .initial_wafer_heights(&state, (lo, hi), step)
+                .map_err(errors::estimate)?;
+        }
+        let init = state.clone();
+        let mut hist = Vec::new();
+        if window > 0 {
+            let sig = PriorSigmas {
+                base_rotation: prior_sigmas.0,
+                base_translation: prior_sigmas.1,
+                offset: prior_sigmas.2,
+            };
+            hist = slam
+                .solve_sliding_window(&state, window, &sig)
+                .map_err(errors::estimate)?;
+            if let Some(last) = hist.last() {
+                state = last.state.clone();
+            }
+        }
+        let sol = slam.solve_batch(&state).map_err(errors::estimate)?;
+        Ok((sol, hist, slam, init))
+    })?;
+    let d = solution_dict(py, &slam, &sol)?;
+    d.set_item("history", history_list(py, &hist)?)?;
+    d.set_item("initial", state_dict(py, &init)?)?;
+    Ok(d)
+}
+
+/// The UKF of 000_3b1454b2b2194811.txt eqs. (5.1)–(5.2) over a session. `noise`: 16 standard
+/// deviations `w_T(3), w_E(3), v_T(3), v_E(3), v_θ(4)` in SI units or `None` for eq. (5.2).
+#[pyfunction]
+#[pyo3(signature = (robot_params, base_pose, encoders, increments, noise=None, offset_std0=0.035))]
+fn handeye_ukf<'py>(
+    py: Python<'py>,
+    robot_params: &Bound<'py, PyAny>,
+    base_pose: &Bound<'py, PyAny>,
+    encoders: &Bound<'py, PyAny>,
+    increments: &Bound<'py, PyAny>,
+    noise: Option<Vec<f64>>,
+    offset_std0: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let params = read_robot_params(robot_params)?;
+    let base = convert::isometry(base_pose, "base_pose")?;
+    let robot = WaferRobot::new(params, base).map_err(errors::geometry)?;
+    let enc = joints(rows(encoders, "encoders", 5)?);
+    let inc: Vec<[f64; 6]> = if enc.len() <= 1 {
+        Vec::new()
+    } else {
+        rows(increments, "increments", 6)?
+            .iter()
+            .map(|r| [r[0], r[1], r[2], r[3], r[4], r[5]])
+            .collect()
+    };
+    let noise = match noise {
+        None => UkfNoise::default(),
+        Some(v) if v.len() == 16 => UkfNoise {
+            w_t: [v[0], v[1], v[2]],
+            w_e: [v[3], v[4], v[5]],
+            v_t: [v[6], v[7], v[8]],
+            v_e: [v[9], v[10], v[11]],
+            v_theta: [v[12], v[13], v[14], v[15]],
+        },
+        Some(v) => {
+            return Err(errors::invalid_input(format!(
+                "noise must have 16 values, got {}",
+                v.len()
+            )));
+        }
+    };
+    let run = convert::detached(py, move || {
+        run_autoteach_ukf(robot, &enc, &inc, &noise, offset_std0).map_err(errors::estimate)
+    })?;
+    let d = PyDict::new(py);
+    d.set_item("poses", pose_array(py, &run.poses)?)?;
+    let n = run.offsets.len();
+    d.set_item(
+        "offsets",
+        to_numpy(py, run.offsets.iter().flatten().copied().collect(), &[n, 3])?,
+    )?;
+    d.set_item(
+        "offset_std",
+        to_numpy(
+            py,
+            run.offset_std.iter().flatten().copied().collect(),
+            &[n, 3],
+        )?,
+    )?;
+    d.set_item(
+        "covariance",
+        to_numpy(py, run.covariance.transpose().as_slice().to_vec(), &[9, 9])?,
+    )?;
+    Ok(d)
+}
+
+/// Theoretical resolution (eq. (5.14)) of a wafer `[cx, cy, cz, rx, ry]` seen from `t_wc`:
+/// pixels per mm of the centre x, y, z and pixels per degree of the tilts rx, ry.
+#[pyfunction]
+#[pyo3(signature = (k, t_wc, wafer, wafer_radius, wafer_thickness, n=180))]
+fn handeye_resolution<'py>(
+    py: Python<'py>,
+    k: &Bound<'py, PyAny>,
+    t_wc: &Bound<'py, PyAny>,
+    wafer: &Bound<'py, PyAny>,
+    wafer_radius: f64,
+    wafer_thickness: f64,
+    n: usize,
+) -> PyResult<Bound<'py, PyAny>> {
+    let k = k_matrix(k)?;
+    let t = convert::isometry(t_wc, "t_wc")?;
+    let w = Vector5::from_column_slice(&convert::finite_array(wafer, "wafer")?.exact(&[5])?);
+    let g = WaferGeometry::new(wafer_radius, wafer_thickness).map_err(errors::estimate)?;
+    let r = theoretical_resolution(&k, &t, &w, &g, n).map_err(errors::estimate)?;
+    Ok(to_numpy(py, r.to_vec(), &[5])?.into_any())
 }

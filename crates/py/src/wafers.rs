@@ -1,8 +1,191 @@
-//! Bindings of the wafers functions (see the matching module of the Rust crates).
+//! Bindings of `autoteach_detect::wafers`: wafer-rim detection in grayscale images.
+//!
+//! `wafer_detect` converts the image (uint8, float32 or float64, 2-D) and the parameters, runs
+//! [`autoteach_detect::wafers::detect_wafers`] without the GIL and wraps the edges; the friendly
+//! front is `autoteach.detect.detect_wafers`.
 
+use autoteach_detect::edges::{GrayView, Pixel};
+use autoteach_detect::wafers::{DetectParams, WaferEdge, WaferPrior, detect_wafers};
+use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
+use crate::convert;
+use crate::errors;
+use crate::geometry::PyEllipse;
+
+/// One detected wafer rim (`autoteach._core.WaferEdge`); see `autoteach.detect.WaferEdge`.
+#[pyclass(name = "WaferEdge", module = "autoteach._core", frozen)]
+pub struct PyWaferEdge {
+    inner: WaferEdge,
+}
+
+#[pymethods]
+impl PyWaferEdge {
+    /// The fitted ellipse.
+    #[getter]
+    fn ellipse(&self) -> PyEllipse {
+        PyEllipse {
+            inner: self.inner.ellipse,
+        }
+    }
+
+    /// Supporting edge points `(N, 2)`.
+    #[getter]
+    fn points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArrayDyn<f64>>> {
+        let n = self.inner.points.len();
+        let data = self.inner.points.iter().flat_map(|p| [p.x, p.y]).collect();
+        convert::to_numpy(py, data, &[n, 2])
+    }
+
+    /// Mean orthogonal distance of the points to the ellipse (pixels).
+    #[getter]
+    fn residual(&self) -> f64 {
+        self.inner.residual
+    }
+
+    /// Covariance of `(cx, cy, a, b, theta)` (5×5) or `None`.
+    #[getter]
+    fn covariance<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, numpy::PyArrayDyn<f64>>>> {
+        self.inner
+            .covariance
+            .map(|c| convert::to_numpy(py, c.transpose().as_slice().to_vec(), &[5, 5]))
+            .transpose()
+    }
+
+    /// `"upper"` or `"lower"`.
+    #[getter]
+    fn kind(&self) -> &'static str {
+        self.inner.kind.as_str()
+    }
+
+    /// Wafer index within the image (the two rims of one wafer share it).
+    #[getter]
+    fn wafer_id(&self) -> usize {
+        self.inner.wafer_id
+    }
+
+    fn __repr__(&self) -> String {
+        let e = &self.inner.ellipse;
+        format!(
+            "_core.WaferEdge(kind={:?}, wafer_id={}, ellipse=({:?}, {:?}, {:?}, {:?}, {:?}), residual={:?}, points={})",
+            self.inner.kind.as_str(),
+            self.inner.wafer_id,
+            e.cx,
+            e.cy,
+            e.a,
+            e.b,
+            e.theta,
+            self.inner.residual,
+            self.inner.points.len()
+        )
+    }
+}
+
+/// Runs the detector on a 2-D array of one pixel type.
+fn run<T: Pixel + numpy::Element>(
+    py: Python<'_>,
+    arr: PyReadonlyArray2<'_, T>,
+    params: &DetectParams,
+) -> PyResult<Vec<WaferEdge>> {
+    let shape = arr.shape();
+    let (h, w) = (shape[0], shape[1]);
+    // Row-major copy (handles non-contiguous views without raw-slice access).
+    let data: Vec<T> = arr.as_array().iter().copied().collect();
+    convert::detached(py, || {
+        let view = GrayView::new(&data, w, h).map_err(errors::detect)?;
+        detect_wafers(&view, params).map_err(errors::detect)
+    })
+}
+
+/// Detects wafer rims in a grayscale image `(height, width)` of dtype uint8 (0–255) or
+/// float32/float64 (0–1). Returns a list of `WaferEdge`.
+#[pyfunction]
+#[pyo3(signature = (
+    image, *, canny_low=6.0, canny_high=15.0, blur_sigma=0.0, min_arc_points=16,
+    residual_threshold=0.25, max_gap=60.0, up=(0.0, -1.0), max_rim_offset=10.0,
+    max_rim_axis_difference=0.03, min_contrast_ratio=0.45, semi_major_range=None,
+    semi_minor_range=None
+))]
+#[allow(clippy::too_many_arguments)]
+fn wafer_detect(
+    py: Python<'_>,
+    image: &Bound<'_, PyAny>,
+    canny_low: f64,
+    canny_high: f64,
+    blur_sigma: f64,
+    min_arc_points: usize,
+    residual_threshold: f64,
+    max_gap: f64,
+    up: (f64, f64),
+    max_rim_offset: f64,
+    max_rim_axis_difference: f64,
+    min_contrast_ratio: f64,
+    semi_major_range: Option<(f64, f64)>,
+    semi_minor_range: Option<(f64, f64)>,
+) -> PyResult<Vec<PyWaferEdge>> {
+    let mut params = DetectParams::default();
+    params.canny.low = canny_low;
+    params.canny.high = canny_high;
+    params.canny.blur_sigma = blur_sigma;
+    params.arcs.min_points = min_arc_points;
+    params.assembly.residual_threshold = residual_threshold;
+    params.assembly.max_gap = max_gap;
+    params.up = [up.0, up.1];
+    params.max_rim_offset = max_rim_offset;
+    params.max_rim_axis_difference = max_rim_axis_difference;
+    params.min_contrast_ratio = min_contrast_ratio;
+    params.prior = match (semi_major_range, semi_minor_range) {
+        (None, None) => None,
+        (a, b) => Some(WaferPrior {
+            semi_major: a.unwrap_or((0.0, f64::MAX)),
+            semi_minor: b.unwrap_or((0.0, f64::MAX)),
+        }),
+    };
+    let ndim = image
+        .getattr("ndim")
+        .and_then(|n| n.extract::<usize>())
+        .map_err(|_| {
+            errors::invalid_input(format!(
+                "image must be a 2-D NumPy array, got a {}",
+                image
+                    .get_type()
+                    .name()
+                    .map(|n| n.to_string())
+                    .unwrap_or_default()
+            ))
+        })?;
+    if ndim != 2 {
+        return Err(errors::invalid_input(format!(
+            "image must be 2-D (height, width) grayscale, got {ndim} dimensions"
+        )));
+    }
+    let edges = if let Ok(a) = image.extract::<PyReadonlyArray2<'_, u8>>() {
+        run(py, a, &params)?
+    } else if let Ok(a) = image.extract::<PyReadonlyArray2<'_, f32>>() {
+        run(py, a, &params)?
+    } else if let Ok(a) = image.extract::<PyReadonlyArray2<'_, f64>>() {
+        run(py, a, &params)?
+    } else {
+        let dtype = image
+            .getattr("dtype")
+            .map(|d| d.to_string())
+            .unwrap_or_else(|_| "unknown".into());
+        return Err(errors::invalid_input(format!(
+            "image must have dtype uint8, float32 or float64, got {dtype}"
+        )));
+    };
+    Ok(edges
+        .into_iter()
+        .map(|inner| PyWaferEdge { inner })
+        .collect())
+}
+
 /// Adds the wafers functions and classes to the module.
-pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyWaferEdge>()?;
+    m.add_function(wrap_pyfunction!(wafer_detect, m)?)?;
     Ok(())
 }

@@ -1,10 +1,49 @@
-"""The ``autoteach run`` command."""
+"""The ``autoteach run LOG.mcap`` command: auto-teaching on a recorded session log."""
 
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:  # type: ignore[type-arg]
-    """Add the ``run`` sub-command (not yet available in this build)."""
-    del sub, common
+    """Add the ``run`` sub-command."""
+    p = sub.add_parser("run", parents=[common], help="auto-teach from an MCAP session log and write a report")
+    p.add_argument("log", type=Path, help="the MCAP file")
+    p.add_argument("--out", type=Path, default=None, help="report folder (default: LOG without suffix + '-report')")
+    p.add_argument(
+        "--frontend",
+        choices=("auto", "simulated", "detect"),
+        default="auto",
+        help="edge front end: ground-truth rims of simulated logs or detection + tracking (default auto)",
+    )
+    p.add_argument("--window", type=int, default=5, help="sliding-window size in frames (0: batch only)")
+    p.add_argument("--baseline", action="store_true", help="also solve with the point-reprojection baseline")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from autoteach.cli import _progress_enabled
+    from autoteach.errors import InvalidInputError
+    from autoteach.io import read_log
+    from autoteach.pipeline import autoteach
+    from autoteach.report import format_table, write_report
+
+    if args.window < 0:
+        raise InvalidInputError(f"--window must be >= 0, got {args.window}")
+    session = read_log(args.log)
+    result = autoteach(
+        session, frontend=args.frontend, window=args.window, baseline=args.baseline, progress=_progress_enabled(args)
+    )
+    out = args.out or args.log.with_name(args.log.stem + "-report")
+    files = write_report(result, out, session)
+    if args.json:
+        d = result.to_dict()
+        d["report"] = str(out)
+        d["report_files"] = files
+        print(json.dumps(d))
+    else:
+        print(format_table(result))
+        print(f"report: {out}")
+    return 0

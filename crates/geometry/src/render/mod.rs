@@ -47,6 +47,7 @@
 //! # Ok::<(), autoteach_geometry::GeometryError>(())
 //! ```
 
+pub mod opening;
 mod post;
 mod raster;
 mod rays;

@@ -1,0 +1,72 @@
+//! Coherent point drift: rigid, affine and non-rigid (full and low-rank) on 2-D point sets of
+//! N = M = 2000 (a noisy, rotated copy of a random cloud), and low-rank non-rigid at 20 000.
+
+use std::hint::black_box;
+
+use autoteach_detect::cpd::{
+    AffineOptions, NonrigidOptions, RigidOptions, affine, nonrigid, rigid,
+};
+use criterion::{Criterion, criterion_group, criterion_main};
+use nalgebra::DMatrix;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// Y uniform in the unit square; X = R(0.3)·Y + t + small noise, same size.
+fn pair(n: usize, seed: u64) -> (DMatrix<f64>, DMatrix<f64>) {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let y = DMatrix::from_fn(n, 2, |_, _| rng.random::<f64>());
+    let (s, c) = 0.3f64.sin_cos();
+    let x = DMatrix::from_fn(n, 2, |i, d| {
+        let (a, b) = (y[(i, 0)], y[(i, 1)]);
+        let v = if d == 0 {
+            c * a - s * b + 0.1
+        } else {
+            s * a + c * b - 0.05
+        };
+        v + 0.002 * (rng.random::<f64>() - 0.5)
+    });
+    (x, y)
+}
+
+fn bench(c: &mut Criterion) {
+    let (x, y) = pair(2000, 1);
+    let mut g = c.benchmark_group("cpd 2000");
+    g.sample_size(10);
+    g.bench_function("rigid", |b| {
+        b.iter(|| rigid(black_box(&x), &y, &RigidOptions::default()))
+    });
+    g.bench_function("affine", |b| {
+        b.iter(|| affine(black_box(&x), &y, &AffineOptions::default()))
+    });
+    let nr = NonrigidOptions {
+        beta: 0.3,
+        lambda: 2.0,
+        ..Default::default()
+    };
+    g.bench_function("nonrigid full", |b| {
+        b.iter(|| nonrigid(black_box(&x), &y, &nr))
+    });
+    let lr = NonrigidOptions {
+        low_rank: Some(100),
+        ..nr.clone()
+    };
+    g.bench_function("nonrigid low-rank 100", |b| {
+        b.iter(|| nonrigid(black_box(&x), &y, &lr))
+    });
+    g.finish();
+    let (x, y) = pair(20_000, 2);
+    let mut g = c.benchmark_group("cpd 20000");
+    g.sample_size(10);
+    let lr = NonrigidOptions {
+        beta: 0.3,
+        low_rank: Some(100),
+        ..Default::default()
+    };
+    g.bench_function("nonrigid low-rank 100", |b| {
+        b.iter(|| nonrigid(black_box(&x), &y, &lr))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

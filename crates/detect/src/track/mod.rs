@@ -1,0 +1,814 @@
+//! Multi-wafer tracking by detection, 000_3b1454b2b2194811.txt ch. 4: prediction of each
+//! track's elliptic segment (§4.2, eq. 4.1), hierarchical segment registration with a Gaussian
+//! mixture (§4.3, Algorithm 5, eq. 4.2–4.10, in [`registration`]) and track management
+//! (Algorithm 4): birth, update, loss, re-acquisition and retirement.
+//!
+//! One track is one wafer: the upper and lower rims of a wafer (the edges of one
+//! [`WaferEdge::wafer_id`] in a frame) are registered together, and an unregistered edge lying
+//! within [`TrackerOptions::rim_merge_distance`] of a rim registered in the same frame joins
+//! that wafer's track (the seed's "distance between the upper and lower edges of a wafer is
+//! much smaller than distances to edges of other wafers", §4.2), which also absorbs duplicated
+//! edges.
+//!
+//! Prediction follows §4.2. A rim seen in the previous frame is moved by image motion: a
+//! constant-velocity model on the ellipse parameters, each edge point keeping its eccentric
+//! angle (the seed uses dense optical flow here; the motion model needs no image). A rim seen
+//! earlier is predicted by eq. (4.1): its 3D circle `w_k` — estimated from its past ellipses,
+//! the camera poses and the known wafer radius ([`circle`]) — is projected through the current
+//! camera pose at the rim angles of its last visible points. Tracks unseen for more than
+//! [`TrackerOptions::max_missed`] frames are retired, as the seed discards long-invisible
+//! wafers.
+//!
+//! ```
+//! use autoteach_detect::track::{Tracker, TrackerOptions};
+//! use autoteach_detect::wafers::{RimKind, WaferEdge};
+//! use autoteach_geometry::conic::Ellipse;
+//! use nalgebra::Point2;
+//!
+//! let edge = |cy: f64, id: usize| {
+//!     let e = Ellipse::new(640.0, cy, 300.0, 40.0, 0.0).unwrap();
+//!     let points = e.sample(60, 0.2, 2.9).unwrap().into_iter().map(Point2::from).collect();
+//!     WaferEdge { ellipse: e, points, residual: 0.0, covariance: None, kind: RimKind::Upper, wafer_id: id }
+//! };
+//! let mut tracker = Tracker::new(TrackerOptions::default())?;
+//! tracker.update(&[edge(300.0, 0), edge(330.0, 1)], None)?;
+//! tracker.update(&[edge(333.0, 0), edge(303.0, 1)], None)?; // listed in the other order
+//! let ids = tracker.edge_tracks();
+//! assert_eq!(ids.len(), 2);
+//! assert_ne!(ids[0], ids[1]);
+//! let t = tracker.tracks().iter().find(|t| Some(t.id) == ids[1]).unwrap();
+//! assert_eq!(t.history[0].1.ellipse.cy, 300.0); // the wafer at 303 continues the one at 300
+//! # Ok::<(), autoteach_detect::DetectError>(())
+//! ```
+
+pub mod circle;
+pub mod registration;
+
+use std::collections::VecDeque;
+
+use autoteach_geometry::conic::{Ellipse, project_circle_world};
+use nalgebra::{Isometry3, Matrix3, Vector2, Vector3};
+
+use crate::assignment::Assignment;
+use crate::wafers::{RimKind, WaferEdge};
+use crate::{DetectError, Result};
+use circle::{Circle3, check_intrinsics, circles_from_ellipse, project};
+use registration::{RegistrationOptions, SegmentPoints, greedy_nearest_centre, register_segments};
+
+/// Which associator registers predicted and observed segments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Associator {
+    /// Hierarchical GMM segment registration, Algorithm 5 (the default).
+    Hierarchical,
+    /// Greedy nearest-centre association (the baseline of §4.3), gated by
+    /// [`TrackerOptions::greedy_gate`].
+    GreedyNearestCentre,
+}
+
+/// Parameters of the [`Tracker`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerOptions {
+    /// Parameters of the segment registration (σ, ω, K, gate, minimum score).
+    pub registration: RegistrationOptions,
+    /// The associator.
+    pub associator: Associator,
+    /// Largest centre distance (pixels) the greedy associator registers.
+    pub greedy_gate: f64,
+    /// Edge points per segment used for registration (longer segments are subsampled evenly).
+    pub max_points_per_segment: usize,
+    /// A confirmed track unseen for more than this many consecutive frames is retired.
+    pub max_missed: usize,
+    /// A new track is confirmed after this many registered frames; a tentative track that
+    /// misses a frame is dropped.
+    pub min_hits: usize,
+    /// An unregistered edge whose points lie within this mean distance (pixels, Sampson) of an
+    /// edge registered to a track in the same frame joins that track (other rim, duplicate).
+    pub rim_merge_distance: f64,
+    /// Image size `(width, height)`: predicted points outside it are dropped.
+    pub image_size: Option<(f64, f64)>,
+    /// Pinhole intrinsics `K` of the camera, needed for the projection prediction (eq. 4.1).
+    pub intrinsics: Option<Matrix3<f64>>,
+    /// Wafer radius (metres) for the 3D circle estimate.
+    pub wafer_radius: f64,
+    /// Expected wafer normal in the world frame (either sign); resolves the two-fold circle
+    /// ambiguity from a single view. Without it the ambiguity is resolved across views.
+    pub normal_prior: Option<Vector3<f64>>,
+    /// Number of most recent views whose circle estimates are averaged per rim.
+    pub circle_window: usize,
+    /// Use the projection (4.1) whenever a 3D estimate and a pose exist, also for rims seen in
+    /// the previous frame with a known image velocity (the seed uses image motion there; a rim
+    /// seen only once has no velocity and is projected whenever possible).
+    pub prefer_projection: bool,
+}
+
+impl Default for TrackerOptions {
+    fn default() -> Self {
+        TrackerOptions {
+            registration: RegistrationOptions::default(),
+            associator: Associator::Hierarchical,
+            greedy_gate: 40.0,
+            max_points_per_segment: 48,
+            max_missed: 30,
+            min_hits: 2,
+            rim_merge_distance: 4.0,
+            image_size: None,
+            intrinsics: None,
+            wafer_radius: 0.15,
+            normal_prior: None,
+            circle_window: 10,
+            prefer_projection: false,
+        }
+    }
+}
+
+impl TrackerOptions {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<()> {
+        self.registration.validate()?;
+        let positive = |what: &'static str, v: f64| {
+            if v > 0.0 && v.is_finite() {
+                Ok(())
+            } else {
+                Err(DetectError::InvalidParameter {
+                    what,
+                    value: v,
+                    reason: "must be finite and positive",
+                })
+            }
+        };
+        positive("greedy_gate", self.greedy_gate)?;
+        positive("rim_merge_distance", self.rim_merge_distance)?;
+        positive("wafer_radius", self.wafer_radius)?;
+        for (what, v) in [
+            ("max_points_per_segment", self.max_points_per_segment),
+            ("min_hits", self.min_hits),
+            ("circle_window", self.circle_window),
+        ] {
+            if v == 0 {
+                return Err(DetectError::InvalidParameter {
+                    what,
+                    value: 0.0,
+                    reason: "must be at least 1",
+                });
+            }
+        }
+        if let Some((w, h)) = self.image_size {
+            positive("image width", w)?;
+            positive("image height", h)?;
+        }
+        if let Some(k) = &self.intrinsics {
+            check_intrinsics(k)?;
+        }
+        if let Some(n) = &self.normal_prior {
+            let len = n.norm();
+            if !(len > 0.0 && len.is_finite()) {
+                return Err(DetectError::InvalidParameter {
+                    what: "normal_prior length",
+                    value: len,
+                    reason: "the normal prior must be a finite non-zero vector",
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The state of one rim (upper or lower) of a track.
+#[derive(Debug, Clone, PartialEq)]
+struct RimState {
+    /// Last registered edge of this rim.
+    edge: WaferEdge,
+    /// Frame of `edge`.
+    frame: usize,
+    /// Camera pose `T_wc` of that frame, if given.
+    pose: Option<Isometry3<f64>>,
+    /// The previous registered ellipse of this rim and its frame (for the velocity).
+    prev: Option<(usize, Ellipse)>,
+    /// The two circle candidates (world frame) of the most recent views.
+    candidates: VecDeque<[Circle3; 2]>,
+    /// The current 3D estimate (world frame).
+    circle: Option<Circle3>,
+}
+
+/// The predicted segment of one track in the current frame.
+#[derive(Debug, Clone, PartialEq)]
+struct Prediction {
+    points: Vec<[f64; 2]>,
+    ellipse: Option<Ellipse>,
+}
+
+/// One tracked wafer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Track {
+    /// Track identifier (unique within a tracker, increasing in order of birth).
+    pub id: u64,
+    /// The edges registered in the last frame the track was seen (one or two rims).
+    pub edges: Vec<WaferEdge>,
+    /// Whether the track was registered in the current frame.
+    pub visible: bool,
+    /// Whether the track has been registered in at least [`TrackerOptions::min_hits`] frames.
+    pub confirmed: bool,
+    /// Number of frames in which the track was registered.
+    pub hits: usize,
+    /// Consecutive frames in which it was not registered.
+    pub missed: usize,
+    /// Frame of the first registration.
+    pub first_frame: usize,
+    /// Frame of the last registration.
+    pub last_frame: usize,
+    /// Every registered edge with its frame index.
+    pub history: Vec<(usize, WaferEdge)>,
+    /// The predicted ellipse of the current frame (upper rim if predicted, else lower).
+    pub predicted: Option<Ellipse>,
+    rims: [Option<RimState>; 2],
+}
+
+impl Track {
+    /// The latest registered ellipse (the upper rim's if the last frame had one).
+    pub fn ellipse(&self) -> Option<Ellipse> {
+        self.edges
+            .iter()
+            .find(|e| e.kind == RimKind::Upper)
+            .or_else(|| self.edges.first())
+            .map(|e| e.ellipse)
+    }
+
+    /// The current 3D estimate (world frame) of the upper rim, else of the lower rim.
+    pub fn circle(&self) -> Option<Circle3> {
+        self.rims.iter().flatten().find_map(|r| r.circle)
+    }
+}
+
+fn rim_index(kind: RimKind) -> usize {
+    match kind {
+        RimKind::Upper => 0,
+        RimKind::Lower => 1,
+    }
+}
+
+/// The multi-wafer tracker of 000_3b1454b2b2194811.txt Algorithm 4 (see the module doc).
+#[derive(Debug, Clone)]
+pub struct Tracker {
+    options: TrackerOptions,
+    tracks: Vec<Track>,
+    retired: Vec<Track>,
+    frame: usize,
+    next_id: u64,
+    edge_tracks: Vec<Option<u64>>,
+}
+
+impl Tracker {
+    /// A tracker with the given options (validated).
+    pub fn new(options: TrackerOptions) -> Result<Tracker> {
+        options.validate()?;
+        Ok(Tracker {
+            options,
+            tracks: Vec::new(),
+            retired: Vec::new(),
+            frame: 0,
+            next_id: 0,
+            edge_tracks: Vec::new(),
+        })
+    }
+
+    /// The options.
+    pub fn options(&self) -> &TrackerOptions {
+        &self.options
+    }
+
+    /// The live tracks (tentative and confirmed, visible or not), in order of birth.
+    pub fn tracks(&self) -> &[Track] {
+        &self.tracks
+    }
+
+    /// Confirmed tracks that were retired (unseen for more than `max_missed` frames).
+    pub fn retired(&self) -> &[Track] {
+        &self.retired
+    }
+
+    /// Number of frames processed so far (the index of the next frame).
+    pub fn frame(&self) -> usize {
+        self.frame
+    }
+
+    /// For each edge of the last [`Tracker::update`], the track it was registered to
+    /// (`None`: not registered — a merged duplicate is registered to its wafer's track).
+    pub fn edge_tracks(&self) -> &[Option<u64>] {
+        &self.edge_tracks
+    }
+
+    /// Processes one frame (Algorithm 4, one iteration of its loop): predicts every track
+    /// into this frame, registers `edges` to the predictions (Algorithm 5 or the greedy
+    /// baseline), updates registered tracks, creates tracks for unregistered wafers and ages
+    /// or retires unregistered tracks. `t_wc` is the camera pose (camera → world) of the frame,
+    /// needed for the projection prediction (eq. 4.1).
+    ///
+    /// Errors (the tracker is unchanged): an edge with non-finite values or an invalid
+    /// ellipse, a non-finite pose.
+    pub fn update(&mut self, edges: &[WaferEdge], t_wc: Option<&Isometry3<f64>>) -> Result<()> {
+        validate_edges(edges)?;
+        if let Some(t) = t_wc {
+            let v = t
+                .translation
+                .vector
+                .iter()
+                .chain(t.rotation.coords.iter())
+                .find(|v| !v.is_finite());
+            if let Some(v) = v {
+                return Err(DetectError::NonFinite {
+                    what: "camera pose",
+                    index: 0,
+                    value: *v,
+                });
+            }
+        }
+        let frame = self.frame;
+        // Observed segments: the edges grouped by wafer_id, in order of first appearance.
+        let mut groups: Vec<(usize, Vec<usize>)> = Vec::new();
+        for (i, e) in edges.iter().enumerate() {
+            match groups.iter_mut().find(|g| g.0 == e.wafer_id) {
+                Some(g) => g.1.push(i),
+                None => groups.push((e.wafer_id, vec![i])),
+            }
+        }
+        let predictions: Vec<Prediction> = self
+            .tracks
+            .iter()
+            .map(|t| self.predict(t, frame, t_wc))
+            .collect();
+        let assignment = match self.options.associator {
+            Associator::Hierarchical => self.register_hierarchical(edges, &groups, &predictions)?,
+            Associator::GreedyNearestCentre => {
+                let observed: Vec<Vector2<f64>> = groups
+                    .iter()
+                    .map(|(_, idx)| {
+                        let e = idx
+                            .iter()
+                            .map(|&i| &edges[i])
+                            .find(|e| e.kind == RimKind::Upper)
+                            .unwrap_or(&edges[idx[0]]);
+                        Vector2::new(e.ellipse.cx, e.ellipse.cy)
+                    })
+                    .collect();
+                let predicted: Vec<Option<Vector2<f64>>> = predictions
+                    .iter()
+                    .map(|p| p.ellipse.map(|e| Vector2::new(e.cx, e.cy)))
+                    .collect();
+                greedy_nearest_centre(&observed, &predicted, self.options.greedy_gate)?
+            }
+        };
+        // Track management (Algorithm 4).
+        self.edge_tracks = vec![None; edges.len()];
+        for (t, p) in self.tracks.iter_mut().zip(&predictions) {
+            t.visible = false;
+            t.predicted = p.ellipse;
+        }
+        for (k, (_, idx)) in groups.iter().enumerate() {
+            if let Some(l) = assignment.row_to_col[k] {
+                let edges_k: Vec<&WaferEdge> = idx.iter().map(|&i| &edges[i]).collect();
+                self.register(l, &edges_k, frame, t_wc);
+                for &i in idx {
+                    self.edge_tracks[i] = Some(self.tracks[l].id);
+                }
+            }
+        }
+        // Unregistered groups: the other rim (or a duplicate) of a wafer registered in this
+        // frame joins its track; the rest start new tracks.
+        let mut births = Vec::new();
+        for (k, (_, idx)) in groups.iter().enumerate() {
+            if assignment.row_to_col[k].is_some() {
+                continue;
+            }
+            match self.merge_target(edges, idx) {
+                Some(l) => {
+                    let edges_k: Vec<&WaferEdge> = idx.iter().map(|&i| &edges[i]).collect();
+                    self.register(l, &edges_k, frame, t_wc);
+                    for &i in idx {
+                        self.edge_tracks[i] = Some(self.tracks[l].id);
+                    }
+                }
+                None => births.push(k),
+            }
+        }
+        // Loss and retirement of unregistered tracks.
+        let max_missed = self.options.max_missed;
+        let mut kept = Vec::with_capacity(self.tracks.len() + births.len());
+        for mut t in std::mem::take(&mut self.tracks) {
+            if !t.visible {
+                t.missed += 1;
+                if !t.confirmed {
+                    continue;
+                }
+                if t.missed > max_missed {
+                    self.retired.push(t);
+                    continue;
+                }
+            }
+            kept.push(t);
+        }
+        self.tracks = kept;
+        for k in births {
+            let idx = &groups[k].1;
+            let id = self.next_id;
+            self.next_id += 1;
+            self.tracks.push(Track {
+                id,
+                edges: Vec::new(),
+                visible: false,
+                confirmed: false,
+                hits: 0,
+                missed: 0,
+                first_frame: frame,
+                last_frame: frame,
+                history: Vec::new(),
+                predicted: None,
+                rims: [None, None],
+            });
+            let l = self.tracks.len() - 1;
+            let edges_k: Vec<&WaferEdge> = idx.iter().map(|&i| &edges[i]).collect();
+            self.register(l, &edges_k, frame, t_wc);
+            for &i in idx {
+                self.edge_tracks[i] = Some(id);
+            }
+        }
+        self.frame += 1;
+        Ok(())
+    }
+
+    /// Builds the point sets of Algorithm 5 and registers them.
+    fn register_hierarchical(
+        &self,
+        edges: &[WaferEdge],
+        groups: &[(usize, Vec<usize>)],
+        predictions: &[Prediction],
+    ) -> Result<Assignment> {
+        let m = self.options.max_points_per_segment;
+        let mut observed = SegmentPoints::default();
+        for (_, idx) in groups {
+            let mut pts = Vec::new();
+            for &i in idx {
+                pts.extend(subsample(&edge_points(&edges[i]), m));
+            }
+            observed.push_segment(pts);
+        }
+        let mut predicted = SegmentPoints::default();
+        for p in predictions {
+            predicted.push_segment(p.points.iter().copied());
+        }
+        Ok(register_segments(&observed, &predicted, &self.options.registration)?.assignment)
+    }
+
+    /// The track registered in this frame whose edges the group's edges lie next to
+    /// (mean Sampson distance below `rim_merge_distance`), if any.
+    fn merge_target(&self, edges: &[WaferEdge], idx: &[usize]) -> Option<usize> {
+        let tol = self.options.rim_merge_distance;
+        let mut target = None;
+        for &i in idx {
+            let pts = subsample(&edge_points(&edges[i]), 32);
+            let e = &edges[i].ellipse;
+            let mut best: Option<(f64, usize)> = None;
+            for (l, t) in self.tracks.iter().enumerate() {
+                if !t.visible {
+                    continue;
+                }
+                for te in &t.edges {
+                    let f = &te.ellipse;
+                    // Cheap pre-check: centres and axes within a few tolerances.
+                    let near = (f.cx - e.cx).hypot(f.cy - e.cy) < 4.0 * tol + 0.2 * f.a
+                        && (f.a - e.a).abs() < 4.0 * tol + 0.2 * f.a;
+                    if !near {
+                        continue;
+                    }
+                    let d = pts
+                        .iter()
+                        .map(|p| f.sampson_distance(&Vector2::new(p[0], p[1])).abs())
+                        .sum::<f64>()
+                        / pts.len().max(1) as f64;
+                    if d < tol && best.is_none_or(|b| d < b.0) {
+                        best = Some((d, l));
+                    }
+                }
+            }
+            match (best, target) {
+                (None, _) => return None,
+                (Some((_, l)), None) => target = Some(l),
+                (Some((_, l)), Some(t)) if l != t => return None,
+                _ => {}
+            }
+        }
+        target
+    }
+
+    /// Updates track `l` with the edges registered to it in `frame`.
+    fn register(
+        &mut self,
+        l: usize,
+        edges: &[&WaferEdge],
+        frame: usize,
+        t_wc: Option<&Isometry3<f64>>,
+    ) {
+        let opts = self.options.clone();
+        let t = &mut self.tracks[l];
+        if !t.visible {
+            t.visible = true;
+            t.hits += 1;
+            t.missed = 0;
+            t.edges.clear();
+        }
+        t.last_frame = frame;
+        if t.hits >= opts.min_hits {
+            t.confirmed = true;
+        }
+        for e in edges {
+            t.history.push((frame, (*e).clone()));
+            t.edges.push((*e).clone());
+        }
+        // Rim states: per kind, the edge with the most points of this frame.
+        for kind in [RimKind::Upper, RimKind::Lower] {
+            let Some(e) = t
+                .edges
+                .iter()
+                .filter(|e| e.kind == kind)
+                .max_by_key(|e| e.points.len())
+            else {
+                continue;
+            };
+            let slot = &mut t.rims[rim_index(kind)];
+            let (prev, mut candidates) = match slot.take() {
+                Some(s) if s.frame == frame => (s.prev, s.candidates),
+                Some(s) => (Some((s.frame, s.edge.ellipse)), s.candidates),
+                None => (None, VecDeque::new()),
+            };
+            let cands = match (t_wc, opts.intrinsics.as_ref()) {
+                (Some(pose), Some(k)) => circles_from_ellipse(k, &e.ellipse, opts.wafer_radius)
+                    .ok()
+                    .map(|c| [c[0].transformed(pose), c[1].transformed(pose)]),
+                _ => None,
+            };
+            if let Some(c) = cands {
+                if candidates.len() == opts.circle_window {
+                    candidates.pop_front();
+                }
+                candidates.push_back(c);
+            }
+            let circle = estimate_circle(&candidates, opts.normal_prior.as_ref());
+            *slot = Some(RimState {
+                edge: e.clone(),
+                frame,
+                pose: t_wc.copied(),
+                prev,
+                candidates,
+                circle,
+            });
+        }
+    }
+
+    /// The predicted segment of track `t` in `frame` (§4.2).
+    fn predict(&self, t: &Track, frame: usize, t_wc: Option<&Isometry3<f64>>) -> Prediction {
+        let m = self.options.max_points_per_segment;
+        let mut out = Prediction {
+            points: Vec::new(),
+            ellipse: None,
+        };
+        for rim in t.rims.iter().flatten() {
+            let gap = frame.saturating_sub(rim.frame).max(1);
+            let projected = match (t_wc, self.options.intrinsics.as_ref(), rim.circle, rim.pose) {
+                (Some(pose), Some(k), Some(c), Some(old_pose))
+                    if gap > 1 || self.options.prefer_projection || !has_velocity(rim) =>
+                {
+                    project_rim(k, pose, &old_pose, &c, &rim.edge, m)
+                }
+                _ => None,
+            };
+            let (pts, ell) = match projected {
+                Some(p) => p,
+                None => {
+                    let e = extrapolate(rim, frame);
+                    let pts = subsample(&edge_points(&rim.edge), m)
+                        .iter()
+                        .map(|p| {
+                            let q = e
+                                .point_at(rim.edge.ellipse.parameter_of(&Vector2::new(p[0], p[1])));
+                            [q.x, q.y]
+                        })
+                        .collect();
+                    (pts, Some(e))
+                }
+            };
+            if out.ellipse.is_none() {
+                out.ellipse = ell;
+            }
+            out.points
+                .extend(pts.into_iter().filter(|p| self.in_image(p)));
+        }
+        out
+    }
+
+    fn in_image(&self, p: &[f64; 2]) -> bool {
+        match self.options.image_size {
+            Some((w, h)) => p[0] >= -0.5 && p[1] >= -0.5 && p[0] <= w - 0.5 && p[1] <= h - 0.5,
+            None => true,
+        }
+    }
+}
+
+/// Eq. (4.1): the rim points of the last visible segment, located on the 3D circle `c` by
+/// their rays from the old camera pose, projected through the current pose `t_wc`; and the
+/// projected ellipse of the whole rim.
+fn project_rim(
+    k: &Matrix3<f64>,
+    t_wc: &Isometry3<f64>,
+    old_pose: &Isometry3<f64>,
+    c: &Circle3,
+    edge: &WaferEdge,
+    m: usize,
+) -> Option<(Vec<[f64; 2]>, Option<Ellipse>)> {
+    let k_inv = k.try_inverse()?;
+    let origin = old_pose.translation.vector;
+    let t_cw = t_wc.inverse();
+    let pts: Vec<[f64; 2]> = subsample(&edge_points(edge), m)
+        .iter()
+        .filter_map(|p| {
+            let ray = old_pose.rotation * (k_inv * Vector3::new(p[0], p[1], 1.0));
+            let phi = c.angle_of_ray(&origin, &ray)?;
+            let x_c = t_cw * nalgebra::Point3::from(c.point_at(phi));
+            project(k, &x_c.coords).map(|q| [q.x, q.y])
+        })
+        .collect();
+    if pts.is_empty() {
+        return None;
+    }
+    let ell = project_circle_world(k, &t_cw, &c.center, &c.normal, c.radius).ok();
+    Some((pts, ell))
+}
+
+/// Whether the rim has a recent previous observation to estimate its image velocity from.
+fn has_velocity(rim: &RimState) -> bool {
+    rim.prev
+        .is_some_and(|(f0, _)| (1..=3).contains(&rim.frame.saturating_sub(f0)))
+}
+
+/// Constant-velocity extrapolation of a rim's ellipse parameters to `frame`.
+fn extrapolate(rim: &RimState, frame: usize) -> Ellipse {
+    let e1 = rim.edge.ellipse;
+    let Some((f0, e0)) = rim.prev else {
+        return e1;
+    };
+    let dt_obs = rim.frame.saturating_sub(f0);
+    if dt_obs == 0 || dt_obs > 3 {
+        return e1;
+    }
+    let s = frame.saturating_sub(rim.frame) as f64 / dt_obs as f64;
+    let mut dth = e1.theta - e0.theta;
+    while dth > std::f64::consts::FRAC_PI_2 {
+        dth -= std::f64::consts::PI;
+    }
+    while dth <= -std::f64::consts::FRAC_PI_2 {
+        dth += std::f64::consts::PI;
+    }
+    // Near-circular ellipses have an ill-defined orientation: do not extrapolate it.
+    if (e1.a - e1.b) < 0.05 * e1.a || (e0.a - e0.b) < 0.05 * e0.a {
+        dth = 0.0;
+    }
+    Ellipse::new(
+        e1.cx + s * (e1.cx - e0.cx),
+        e1.cy + s * (e1.cy - e0.cy),
+        e1.a + s * (e1.a - e0.a),
+        e1.b + s * (e1.b - e0.b),
+        e1.theta + s * dth,
+    )
+    .unwrap_or(e1)
+}
+
+/// World-frame circle of a rim from the candidate pairs of its recent views: per view the
+/// candidate whose normal is closest to `normal_prior`, or, without a prior, closest to the
+/// reference that makes the oldest and newest views agree best; then the mean centre and the
+/// sign-aligned mean normal. `None` for a single view without a prior (ambiguous).
+fn estimate_circle(
+    candidates: &VecDeque<[Circle3; 2]>,
+    normal_prior: Option<&Vector3<f64>>,
+) -> Option<Circle3> {
+    let first = candidates.front()?;
+    let chosen: Vec<Circle3> = match normal_prior {
+        Some(n) => candidates
+            .iter()
+            .map(|c| {
+                if c[0].normal.dot(n).abs() >= c[1].normal.dot(n).abs() {
+                    c[0]
+                } else {
+                    c[1]
+                }
+            })
+            .collect(),
+        None => {
+            if candidates.len() < 2 {
+                return None;
+            }
+            let last = candidates.back()?;
+            let mut best = (f64::INFINITY, first[0]);
+            for a in first {
+                for b in last {
+                    let d = (a.center - b.center).norm();
+                    if d < best.0 {
+                        best = (d, *a);
+                    }
+                }
+            }
+            let r = best.1;
+            candidates
+                .iter()
+                .map(|c| {
+                    if (c[0].center - r.center).norm() <= (c[1].center - r.center).norm() {
+                        c[0]
+                    } else {
+                        c[1]
+                    }
+                })
+                .collect()
+        }
+    };
+    let n = chosen.len() as f64;
+    let center = chosen.iter().map(|c| c.center).sum::<Vector3<f64>>() / n;
+    let reference = chosen[0].normal;
+    let normal_sum: Vector3<f64> = chosen
+        .iter()
+        .map(|c| {
+            if c.normal.dot(&reference) < 0.0 {
+                -c.normal
+            } else {
+                c.normal
+            }
+        })
+        .sum();
+    let len = normal_sum.norm();
+    (len > 0.0 && center.iter().all(|v| v.is_finite())).then(|| Circle3 {
+        center,
+        normal: normal_sum / len,
+        radius: chosen[0].radius,
+    })
+}
+
+/// An edge's points as `[u, v]`; an edge without points stands for its whole ellipse
+/// (64 samples).
+fn edge_points(edge: &WaferEdge) -> Vec<[f64; 2]> {
+    if edge.points.is_empty() {
+        let e = &edge.ellipse;
+        (0..64)
+            .map(|i| {
+                let p = e.point_at(i as f64 * std::f64::consts::TAU / 64.0);
+                [p.x, p.y]
+            })
+            .collect()
+    } else {
+        edge.points.iter().map(|p| [p.x, p.y]).collect()
+    }
+}
+
+/// At most `m` evenly spaced elements (all of them if there are fewer).
+fn subsample(points: &[[f64; 2]], m: usize) -> Vec<[f64; 2]> {
+    if points.len() <= m {
+        return points.to_vec();
+    }
+    let step = points.len() as f64 / m as f64;
+    (0..m)
+        .map(|i| points[((i as f64 * step) as usize).min(points.len() - 1)])
+        .collect()
+}
+
+/// Rejects edges with non-finite points or an invalid ellipse.
+fn validate_edges(edges: &[WaferEdge]) -> Result<()> {
+    for (i, e) in edges.iter().enumerate() {
+        let el = &e.ellipse;
+        let params = [el.cx, el.cy, el.a, el.b, el.theta];
+        if let Some(v) = params.iter().find(|v| !v.is_finite()) {
+            return Err(DetectError::NonFinite {
+                what: "edge ellipse",
+                index: i,
+                value: *v,
+            });
+        }
+        if !(el.b > 0.0 && el.a >= el.b) {
+            return Err(DetectError::InvalidParameter {
+                what: "edge ellipse semi-minor axis b",
+                value: el.b,
+                reason: "an edge ellipse needs a >= b > 0",
+            });
+        }
+        if let Some(v) = e
+            .points
+            .iter()
+            .flat_map(|p| [p.x, p.y])
+            .find(|v| !v.is_finite())
+        {
+            return Err(DetectError::NonFinite {
+                what: "edge points",
+                index: i,
+                value: v,
+            });
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,1482 @@
+//! The visual-inertial SLAM-MOT calibration of 000_3b1454b2b2194811.txt §5.3: factor graph
+//! (eqs. (5.3)–(5.8)), camera poses through the kinematic chain (eqs. (5.9)–(5.10)), the conic
+//! projection factor of every tracked edge point (eq. (5.13)), sliding-window and batch solves
+//! and marginal covariances of every estimate.
+
+use autoteach_geometry::lie::{hat, se3_minus, so3_right_jacobian_inv};
+use autoteach_geometry::robot::{Joints, RobotParams, WaferRobot};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Vector2, Vector3, Vector5};
+
+use super::chain::{CameraChain, N_JOINTS};
+use super::factors::{
+    EdgeJacobians, conic_edge_residuals, nearest_model_angles, point_reprojection_residuals,
+};
+use super::wafer::{Rim, WaferGeometry};
+use crate::lsq::{
+    BlockId, Loss, Manifold, Problem, Residual, SolverOptions, se3_from_params, se3_to_params,
+};
+use crate::{EstimateError, Result};
+
+/// Tracked edge points of one rim of one wafer in one frame (a camera observation `z_{k,t}`
+/// of Fig. 5.5).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EdgeObservation {
+    /// Frame index `t` (into the encoder readings).
+    pub frame: usize,
+    /// Wafer index `k`.
+    pub wafer: usize,
+    /// Which rim the points belong to.
+    pub rim: Rim,
+    /// Edge points in pixels (undistorted, pinhole `K`).
+    pub points: Vec<Vector2<f64>>,
+}
+
+/// The camera-observation factor to use.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum EdgeFactor {
+    /// The conic projection error of eq. (5.13) (point-to-object, no correspondences).
+    Conic,
+    /// Baseline: point-wise reprojection error against the nearest of `n_model` model points
+    /// per rim, re-associated `rounds` times (point-based bundle adjustment with naive
+    /// nearest-point association).
+    NearestPoint {
+        /// Model points per rim.
+        n_model: usize,
+        /// Association rounds.
+        rounds: usize,
+    },
+}
+
+/// Settings of the SLAM-MOT solve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlamMotConfig {
+    /// Pinhole intrinsic matrix `K`.
+    pub k: Matrix3<f64>,
+    /// Robot geometry (link lengths, camera mount), assumed accurate as in §5.3.
+    pub robot_params: RobotParams,
+    /// Wafer radius and thickness.
+    pub geometry: WaferGeometry,
+    /// Standard deviation of the edge points (pixels): `Ω^z = 1/σ²` of eq. (5.5).
+    pub pixel_sigma: f64,
+    /// Joints whose zero offsets are estimated (indices into `(θ1, θ2, θ3, θ4, h)`).
+    pub estimate_offsets: Vec<usize>,
+    /// Index of the reference wafer that defines the world frame (held fixed).
+    pub reference_wafer: usize,
+    /// Gauge prior on the yaw of the base about the world z axis (rad standard deviation).
+    pub yaw_gauge_sigma: f64,
+    /// Huber threshold on whitened residuals (`None`: plain least squares).
+    pub huber: Option<f64>,
+    /// Camera-observation factor.
+    pub factor: EdgeFactor,
+    /// Iteration limit of each solve.
+    pub max_iterations: usize,
+    /// Encoder noise (θ1, θ2, θ4, lift; rad, rad, rad, m) or `None`. With it every frame gets
+    /// its own joint-noise variables `n_t` (the camera pose is `T_wc(q_enc − δ − n_t)`) with
+    /// the Gaussian prior `N(0, diag(σ²))`: the robot-precision factor of eqs. (5.6), (5.11)
+    /// in absolute form, so that the covariances account for the encoder noise that moves
+    /// every edge point of a frame together.
+    pub encoder_sigma: Option<[f64; 4]>,
+}
+
+/// Joints whose per-frame encoder noise is modelled (the others do not move the camera).
+const NOISE_JOINTS: [usize; 4] = [0, 1, 3, 4];
+
+impl SlamMotConfig {
+    /// Defaults: 0.5 px edge noise, offsets of θ2 and θ4, wafer 0 as reference, a 1e-6 rad
+    /// yaw gauge, Huber at 3σ, the conic factor, 50 iterations.
+    pub fn new(k: Matrix3<f64>, robot_params: RobotParams, geometry: WaferGeometry) -> Self {
+        Self {
+            k,
+            robot_params,
+            geometry,
+            pixel_sigma: 0.5,
+            estimate_offsets: vec![1, 3],
+            reference_wafer: 0,
+            yaw_gauge_sigma: 1e-6,
+            huber: Some(3.0),
+            factor: EdgeFactor::Conic,
+            max_iterations: 50,
+            encoder_sigma: None,
+        }
+    }
+
+    fn validate(&self, n_wafers: usize) -> Result<()> {
+        if !(self.pixel_sigma.is_finite() && self.pixel_sigma > 0.0) {
+            return Err(EstimateError::InvalidParameter {
+                name: "pixel_sigma",
+                value: self.pixel_sigma,
+                reason: "must be positive",
+            });
+        }
+        if !(self.yaw_gauge_sigma.is_finite() && self.yaw_gauge_sigma > 0.0) {
+            return Err(EstimateError::InvalidParameter {
+                name: "yaw_gauge_sigma",
+                value: self.yaw_gauge_sigma,
+                reason: "must be positive",
+            });
+        }
+        if let Some(&j) = self.estimate_offsets.iter().find(|&&j| j >= N_JOINTS) {
+            return Err(EstimateError::InvalidParameter {
+                name: "estimate_offsets",
+                value: j as f64,
+                reason: "joint indices are 0..5",
+            });
+        }
+        if let Some(sig) = self.encoder_sigma
+            && let Some(v) = sig.iter().find(|v| !(v.is_finite() && **v > 0.0))
+        {
+            return Err(EstimateError::InvalidParameter {
+                name: "encoder_sigma",
+                value: *v,
+                reason: "must be finite and positive",
+            });
+        }
+        if self.reference_wafer >= n_wafers {
+            return Err(EstimateError::InvalidParameter {
+                name: "reference_wafer",
+                value: self.reference_wafer as f64,
+                reason: "no such wafer",
+            });
+        }
+        if let EdgeFactor::NearestPoint { n_model, .. } = self.factor
+            && n_model < 3
+        {
+            return Err(EstimateError::InvalidParameter {
+                name: "n_model",
+                value: n_model as f64,
+                reason: "at least 3",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The current values of everything SLAM-MOT estimates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlamMotState {
+    /// Effective base pose `T_wb` (see the module docs of [`super`]).
+    pub base: Isometry3<f64>,
+    /// All five joint zero offsets (the estimated ones and the fixed rest).
+    pub offsets: Joints,
+    /// Wafers `[cx, cy, cz, rx, ry]`, indexed like the observations.
+    pub wafers: Vec<Vector5<f64>>,
+}
+
+/// One estimate with its standard deviation (`None` when the data do not constrain it).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Uncertainty {
+    /// Joint covariance of the estimated quantities in tangent coordinates, ordered: base
+    /// `[ω; ρ]` (6), estimated offsets (in `estimate_offsets` order), then every observed
+    /// non-reference wafer (5 each, in `wafer_order`). `None` if the information matrix is
+    /// singular.
+    pub covariance: Option<DMatrix<f64>>,
+    /// Wafers in the order of the covariance.
+    pub wafer_order: Vec<usize>,
+    /// Blocks/directions the data leave unconstrained (the lsq engine's report), if any.
+    pub unobservable: Option<String>,
+}
+
+/// Outcome of a solve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlamMotSolution {
+    /// Estimates.
+    pub state: SlamMotState,
+    /// Covariances.
+    pub uncertainty: Uncertainty,
+    /// Initial and final cost, iterations.
+    pub initial_cost: f64,
+    /// Final cost.
+    pub final_cost: f64,
+    /// LM iterations (summed over association rounds).
+    pub iterations: usize,
+    /// RMS of the final whitened edge residuals times σ (pixels).
+    pub rms_px: f64,
+    /// Number of scalar edge residuals.
+    pub n_residuals: usize,
+}
+
+/// Per-window record of the sliding-window run (Fig. 5.11).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WindowRecord {
+    /// Last frame of the window.
+    pub last_frame: usize,
+    /// Estimates after the window.
+    pub state: SlamMotState,
+    /// Standard deviations of the base tangent `[ω; ρ]` (6) and the estimated offsets.
+    pub std: Vec<f64>,
+}
+
+/// The conic edge factor of eq. (5.13) with camera poses through eq. (5.9): blocks
+/// `[base (Se3), offset_j (Euclidean 1) …, wafer (Euclidean 5)]`.
+struct EdgeResidual {
+    k: Matrix3<f64>,
+    params: RobotParams,
+    geometry: WaferGeometry,
+    q_enc: Joints,
+    fixed_offsets: Joints,
+    offset_joints: Vec<usize>,
+    rim: Rim,
+    points: Vec<Vector2<f64>>,
+    sigma: f64,
+    /// `Some(angles)`: the point-reprojection baseline with these associations.
+    angles: Option<Vec<f64>>,
+    /// Whether the last block is the frame's joint noise `n_t` (Euclidean 4).
+    joint_noise: bool,
+}
+
+impl EdgeResidual {
+    fn chain(&self, params: &[&[f64]]) -> CameraChain {
+        let mut offsets = self.fixed_offsets;
+        for (i, &j) in self.offset_joints.iter().enumerate() {
+            offsets[j] = params[1 + i][0];
+        }
+        if self.joint_noise {
+            let n = params[2 + self.offset_joints.len()];
+            for (k, &j) in NOISE_JOINTS.iter().enumerate() {
+                offsets[j] += n[k];
+            }
+        }
+        CameraChain {
+            robot: WaferRobot {
+                params: self.params,
+                base: se3_from_params(params[0]),
+            },
+            offsets,
+        }
+    }
+}
+
+impl Residual for EdgeResidual {
+    fn dim(&self) -> usize {
+        self.points.len() * if self.angles.is_some() { 2 } else { 1 }
+    }
+
+    fn evaluate(
+        &self,
+        params: &[&[f64]],
+        residual: &mut [f64],
+        jacobians: Option<&mut [DMatrix<f64>]>,
+    ) -> Result<()> {
+        let chain = self.chain(params);
+        let ev = chain.evaluate(&self.q_enc);
+        let wp = params[1 + self.offset_joints.len()];
+        let w = Vector5::from_column_slice(wp);
+        let n = self.dim();
+        let mut ej = jacobians.as_ref().map(|_| EdgeJacobians {
+            camera: DMatrix::zeros(n, 6),
+            wafer: DMatrix::zeros(n, 5),
+        });
+        let (r, t) = (self.geometry.radius, self.geometry.thickness);
+        match &self.angles {
+            None => conic_edge_residuals(
+                &self.k,
+                &ev.t_wc,
+                &w,
+                self.rim,
+                r,
+                t,
+                &self.points,
+                self.sigma,
+                residual,
+                ej.as_mut(),
+            )?,
+            Some(a) => point_reprojection_residuals(
+                &self.k,
+                &ev.t_wc,
+                &w,
+                self.rim,
+                r,
+                t,
+                &self.points,
+                a,
+                self.sigma,
+                residual,
+                ej.as_mut(),
+            )?,
+        }
+        if let (Some(jac), Some(ej)) = (jacobians, ej) {
+            jac[0]
+                .copy_from(&(&ej.camera * DMatrix::from_column_slice(6, 6, ev.d_base.as_slice())));
+            for (i, &j) in self.offset_joints.iter().enumerate() {
+                let col = ev.d_offsets.column(j);
+                let dcol = &ej.camera * DVector::from_column_slice(col.as_slice());
+                jac[1 + i].set_column(0, &dcol);
+            }
+            jac[1 + self.offset_joints.len()].copy_from(&ej.wafer);
+            if self.joint_noise {
+                let jn = &mut jac[2 + self.offset_joints.len()];
+                for (k, &j) in NOISE_JOINTS.iter().enumerate() {
+                    let col = ev.d_offsets.column(j);
+                    jn.set_column(
+                        k,
+                        &(&ej.camera * DVector::from_column_slice(col.as_slice())),
+                    );
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Gauge prior on the base yaw `atan2(R₁₀, R₀₀)` (one whitened residual).
+struct YawGauge {
+    yaw: f64,
+    sigma: f64,
+}
+
+impl Residual for YawGauge {
+    fn dim(&self) -> usize {
+        1
+    }
+
+    fn evaluate(
+        &self,
+        params: &[&[f64]],
+        residual: &mut [f64],
+        jacobians: Option<&mut [DMatrix<f64>]>,
+    ) -> Result<()> {
+        let t = se3_from_params(params[0]);
+        let r = t.rotation.to_rotation_matrix().into_inner();
+        let h = r.column(0).into_owned();
+        let yaw = h.y.atan2(h.x);
+        residual[0] = autoteach_geometry::robot::wrap_angle(yaw - self.yaw) / self.sigma;
+        if let Some(jac) = jacobians {
+            // d(R Exp(ω) e_x)/dω = −R [e_x]×.
+            let dh = -r * hat(&Vector3::x());
+            let den = h.x * h.x + h.y * h.y;
+            for m in 0..3 {
+                jac[0][(0, m)] = (h.x * dh[(1, m)] - h.y * dh[(0, m)]) / den / self.sigma;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A Gaussian prior on several blocks jointly (the marginalised previous window):
+/// `r = L⁻¹ [x_b ⊖ μ_b]_b` with `Σ = L Lᵀ`; blocks are Se3 (first) and Euclidean.
+struct JointPrior {
+    means: Vec<Vec<f64>>,
+    manifolds: Vec<Manifold>,
+    l_inv: DMatrix<f64>,
+}
+
+impl Residual for JointPrior {
+    fn dim(&self) -> usize {
+        self.l_inv.nrows()
+    }
+
+    fn evaluate(
+        &self,
+        params: &[&[f64]],
+        residual: &mut [f64],
+        jacobians: Option<&mut [DMatrix<f64>]>,
+    ) -> Result<()> {
+        let n = self.dim();
+        let mut d = DVector::zeros(n);
+        let mut dj = DMatrix::zeros(n, n);
+        let mut off = 0;
+        for (b, (m, mu)) in self.manifolds.iter().zip(&self.means).enumerate() {
+            match m {
+                Manifold::Se3 => {
+                    let x = se3_from_params(params[b]);
+                    let e = se3_minus(&x, &se3_from_params(mu));
+                    d.rows_mut(off, 6).copy_from(&e);
+                    // ∂(x ⊖ μ)/∂δx = J_r⁻¹(e) for SE(3); the rotation block approximation
+                    // J_r⁻¹ of SO(3) on both parts is exact to first order near e = 0.
+                    let jr = so3_right_jacobian_inv(&Vector3::new(e[0], e[1], e[2]));
+                    let mut j6 = DMatrix::<f64>::identity(6, 6);
+                    j6.view_mut((0, 0), (3, 3)).copy_from(&jr);
+                    j6.view_mut((3, 3), (3, 3)).copy_from(&jr);
+                    dj.view_mut((off, off), (6, 6)).copy_from(&j6);
+                    off += 6;
+                }
+                _ => {
+                    let k = params[b].len();
+                    for i in 0..k {
+                        d[off + i] = params[b][i] - mu[i];
+                        dj[(off + i, off + i)] = 1.0;
+                    }
+                    off += k;
+                }
+            }
+        }
+        let r = &self.l_inv * d;
+        residual.copy_from_slice(r.as_slice());
+        if let Some(jac) = jacobians {
+            let full = &self.l_inv * dj;
+            let mut off = 0;
+            for (b, m) in self.manifolds.iter().enumerate() {
+                let k = m.tangent_dim();
+                jac[b].copy_from(&full.columns(off, k));
+                off += k;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The parameter blocks of one problem.
+struct Blocks {
+    base: BlockId,
+    offsets: Vec<BlockId>,
+    wafers: Vec<Option<BlockId>>,
+}
+
+/// The SLAM-MOT estimator over a session: encoder readings per frame and edge observations.
+#[derive(Debug, Clone)]
+pub struct SlamMot {
+    config: SlamMotConfig,
+    encoders: Vec<Joints>,
+    observations: Vec<EdgeObservation>,
+    n_wafers: usize,
+}
+
+impl SlamMot {
+    /// Validates the inputs: finite encoders and points, observations naming existing frames
+    /// and wafers, a non-empty point set per observation.
+    pub fn new(
+        config: SlamMotConfig,
+        encoders: Vec<Joints>,
+        observations: Vec<EdgeObservation>,
+        n_wafers: usize,
+    ) -> Result<Self> {
+        config.validate(n_wafers)?;
+        config.robot_params.validate()?;
+        for (f, q) in encoders.iter().enumerate() {
+            if let Some((i, v)) = q.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                return Err(EstimateError::NonFiniteInput {
+                    what: format!("encoder reading of frame {f}"),
+                    index: i,
+                    value: *v,
+                });
+            }
+        }
+        for (o, obs) in observations.iter().enumerate() {
+            if obs.frame >= encoders.len() || obs.wafer >= n_wafers {
+                return Err(EstimateError::InvalidParameter {
+                    name: "observation frame/wafer",
+                    value: o as f64,
+                    reason: "an observation names a frame without encoder reading or an unknown wafer",
+                });
+            }
+            if obs.points.is_empty() {
+                return Err(EstimateError::InvalidParameter {
+                    name: "observation points",
+                    value: o as f64,
+                    reason: "an observation has no edge points",
+                });
+            }
+            if let Some(p) = obs
+                .points
+                .iter()
+                .find(|p| !(p.x.is_finite() && p.y.is_finite()))
+            {
+                return Err(EstimateError::NonFiniteInput {
+                    what: format!("edge points of observation {o}"),
+                    index: 0,
+                    value: if p.x.is_finite() { p.y } else { p.x },
+                });
+            }
+        }
+        if observations.is_empty() {
+            return Err(EstimateError::InvalidParameter {
+                name: "observations",
+                value: 0.0,
+                reason: "no wafer edge was observed in any frame: nothing constrains the calibration",
+            });
+        }
+        Ok(Self {
+            config,
+            encoders,
+            observations,
+            n_wafers,
+        })
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &SlamMotConfig {
+        &self.config
+    }
+
+    /// Camera poses `T_wc` of every frame for a state (eq. (5.9)).
+    pub fn camera_poses(&self, state: &SlamMotState) -> Vec<Isometry3<f64>> {
+        let robot = WaferRobot {
+            params: self.config.robot_params,
+            base: state.base,
+        };
+        let qs: Vec<Joints> = self.encoders.iter().map(|q| q - state.offsets).collect();
+        robot.camera_poses(&qs)
+    }
+
+    /// Initial height of every wafer by a 1-D search along the world z axis (wafers stacked
+    /// above the reference, level): for each wafer the z (step `step`, within `z_range`) whose
+    /// rim conics best explain its edge points (median |conic error|) with the camera poses of
+    /// `state`; the reference wafer keeps its value. Returns the wafers of `state` updated.
+    pub fn initial_wafer_heights(
+        &self,
+        state: &SlamMotState,
+        z_range: (f64, f64),
+        step: f64,
+    ) -> Result<Vec<Vector5<f64>>> {
+        if !(step > 0.0 && z_range.1 > z_range.0) {
+            return Err(EstimateError::InvalidParameter {
+                name: "z search step",
+                value: step,
+                reason: "needs step > 0 and a non-empty range",
+            });
+        }
+        let poses = self.camera_poses(state);
+        let mut out = state.wafers.clone();
+        let n_steps = ((z_range.1 - z_range.0) / step).ceil() as usize + 1;
+        for (k, wk) in out.iter_mut().enumerate() {
+            if k == self.config.reference_wafer {
+                continue;
+            }
+            let obs: Vec<&EdgeObservation> =
+                self.observations.iter().filter(|o| o.wafer == k).collect();
+            if obs.is_empty() {
+                continue;
+            }
+            let mut best = (f64::INFINITY, wk[2]);
+            for s in 0..n_steps {
+                let z = z_range.0 + step * s as f64;
+                let w = Vector5::new(wk[0], wk[1], z, wk[3], wk[4]);
+                let mut errs = Vec::new();
+                for o in obs.iter().step_by((obs.len() / 40).max(1)) {
+                    let mut r = vec![0.0; o.points.len()];
+                    if conic_edge_residuals(
+                        &self.config.k,
+                        &poses[o.frame],
+                        &w,
+                        o.rim,
+                        self.config.geometry.radius,
+                        self.config.geometry.thickness,
+                        &o.points,
+                        1.0,
+                        &mut r,
+                        None,
+                    )
+                    .is_ok()
+                    {
+                        errs.extend(r.iter().map(|v| v.abs()));
+                    }
+                }
+                if errs.is_empty() {
+                    continue;
+                }
+                errs.sort_by(f64::total_cmp);
+                let med = errs[errs.len() / 2];
+                if med < best.0 {
+                    best = (med, z);
+                }
+            }
+            wk[2] = best.1;
+        }
+        Ok(out)
+    }
+
+    fn build(
+        &self,
+        state: &SlamMotState,
+        frames: std::ops::Range<usize>,
+        angles: Option<&[Option<Vec<f64>>]>,
+    ) -> Result<(Problem, Blocks, usize)> {
+        let mut p = Problem::new();
+        let base = p.add_block(&se3_to_params(&state.base), Manifold::Se3)?;
+        let offsets: Vec<BlockId> = self
+            .config
+            .estimate_offsets
+            .iter()
+            .map(|&j| p.add_block(&[state.offsets[j]], Manifold::Euclidean(1)))
+            .collect::<Result<_>>()?;
+        let mut wafers: Vec<Option<BlockId>> = vec![None; self.n_wafers];
+        let mut noise: Vec<Option<BlockId>> = vec![None; self.encoders.len()];
+        let loss = self.config.huber.map_or(Loss::Trivial, Loss::Huber);
+        let mut n_res = 0;
+        for (o, obs) in self.observations.iter().enumerate() {
+            if !frames.contains(&obs.frame) {
+                continue;
+            }
+            let wb = match wafers[obs.wafer] {
+                Some(b) => b,
+                None => {
+                    let b =
+                        p.add_block(state.wafers[obs.wafer].as_slice(), Manifold::Euclidean(5))?;
+                    if obs.wafer == self.config.reference_wafer {
+                        p.set_fixed(b, true)?;
+                    }
+                    wafers[obs.wafer] = Some(b);
+                    b
+                }
+            };
+            let nb = match (self.config.encoder_sigma, noise[obs.frame]) {
+                (None, _) => None,
+                (Some(_), Some(b)) => Some(b),
+                (Some(sig), None) => {
+                    let b = p.add_block(&[0.0; 4], Manifold::Euclidean(4))?;
+                    let cov = DMatrix::from_diagonal(&DVector::from_iterator(
+                        4,
+                        sig.iter().map(|v| v * v),
+                    ));
+                    p.add_prior(b, &[0.0; 4], &cov)?;
+                    noise[obs.frame] = Some(b);
+                    Some(b)
+                }
+            };
+            let res = EdgeResidual {
+                k: self.config.k,
+                params: self.config.robot_params,
+                geometry: self.config.geometry,
+                q_enc: self.encoders[obs.frame],
+                fixed_offsets: state.offsets,
+                offset_joints: self.config.estimate_offsets.clone(),
+                rim: obs.rim,
+                points: obs.points.clone(),
+                sigma: self.config.pixel_sigma,
+                angles: angles.and_then(|a| a[o].clone()),
+                joint_noise: nb.is_some(),
+            };
+            n_res += res.dim();
+            let mut blocks = vec![base];
+            blocks.extend(&offsets);
+            blocks.push(wb);
+            blocks.extend(nb);
+            p.add_residual(res, &blocks, loss)?;
+        }
+        let yaw = {
+            let r = state.base.rotation.to_rotation_matrix().into_inner();
+            r[(1, 0)].atan2(r[(0, 0)])
+        };
+        p.add_residual(
+            YawGauge {
+                yaw,
+                sigma: self.config.yaw_gauge_sigma,
+            },
+            &[base],
+            Loss::Trivial,
+        )?;
+        Ok((
+            p,
+            Blocks {
+                base,
+                offsets,
+                wafers,
+            },
+            n_res,
+        ))
+    }
+
+    fn read_state(&self, p: &Problem, b: &Blocks, prev: &SlamMotState) -> SlamMotState {
+        let mut s = prev.clone();
+        s.base = se3_from_params(p.values(b.base));
+        for (i, &j) in self.config.estimate_offsets.iter().enumerate() {
+            s.offsets[j] = p.values(b.offsets[i])[0];
+        }
+        for (k, w) in b.wafers.iter().enumerate() {
+            if let Some(w) = w {
+                s.wafers[k] = Vector5::from_column_slice(p.values(*w));
+            }
+        }
+        s
+    }
+
+    fn uncertainty(&self, p: &Problem, b: &Blocks) -> Uncertainty {
+        let mut blocks = vec![b.base];
+        blocks.extend(&b.offsets);
+        let mut order = Vec::new();
+        for (k, w) in b.wafers.iter().enumerate() {
+            if let Some(w) = w
+                && k != self.config.reference_wafer
+            {
+                blocks.push(*w);
+                order.push(k);
+            }
+        }
+        match p.marginal_covariance(&blocks) {
+            Ok(c) => Uncertainty {
+                covariance: Some(c),
+                wafer_order: order,
+                unobservable: None,
+            },
+            Err(EstimateError::RankDeficient { directions, .. }) => Uncertainty {
+                covariance: None,
+                wafer_order: order,
+                unobservable: Some(self.describe(&directions, b)),
+            },
+            Err(e) => Uncertainty {
+                covariance: None,
+                wafer_order: order,
+                unobservable: Some(format!("covariance failed: {e}")),
+            },
+        }
+    }
+
+    /// Rewrites the engine's `block N` names into parameter names.
+    fn describe(&self, directions: &str, b: &Blocks) -> String {
+        let mut names: Vec<(usize, String)> = vec![(b.base.0, "base pose".into())];
+        for (i, &j) in self.config.estimate_offsets.iter().enumerate() {
+            names.push((
+                b.offsets[i].0,
+                format!("{} zero offset", super::chain::JOINT_NAMES[j]),
+            ));
+        }
+        for (k, w) in b.wafers.iter().enumerate() {
+            if let Some(w) = w {
+                names.push((w.0, format!("wafer {k}")));
+            }
+        }
+        let mut out = directions.to_string();
+        names.sort_by_key(|n| std::cmp::Reverse(n.0));
+        for (id, name) in names {
+            out = out
+                .replace(&format!("block {id} "), &format!("{name} "))
+                .replace(&format!("block {id})"), &format!("{name})"));
+        }
+        format!("unobservable: {out}")
+    }
+
+    fn options(&self) -> SolverOptions {
+        SolverOptions {
+            max_iterations: self.config.max_iterations,
+            ..SolverOptions::default()
+        }
+    }
+
+    fn associate(&self, state: &SlamMotState, n_model: usize) -> Result<Vec<Option<Vec<f64>>>> {
+        let poses = self.camera_poses(state);
+        self.observations
+            .iter()
+            .map(|o| {
+                nearest_model_angles(
+                    &self.config.k,
+                    &poses[o.frame],
+                    &state.wafers[o.wafer],
+                    o.rim,
+                    self.config.geometry.radius,
+                    self.config.geometry.thickness,
+                    &o.points,
+                    n_model,
+                )
+                .map(Some)
+            })
+            .collect()
+    }
+
+    /// The full batch solve over all frames from `initial`, with marginal covariances.
+    pub fn solve_batch(&self, initial: &SlamMotState) -> Result<SlamMotSolution> {
+        self.check_state(initial)?;
+        let all = 0..self.encoders.len();
+        let (rounds, n_model) = match self.config.factor {
+            EdgeFactor::Conic => (1, 0),
+            EdgeFactor::NearestPoint { n_model, rounds } => (rounds.max(1), n_model),
+        };
+        let mut state = initial.clone();
+        let mut iterations = 0;
+        let mut initial_cost = f64::NAN;
+        let mut last = None;
+        for round in 0..rounds {
+            let angles = if n_model > 0 {
+                Some(self.associate(&state, n_model)?)
+            } else {
+                None
+            };
+            let (mut p, b, n_res) = self.build(&state, all.clone(), angles.as_deref())?;
+            let summary = p.solve(&self.options())?;
+            if round == 0 {
+                initial_cost = summary.initial_cost;
+            }
+            iterations += summary.iterations;
+            state = self.read_state(&p, &b, &state);
+            last = Some((p, b, n_res, summary.final_cost));
+        }
+        let (p, b, n_res, final_cost) = last.ok_or(EstimateError::InvalidParameter {
+            name: "rounds",
+            value: 0.0,
+            reason: "no solve ran",
+        })?;
+        let uncertainty = self.uncertainty(&p, &b);
+        let rms_px = self.rms(&state, n_model)?;
+        Ok(SlamMotSolution {
+            state,
+            uncertainty,
+            initial_cost,
+            final_cost,
+            iterations,
+            rms_px,
+            n_residuals: n_res,
+        })
+    }
+
+    /// RMS edge error in pixels of a state (conic distance, or point distance for the
+    /// baseline).
+    pub fn rms(&self, state: &SlamMotState, n_model: usize) -> Result<f64> {
+        let poses = self.camera_poses(state);
+        let (mut s, mut n) = (0.0, 0usize);
+        for o in &self.observations {
+            let w = &state.wafers[o.wafer];
+            let (g, k) = (&self.config.geometry, &self.config.k);
+            let r = if n_model > 0 {
+                let a = nearest_model_angles(
+                    k,
+                    &poses[o.frame],
+                    w,
+                    o.rim,
+                    g.radius,
+                    g.thickness,
+                    &o.points,
+                    n_model,
+                )?;
+                let mut r = vec![0.0; 2 * o.points.len()];
+                point_reprojection_residuals(
+                    k,
+                    &poses[o.frame],
+                    w,
+                    o.rim,
+                    g.radius,
+                    g.thickness,
+                    &o.points,
+                    &a,
+                    1.0,
+                    &mut r,
+                    None,
+                )?;
+                r
+            } else {
+                let mut r = vec![0.0; o.points.len()];
+                conic_edge_residuals(
+                    k,
+                    &poses[o.frame],
+                    w,
+                    o.rim,
+                    g.radius,
+                    g.thickness,
+                    &o.points,
+                    1.0,
+                    &mut r,
+                    None,
+                )?;
+                r
+            };
+            s += r.iter().map(|v| v * v).sum::<f64>();
+            n += r.len();
+        }
+        Ok(if n > 0 {
+            (s / n as f64).sqrt()
+        } else {
+            f64::NAN
+        })
+    }
+
+    fn check_state(&self, s: &SlamMotState) -> Result<()> {
+        if s.wafers.len() != self.n_wafers {
+            return Err(EstimateError::DimensionMismatch {
+                what: "initial wafers".into(),
+                expected: vec![self.n_wafers, 5],
+                got: vec![s.wafers.len(), 5],
+            });
+        }
+        let vals = s
+            .wafers
+            .iter()
+            .flat_map(|w| w.iter().copied())
+            .chain(s.offsets.iter().copied())
+            .chain(s.base.translation.vector.iter().copied());
+        for (i, v) in vals.enumerate() {
+            if !v.is_finite() {
+                return Err(EstimateError::NonFiniteInput {
+                    what: "initial state".into(),
+                    index: i,
+                    value: v,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The online sliding-window solve (§5.3, "a standard sliding-window optimization"):
+    /// consecutive windows of `window` frames, each solved with the observations of its
+    /// frames and a joint Gaussian prior on the calibration and every wafer seen so far
+    /// (the previous window's posterior: its estimates and joint marginal covariance, i.e.
+    /// marginalisation of the old frames, whose poses are functions of the calibration).
+    /// Returns the estimate after every window (Fig. 5.11). The conic factor is used.
+    pub fn solve_sliding_window(
+        &self,
+        initial: &SlamMotState,
+        window: usize,
+        prior_sigmas: &PriorSigmas,
+    ) -> Result<Vec<WindowRecord>> {
+        self.check_state(initial)?;
+        if window == 0 {
+            return Err(EstimateError::InvalidParameter {
+                name: "window",
+                value: 0.0,
+                reason: "the window needs at least one frame",
+            });
+        }
+        let mut state = initial.clone();
+        // Prior: blocks → (mean, manifold); covariance over their tangents.
+        let n_off = self.config.estimate_offsets.len();
+        let mut prior_cov = DMatrix::<f64>::zeros(6 + n_off, 6 + n_off);
+        for i in 0..3 {
+            prior_cov[(i, i)] = prior_sigmas.base_rotation.powi(2);
+            prior_cov[(3 + i, 3 + i)] = prior_sigmas.base_translation.powi(2);
+        }
+        for i in 0..n_off {
+            prior_cov[(6 + i, 6 + i)] = prior_sigmas.offset.powi(2);
+        }
+        let mut prior_wafers: Vec<usize> = Vec::new();
+        let mut out = Vec::new();
+        let n = self.encoders.len();
+        let mut start = 0;
+        while start < n {
+            let end = (start + window).min(n);
+            let (mut p, b, n_res) = self.build(&state, start..end, None)?;
+            // Wafers that were seen before but not in this window still get their block (prior only).
+            let mut wafer_blocks = b.wafers.clone();
+            for &k in &prior_wafers {
+                if wafer_blocks[k].is_none() {
+                    let blk = p.add_block(state.wafers[k].as_slice(), Manifold::Euclidean(5))?;
+                    wafer_blocks[k] = Some(blk);
+                }
+            }
+            // Joint prior over base, offsets and previously seen wafers.
+            let mut blocks = vec![b.base];
+            blocks.extend(&b.offsets);
+            let mut means: Vec<Vec<f64>> = vec![se3_to_params(&state.base).to_vec()];
+            let mut manifolds = vec![Manifold::Se3];
+            for &j in &self.config.estimate_offsets {
+                means.push(vec![state.offsets[j]]);
+                manifolds.push(Manifold::Euclidean(1));
+            }
+            for &k in &prior_wafers {
+                if let Some(blk) = wafer_blocks[k] {
+                    blocks.push(blk);
+                    means.push(state.wafers[k].as_slice().to_vec());
+                    manifolds.push(Manifold::Euclidean(5));
+                }
+            }
+            let l =
+                prior_cov
+                    .clone()
+                    .cholesky()
+                    .ok_or_else(|| EstimateError::InvalidCovariance {
+                        what: "sliding-window prior".into(),
+                        asymmetry: 0.0,
+                        min_eigenvalue: prior_cov.symmetric_eigenvalues().min(),
+                    })?;
+            let l_inv = l
+                .l()
+                .try_inverse()
+                .ok_or_else(|| EstimateError::LinearSolver("prior factor not invertible".into()))?;
+            p.add_residual(
+                JointPrior {
+                    means,
+                    manifolds,
+                    l_inv,
+                },
+                &blocks,
+                Loss::Trivial,
+            )?;
+            if n_res > 0 {
+                p.solve(&self.options())?;
+            }
+            let full = Blocks {
+                base: b.base,
+                offsets: b.offsets.clone(),
+                wafers: wafer_blocks.clone(),
+            };
+            state = self.read_state(&p, &full, &state);
+            // Posterior → next prior (all wafers seen so far, the reference excluded: fixed).
+            let mut post_blocks = vec![b.base];
+            post_blocks.extend(&b.offsets);
+            let mut seen: Vec<usize> = Vec::new();
+            for (k, w) in wafer_blocks.iter().enumerate() {
+                if let Some(w) = w
+                    && k != self.config.reference_wafer
+                {
+                    post_blocks.push(*w);
+                    seen.push(k);
+                }
+            }
+            let cov = p.marginal_covariance(&post_blocks)?;
+            // New wafers enter the prior with their window posterior; keep the ordering.
+            prior_cov = cov;
+            prior_wafers = seen;
+            let std: Vec<f64> = (0..6 + n_off)
+                .map(|i| prior_cov[(i, i)].max(0.0).sqrt())
+                .collect();
+            out.push(WindowRecord {
+                last_frame: end - 1,
+                state: state.clone(),
+                std,
+            });
+            start = end;
+        }
+        Ok(out)
+    }
+}
+
+/// Prior standard deviations of the first sliding window (the uncalibrated robot).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PriorSigmas {
+    /// Base rotation (rad).
+    pub base_rotation: f64,
+    /// Base translation (m).
+    pub base_translation: f64,
+    /// Joint offsets (rad).
+    pub offset: f64,
+}
+
+impl Default for PriorSigmas {
+    /// 2°, 20 mm, 2°.
+    fn default() -> Self {
+        Self {
+            base_rotation: 2f64.to_radians(),
+            base_translation: 0.02,
+            offset: 2f64.to_radians(),
+        }
+    }
+}
+
+/// Theoretical resolution of a wafer pose in one view, eq. (5.14): the RMS over `n` rim points
+/// (both rims, visible or not) of the image motion per unit change of each wafer parameter,
+/// `‖∂(u, v)/∂p‖` with `(u, v)` the projection `w⁻¹·K·E·T·x̄`. Returns pixels per millimetre
+/// for the centre x, y, z and pixels per degree for the tilts rx, ry.
+pub fn theoretical_resolution(
+    k: &Matrix3<f64>,
+    t_wc: &Isometry3<f64>,
+    w: &Vector5<f64>,
+    geometry: &WaferGeometry,
+    n: usize,
+) -> Result<[f64; 5]> {
+    if n == 0 {
+        return Err(EstimateError::InvalidParameter {
+            name: "n",
+            value: 0.0,
+            reason: "at least one rim point",
+        });
+    }
+    let mut acc = [0.0; 5];
+    let mut count = 0usize;
+    for rim in [Rim::Upper, Rim::Lower] {
+        let angles: Vec<f64> = (0..n)
+            .map(|i| std::f64::consts::TAU * i as f64 / n as f64)
+            .collect();
+        let (t_wo, _) = super::wafer::rim_pose(w, rim, geometry.thickness);
+        let t_co = t_wc.inverse() * t_wo;
+        let pts: Vec<Vector2<f64>> = angles
+            .iter()
+            .map(|&a| {
+                let x =
+                    t_co * nalgebra::Point3::from(super::factors::rim_point(geometry.radius, a));
+                let p = k * x.coords;
+                Vector2::new(p.x / p.z, p.y / p.z)
+            })
+            .collect();
+        let mut r = vec![0.0; 2 * n];
+        let mut j = EdgeJacobians {
+            camera: DMatrix::zeros(2 * n, 6),
+            wafer: DMatrix::zeros(2 * n, 5),
+        };
+        point_reprojection_residuals(
+            k,
+            t_wc,
+            w,
+            rim,
+            geometry.radius,
+            geometry.thickness,
+            &pts,
+            &angles,
+            1.0,
+            &mut r,
+            Some(&mut j),
+        )?;
+        for i in 0..n {
+            for (m, a) in acc.iter_mut().enumerate() {
+                *a += j.wafer[(2 * i, m)].powi(2) + j.wafer[(2 * i + 1, m)].powi(2);
+            }
+            count += 1;
+        }
+    }
+    let mut out = [0.0; 5];
+    for m in 0..5 {
+        let rms = (acc[m] / count as f64).sqrt();
+        out[m] = if m < 3 {
+            rms * 1e-3
+        } else {
+            rms * std::f64::consts::PI / 180.0
+        };
+    }
+    Ok(out)
+}
+
+/// Exposed for tests and the bindings: evaluates the whitened edge residuals of one
+/// observation for a state.
+pub fn edge_residuals(
+    config: &SlamMotConfig,
+    state: &SlamMotState,
+    q_enc: &Joints,
+    obs: &EdgeObservation,
+) -> Result<Vec<f64>> {
+    let chain = CameraChain {
+        robot: WaferRobot {
+            params: config.robot_params,
+            base: state.base,
+        },
+        offsets: state.offsets,
+    };
+    let t_wc = chain.camera_pose(q_enc);
+    let mut r = vec![0.0; obs.points.len()];
+    let w = state
+        .wafers
+        .get(obs.wafer)
+        .ok_or(EstimateError::InvalidParameter {
+            name: "wafer",
+            value: obs.wafer as f64,
+            reason: "no such wafer",
+        })?;
+    conic_edge_residuals(
+        &config.k,
+        &t_wc,
+        w,
+        obs.rim,
+        config.geometry.radius,
+        config.geometry.thickness,
+        &obs.points,
+        config.pixel_sigma,
+        &mut r,
+        None,
+    )?;
+    Ok(r)
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use autoteach_geometry::conic::project_circle;
+    use nalgebra::{Translation3, UnitQuaternion};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    use rand_pcg::Pcg64;
+
+    /// A synthetic session: the default robot in front of a stack of wafers, the camera
+    /// sweeping up and down; edge points are the projections of the facing half of each rim
+    /// plus Gaussian pixel noise.
+    pub(crate) struct Scene {
+        pub config: SlamMotConfig,
+        pub truth: SlamMotState,
+        pub encoders: Vec<Joints>,
+        pub observations: Vec<EdgeObservation>,
+    }
+
+    pub(crate) fn scene(seed: u64, frames: usize, noise_px: f64) -> Scene {
+        let params = RobotParams::default();
+        let k = Matrix3::new(1000.0, 0.0, 639.5, 0.0, 1000.0, 359.5, 0.0, 0.0, 1.0);
+        let base = Isometry3::from_parts(
+            Translation3::new(-1.0, 0.03, -0.48),
+            UnitQuaternion::from_euler_angles(0.0012, -0.0009, 0.026),
+        );
+        let offsets = Joints::new(0.0, 0.009, 0.0, -0.012, 0.0);
+        let robot = WaferRobot { params, base };
+        let slots = [0.0, 0.03, 0.06, 0.09, 0.12];
+        let wafers: Vec<Vector5<f64>> = slots
+            .iter()
+            .enumerate()
+            .map(|(i, z)| {
+                Vector5::new(
+                    0.0002 * i as f64,
+                    -0.0001 * i as f64,
+                    *z,
+                    0.0,
+                    if i == 4 { 0.0175 } else { 0.0005 * i as f64 },
+                )
+            })
+            .collect();
+        let ref_pose = robot.camera_pose(&Joints::zeros());
+        let mut rng = Pcg64::seed_from_u64(seed);
+        let noise = Normal::new(0.0, noise_px.max(1e-12)).unwrap();
+        let mut encoders = Vec::new();
+        let mut observations = Vec::new();
+        let mut prev: Option<Joints> = None;
+        for f in 0..frames {
+            let s = f as f64 / (frames.max(2) - 1) as f64;
+            let x = -0.52 + 0.1 * (3.0 * s).sin().abs();
+            let y = -0.06 + 0.12 * s;
+            let z = 0.03 + 0.12 * (0.5 - 0.5 * (std::f64::consts::TAU * s).cos());
+            let yaw = 0.06 * (5.0 * s).sin();
+            let rot = base.rotation
+                * UnitQuaternion::from_euler_angles(0.0, 0.0, yaw - 0.026)
+                * base.rotation.inverse()
+                * ref_pose.rotation;
+            let target = Isometry3::from_parts(Translation3::new(x, y, z), rot);
+            let sols = robot.inverse_kinematics_camera(&target, 0.0).unwrap();
+            let q = *sols
+                .iter()
+                .min_by(|a, b| {
+                    let da = prev.map_or(if a[1] > 0.0 { 0.0 } else { 1.0 }, |p| (*a - p).norm());
+                    let db = prev.map_or(if b[1] > 0.0 { 0.0 } else { 1.0 }, |p| (*b - p).norm());
+                    da.total_cmp(&db)
+                })
+                .unwrap();
+            prev = Some(q);
+            encoders.push(q + offsets);
+            let t_wc = robot.camera_pose(&q);
+            for (wi, w) in wafers.iter().enumerate() {
+                for rim in [Rim::Upper, Rim::Lower] {
+                    let (t_wo, _) = super::super::wafer::rim_pose(w, rim, 0.001);
+                    let t_co = t_wc.inverse() * t_wo;
+                    let Ok(e) = project_circle(&k, &t_co, 0.15) else {
+                        continue;
+                    };
+                    // Grazing views (the wafer seen nearly edge-on) are left out, as the
+                    // pipeline's front end does.
+                    if e.b / e.a < 0.05 {
+                        continue;
+                    }
+                    let pts: Vec<Vector2<f64>> = (0..24)
+                        .filter_map(|i| {
+                            let th = std::f64::consts::PI * (0.55 + 0.9 * i as f64 / 23.0);
+                            let xo =
+                                t_co * nalgebra::Point3::new(0.15 * th.cos(), 0.15 * th.sin(), 0.0);
+                            let p = k * xo.coords;
+                            let px = Vector2::new(p.x / p.z, p.y / p.z);
+                            (px.x > 0.0 && px.x < 1279.0 && px.y > 0.0 && px.y < 719.0).then(|| {
+                                px + Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng))
+                            })
+                        })
+                        .collect();
+                    if pts.len() >= 6 {
+                        observations.push(EdgeObservation {
+                            frame: f,
+                            wafer: wi,
+                            rim,
+                            points: pts,
+                        });
+                    }
+                }
+            }
+        }
+        let mut config = SlamMotConfig::new(k, params, WaferGeometry::new(0.15, 0.001).unwrap());
+        config.pixel_sigma = noise_px.max(0.05);
+        Scene {
+            config,
+            truth: SlamMotState {
+                base,
+                offsets,
+                wafers,
+            },
+            encoders,
+            observations,
+        }
+    }
+
+    fn perturbed(truth: &SlamMotState) -> SlamMotState {
+        let mut s = truth.clone();
+        s.base = Isometry3::from_parts(
+            Translation3::from(truth.base.translation.vector + Vector3::new(0.004, -0.003, 0.002)),
+            truth.base.rotation * UnitQuaternion::from_euler_angles(0.004, -0.003, 0.0),
+        );
+        s.offsets = Joints::zeros();
+        for (i, w) in s.wafers.iter_mut().enumerate() {
+            if i > 0 {
+                w[0] += 0.002;
+                w[2] += 0.003;
+                w[3] = 0.0;
+                w[4] = 0.0;
+            }
+        }
+        s
+    }
+
+    #[test]
+    fn batch_recovers_the_truth_within_three_sigma() {
+        let sc = scene(1, 40, 0.3);
+        let slam = SlamMot::new(
+            sc.config.clone(),
+            sc.encoders.clone(),
+            sc.observations.clone(),
+            sc.truth.wafers.len(),
+        )
+        .unwrap();
+        let sol = slam.solve_batch(&perturbed(&sc.truth)).unwrap();
+        let cov = sol.uncertainty.covariance.clone().expect("observable");
+        let d = se3_minus(&sol.state.base, &sc.truth.base);
+        for i in 0..6 {
+            let sd = cov[(i, i)].sqrt();
+            assert!(
+                d[i].abs() < 4.0 * sd + 1e-9,
+                "base {i}: error {} vs sd {sd}",
+                d[i]
+            );
+        }
+        for (i, &j) in sc.config.estimate_offsets.iter().enumerate() {
+            let err = sol.state.offsets[j] - sc.truth.offsets[j];
+            let sd = cov[(6 + i, 6 + i)].sqrt();
+            assert!(
+                err.abs() < 4.0 * sd && err.abs() < 2e-4,
+                "offset {j}: {err} vs {sd}"
+            );
+        }
+        for (w_est, w_true) in sol.state.wafers.iter().zip(&sc.truth.wafers) {
+            assert!(
+                (w_est - w_true).fixed_rows::<3>(0).norm() < 3e-4,
+                "{w_est} vs {w_true}"
+            );
+        }
+        assert!(sol.rms_px < 0.5 && sol.rms_px > 0.15, "rms {}", sol.rms_px);
+    }
+
+    #[test]
+    fn edge_residual_jacobians_match_finite_differences() {
+        use autoteach_geometry::lie::se3_plus;
+        let sc = scene(6, 4, 0.3);
+        let obs = &sc.observations[3];
+        let cfg = &sc.config;
+        let res = EdgeResidual {
+            k: cfg.k,
+            params: cfg.robot_params,
+            geometry: cfg.geometry,
+            q_enc: sc.encoders[obs.frame],
+            fixed_offsets: Joints::zeros(),
+            offset_joints: vec![0, 1, 3],
+            rim: obs.rim,
+            points: obs.points.clone(),
+            sigma: 0.5,
+            angles: None,
+            joint_noise: false,
+        };
+        let base = se3_to_params(&sc.truth.base).to_vec();
+        let offs = [vec![0.001], vec![0.002], vec![-0.003]];
+        let w = sc.truth.wafers[obs.wafer].as_slice().to_vec();
+        let eval = |b: &[f64], o: &[Vec<f64>; 3], w: &[f64], jac: Option<&mut [DMatrix<f64>]>| {
+            let mut r = vec![0.0; res.dim()];
+            res.evaluate(&[b, &o[0], &o[1], &o[2], w], &mut r, jac)
+                .unwrap();
+            r
+        };
+        let n = res.dim();
+        let mut jac = vec![
+            DMatrix::zeros(n, 6),
+            DMatrix::zeros(n, 1),
+            DMatrix::zeros(n, 1),
+            DMatrix::zeros(n, 1),
+            DMatrix::zeros(n, 5),
+        ];
+        let r0 = eval(&base, &offs, &w, Some(&mut jac));
+        let h = 1e-7;
+        let close = |fd: f64, an: f64, what: &str| {
+            assert!(
+                (fd - an).abs() < 1e-3 * (1.0 + an.abs()),
+                "{what}: {fd} vs {an}"
+            )
+        };
+        for m in 0..6 {
+            let mut d = nalgebra::Vector6::zeros();
+            d[m] = h;
+            let b2 = se3_to_params(&se3_plus(&sc.truth.base, &d)).to_vec();
+            let b3 = se3_to_params(&se3_plus(&sc.truth.base, &(-d))).to_vec();
+            let r1 = eval(&b2, &offs, &w, None);
+            let r2 = eval(&b3, &offs, &w, None);
+            for i in 0..n {
+                close((r1[i] - r2[i]) / (2.0 * h), jac[0][(i, m)], "base");
+            }
+        }
+        for j in 0..3 {
+            let mut o2 = offs.clone();
+            o2[j][0] += h;
+            let r1 = eval(&base, &o2, &w, None);
+            for i in 0..n {
+                close((r1[i] - r0[i]) / h, jac[1 + j][(i, 0)], "offset");
+            }
+        }
+    }
+
+    #[test]
+    fn lift_offset_with_free_base_is_reported_unobservable() {
+        let sc = scene(2, 20, 0.3);
+        let mut cfg = sc.config.clone();
+        cfg.estimate_offsets = vec![1, 3, 4];
+        let slam = SlamMot::new(
+            cfg,
+            sc.encoders.clone(),
+            sc.observations.clone(),
+            sc.truth.wafers.len(),
+        )
+        .unwrap();
+        let sol = slam.solve_batch(&perturbed(&sc.truth)).unwrap();
+        assert!(sol.uncertainty.covariance.is_none());
+        let msg = sol.uncertainty.unobservable.unwrap();
+        assert!(
+            msg.contains("lift zero offset") || msg.contains("base pose"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn sliding_window_converges_toward_the_batch() {
+        let sc = scene(3, 40, 0.3);
+        let slam = SlamMot::new(
+            sc.config.clone(),
+            sc.encoders.clone(),
+            sc.observations.clone(),
+            sc.truth.wafers.len(),
+        )
+        .unwrap();
+        // Start from a nominal installation: base within a few millimetres, offsets zero.
+        let mut init = sc.truth.clone();
+        init.base = Isometry3::from_parts(
+            Translation3::from(
+                sc.truth.base.translation.vector + Vector3::new(0.002, -0.0015, 0.001),
+            ),
+            sc.truth.base.rotation * UnitQuaternion::from_euler_angles(0.0008, -0.0006, 0.0),
+        );
+        init.offsets = Joints::zeros();
+        for w in init.wafers.iter_mut().skip(1) {
+            w[3] = 0.0;
+            w[4] = 0.0;
+        }
+        let hist = slam
+            .solve_sliding_window(&init, 5, &PriorSigmas::default())
+            .unwrap();
+        assert_eq!(hist.len(), 8);
+        let last = &hist.last().unwrap().state;
+        let err0 = se3_minus(&init.base, &sc.truth.base)
+            .fixed_rows::<3>(3)
+            .norm();
+        let err1 = se3_minus(&last.base, &sc.truth.base)
+            .fixed_rows::<3>(3)
+            .norm();
+        eprintln!("sliding window: base translation error {err0} -> {err1}");
+        assert!(err1 < 0.2 * err0, "{err1} vs {err0}");
+        assert!(hist.last().unwrap().std[3] < hist[0].std[3]);
+    }
+
+    #[test]
+    fn no_observations_is_a_clear_error() {
+        let sc = scene(4, 5, 0.3);
+        let err = SlamMot::new(sc.config.clone(), sc.encoders.clone(), vec![], 5).unwrap_err();
+        assert!(err.to_string().contains("no wafer edge"), "{err}");
+    }
+
+    #[test]
+    fn resolution_grows_when_the_camera_is_closer() {
+        let sc = scene(5, 3, 0.3);
+        let g = sc.config.geometry;
+        let w = sc.truth.wafers[1];
+        let far = Isometry3::from_parts(
+            Translation3::new(-0.6, 0.0, 0.06),
+            UnitQuaternion::from_matrix(&Matrix3::new(
+                0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0,
+            )),
+        );
+        let mut near = far;
+        near.translation.vector.x = -0.45;
+        let rf = theoretical_resolution(&sc.config.k, &far, &w, &g, 90).unwrap();
+        let rn = theoretical_resolution(&sc.config.k, &near, &w, &g, 90).unwrap();
+        for m in 0..5 {
+            assert!(rn[m] > rf[m], "{m}: {rn:?} vs {rf:?}");
+        }
+        // Lateral motion of 1 mm at ~0.6 m with f = 1000 px: ≈ 1000/600 px.
+        assert!((rf[1] - 1000.0 / 600.0).abs() < 0.4, "{rf:?}");
+    }
+}

@@ -1,0 +1,753 @@
+//! Levenberg–Marquardt (trust region, Nielsen's damping update) and Gauss–Newton on
+//! manifolds (seed 004_815695db12a6b16c.txt eq. (5.2)–(5.5); seed 000_3b1454b2b2194811.txt
+//! ch. 5.3): residuals and Jacobians evaluated in parallel, normal equations assembled by
+//! block structure and solved by Cholesky (dense, sparse, or sparse with the point-like
+//! blocks eliminated first — the Schur complement).
+
+use std::time::Instant;
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::SymbolicSparseColMatRef;
+use faer::sparse::linalg::amd;
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+
+use super::linear::{Cholesky, Pattern};
+use super::manifold::Manifold;
+use super::problem::Problem;
+use crate::{EstimateError, Result};
+
+/// The nonlinear iteration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Method {
+    /// Levenberg–Marquardt: (JᵀJ + μ D) δ = −Jᵀr with D = diag(JᵀJ) (Marquardt scaling,
+    /// clamped to [1e-6, 1e32]); steps accepted when the gain ratio ρ > 0, μ updated as in
+    /// Nielsen (1999): μ ← μ·max(1/3, 1 − (2ρ − 1)³) on success, μ ← μ·ν, ν ← 2ν on failure.
+    #[default]
+    LevenbergMarquardt,
+    /// Gauss–Newton: JᵀJ δ = −Jᵀr, every finite step accepted.
+    GaussNewton,
+}
+
+/// How the normal equations are solved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LinearSolver {
+    /// Dense below `SolverOptions::dense_threshold` unknowns; otherwise `SparseSchur` when
+    /// eliminable (point-like) blocks hold at least half of the unknowns, else
+    /// `SparseCholesky`.
+    #[default]
+    Auto,
+    /// Dense Cholesky (nalgebra).
+    DenseCholesky,
+    /// Sparse Cholesky (faer) with an approximate-minimum-degree fill-reducing ordering.
+    SparseCholesky,
+    /// Sparse Cholesky with the eliminated blocks ordered first: eliminating them forms the
+    /// Schur complement S = H_cc − H_cp H_pp⁻¹ H_pc of the remaining blocks inside the
+    /// factorisation (H_pp is block diagonal, so no fill among them), then S is factored with
+    /// the AMD order of the remaining blocks. Blocks are eliminated when marked with
+    /// [`Problem::set_eliminate`]`(b, Some(true))`, or automatically: free `Euclidean(3)`
+    /// blocks (points) none of whose residuals touches another eliminated block.
+    SparseSchur,
+}
+
+/// Solver settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SolverOptions {
+    /// The iteration.
+    pub method: Method,
+    /// Maximum number of iterations (trial steps, accepted or not).
+    pub max_iterations: usize,
+    /// Stop when an accepted step decreases the cost by less than this fraction of it.
+    pub function_tolerance: f64,
+    /// Stop when max |Jᵀr| ≤ this.
+    pub gradient_tolerance: f64,
+    /// Stop when ‖δ‖ ≤ this · (‖x‖ + this) (x: the free ambient values).
+    pub parameter_tolerance: f64,
+    /// Linear solver.
+    pub linear_solver: LinearSolver,
+    /// Initial LM damping μ₀ (relative to diag(JᵀJ)).
+    pub initial_damping: f64,
+    /// `Auto` uses the dense solver up to this many unknowns.
+    pub dense_threshold: usize,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        Self {
+            method: Method::LevenbergMarquardt,
+            max_iterations: 100,
+            function_tolerance: 1e-10,
+            gradient_tolerance: 1e-10,
+            parameter_tolerance: 1e-10,
+            linear_solver: LinearSolver::Auto,
+            initial_damping: 1e-4,
+            dense_threshold: 250,
+        }
+    }
+}
+
+impl SolverOptions {
+    fn validate(&self) -> Result<()> {
+        for (name, v) in [
+            ("function_tolerance", self.function_tolerance),
+            ("gradient_tolerance", self.gradient_tolerance),
+            ("parameter_tolerance", self.parameter_tolerance),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(EstimateError::InvalidParameter {
+                    name,
+                    value: v,
+                    reason: "must be finite and non-negative",
+                });
+            }
+        }
+        if !(self.initial_damping.is_finite() && self.initial_damping > 0.0) {
+            return Err(EstimateError::InvalidParameter {
+                name: "initial_damping",
+                value: self.initial_damping,
+                reason: "must be finite and positive",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Why the solver stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Termination {
+    /// Relative cost decrease below `function_tolerance`.
+    FunctionTolerance,
+    /// Gradient below `gradient_tolerance`.
+    GradientTolerance,
+    /// Step below `parameter_tolerance`.
+    ParameterTolerance,
+    /// `max_iterations` reached.
+    MaxIterations,
+    /// Every block is fixed (or there are no residuals): nothing to optimise.
+    NoFreeParameters,
+    /// LM: the damping grew beyond 1e32 without an acceptable step (e.g. every trial step
+    /// makes a residual non-finite).
+    DampingLimit,
+    /// Gauss–Newton: the normal matrix is not positive definite (rank deficient); LM never
+    /// stops for this, it raises the damping.
+    LinearSolverFailure,
+    /// A residual or Jacobian became non-finite at an accepted point (Gauss–Newton) — the
+    /// values are left at the last finite point. See `Summary::message`.
+    NonFinite,
+}
+
+impl Termination {
+    /// Whether this is a convergence criterion (as opposed to a failure or a limit).
+    pub fn converged(&self) -> bool {
+        matches!(
+            self,
+            Termination::FunctionTolerance
+                | Termination::GradientTolerance
+                | Termination::ParameterTolerance
+                | Termination::NoFreeParameters
+        )
+    }
+}
+
+/// What the solver did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    /// Iterations (trial steps).
+    pub iterations: usize,
+    /// Accepted steps.
+    pub successful_steps: usize,
+    /// Cost ½ Σ ρ(‖r‖²) at the start.
+    pub initial_cost: f64,
+    /// Cost at the end.
+    pub final_cost: f64,
+    /// Why it stopped.
+    pub termination: Termination,
+    /// Human-readable reason.
+    pub message: String,
+    /// Wall time of the solve (s).
+    pub time_s: f64,
+    /// Linear solver used (resolved from `Auto`).
+    pub linear_solver: LinearSolver,
+    /// Free tangent dimension.
+    pub num_parameters: usize,
+    /// Total residual dimension.
+    pub num_residuals: usize,
+    /// Blocks eliminated first (Schur), 0 unless `SparseSchur`.
+    pub num_eliminated_blocks: usize,
+    /// max |Jᵀr| at the end.
+    pub gradient_max_norm: f64,
+    /// Time (s) in structure analysis (block pattern, ordering, symbolic factorisation).
+    pub time_setup_s: f64,
+    /// Time (s) evaluating residuals and Jacobians.
+    pub time_evaluate_s: f64,
+    /// Time (s) assembling the normal equations.
+    pub time_assemble_s: f64,
+    /// Time (s) factorising and solving the normal equations.
+    pub time_linear_s: f64,
+}
+
+/// Evaluation buffers of one residual block.
+pub(crate) struct EvalBuf {
+    pub r: Vec<f64>,
+    pub jac: Vec<DMatrix<f64>>,
+    /// ρ(‖r‖²) (unweighted cost contribution ×2).
+    pub rho: f64,
+}
+
+/// The block structure of the free unknowns, fixed for one solve.
+pub(crate) struct Structure {
+    /// Per block: its index among the free blocks.
+    pub free_index: Vec<Option<usize>>,
+    /// Free index → block.
+    pub free_blocks: Vec<usize>,
+    /// Scalar offset of each free block.
+    pub col_offset: Vec<usize>,
+    /// Tangent dimension of each free block.
+    pub dims: Vec<usize>,
+    /// Scalar dimension.
+    pub n: usize,
+    /// Pattern of JᵀJ.
+    pub pattern: Pattern,
+    /// Per residual: `(local k_a, local k_b, slot)` for every pair of free blocks, the row
+    /// block `a` having the larger free index.
+    pub res_pairs: Vec<Vec<(usize, usize, usize)>>,
+    /// Per free block: eliminated first (Schur).
+    pub eliminated: Vec<bool>,
+}
+
+impl Structure {
+    pub fn new(p: &Problem) -> Self {
+        let mut free_index = vec![None; p.blocks.len()];
+        let mut free_blocks = Vec::new();
+        let mut col_offset = Vec::new();
+        let mut dims = Vec::new();
+        let mut n = 0;
+        for (i, b) in p.blocks.iter().enumerate() {
+            if !b.fixed {
+                free_index[i] = Some(free_blocks.len());
+                free_blocks.push(i);
+                col_offset.push(n);
+                dims.push(b.manifold.tangent_dim());
+                n += b.manifold.tangent_dim();
+            }
+        }
+        let mut pairs = Vec::new();
+        for r in &p.residuals {
+            let fr: Vec<usize> = r.blocks.iter().filter_map(|b| free_index[b.0]).collect();
+            for (i, &a) in fr.iter().enumerate() {
+                for &b in &fr[..i] {
+                    pairs.push((a, b));
+                }
+            }
+        }
+        let pattern = Pattern::new(&dims, pairs);
+        let res_pairs = p
+            .residuals
+            .iter()
+            .map(|r| {
+                let mut out = Vec::new();
+                for (ka, a) in r.blocks.iter().enumerate() {
+                    let Some(fa) = free_index[a.0] else { continue };
+                    for (kb, b) in r.blocks.iter().enumerate() {
+                        let Some(fb) = free_index[b.0] else { continue };
+                        if fa >= fb
+                            && let Some(&slot) = pattern.slots.get(&(fa, fb))
+                        {
+                            out.push((ka, kb, slot));
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        // Elimination candidates: marked, or free Euclidean(3) not marked otherwise.
+        let nf = free_blocks.len();
+        let mut cand: Vec<bool> = free_blocks
+            .iter()
+            .map(|&b| {
+                let blk = &p.blocks[b];
+                blk.eliminate
+                    .unwrap_or(blk.manifold == Manifold::Euclidean(3))
+            })
+            .collect();
+        let explicit: Vec<bool> = free_blocks
+            .iter()
+            .map(|&b| p.blocks[b].eliminate == Some(true))
+            .collect();
+        let mut conflict = vec![false; nf];
+        for r in &p.residuals {
+            let c: Vec<usize> = r
+                .blocks
+                .iter()
+                .filter_map(|b| free_index[b.0])
+                .filter(|&f| cand[f])
+                .collect();
+            if c.len() > 1 {
+                c.iter().for_each(|&f| conflict[f] = true);
+            }
+        }
+        for f in 0..nf {
+            if conflict[f] && !explicit[f] {
+                cand[f] = false;
+            }
+        }
+        Self {
+            free_index,
+            free_blocks,
+            col_offset,
+            dims,
+            n,
+            pattern,
+            res_pairs,
+            eliminated: cand,
+        }
+    }
+
+    /// A fill-reducing order with the eliminated blocks first (AMD order kept within each
+    /// group).
+    fn schur_ordering(&self) -> Result<(Vec<usize>, Vec<usize>)> {
+        let n = self.n;
+        let nnz = self.pattern.nnz();
+        let mut perm = vec![0usize; n];
+        let mut perm_inv = vec![0usize; n];
+        let mut mem = MemBuffer::try_new(amd::order_scratch::<usize>(n, nnz))
+            .map_err(|e| EstimateError::LinearSolver(format!("AMD workspace: {e:?}")))?;
+        let sym = SymbolicSparseColMatRef::new_checked(
+            n,
+            n,
+            &self.pattern.col_ptr,
+            None,
+            &self.pattern.row_idx,
+        );
+        amd::order(
+            &mut perm,
+            &mut perm_inv,
+            sym,
+            amd::Control::default(),
+            MemStack::new(&mut mem),
+        )
+        .map_err(|e| EstimateError::LinearSolver(format!("AMD ordering: {e:?}")))?;
+        let mut scalar_elim = vec![false; n];
+        for (f, &e) in self.eliminated.iter().enumerate() {
+            if e {
+                scalar_elim[self.col_offset[f]..self.col_offset[f] + self.dims[f]].fill(true);
+            }
+        }
+        let mut fwd: Vec<usize> = perm.iter().copied().filter(|&i| scalar_elim[i]).collect();
+        fwd.extend(perm.iter().copied().filter(|&i| !scalar_elim[i]));
+        let mut inv = vec![0usize; n];
+        for (i, &f) in fwd.iter().enumerate() {
+            inv[f] = i;
+        }
+        Ok((fwd, inv))
+    }
+
+    /// The factorisation for the chosen solver.
+    pub fn make_solver(
+        &self,
+        choice: LinearSolver,
+        dense_threshold: usize,
+    ) -> Result<(LinearSolver, Cholesky)> {
+        let resolved = match choice {
+            LinearSolver::Auto => {
+                let elim: usize = self
+                    .eliminated
+                    .iter()
+                    .zip(&self.dims)
+                    .filter(|(e, _)| **e)
+                    .map(|(_, d)| d)
+                    .sum();
+                if self.n <= dense_threshold {
+                    LinearSolver::DenseCholesky
+                } else if 2 * elim >= self.n {
+                    LinearSolver::SparseSchur
+                } else {
+                    LinearSolver::SparseCholesky
+                }
+            }
+            c => c,
+        };
+        let ch = match resolved {
+            LinearSolver::DenseCholesky => Cholesky::new(&self.pattern, true, None)?,
+            LinearSolver::SparseSchur => {
+                let (fwd, inv) = self.schur_ordering()?;
+                Cholesky::new(&self.pattern, false, Some((&fwd, &inv)))?
+            }
+            _ => Cholesky::new(&self.pattern, false, None)?,
+        };
+        Ok((resolved, ch))
+    }
+}
+
+impl Problem {
+    /// Evaluates every residual (in parallel) at `values`, with Jacobians when `jac`;
+    /// robust losses are applied as IRLS weights: r and J are scaled by √ρ′(‖r‖²) so that
+    /// Jᵀr is the exact gradient of ½ Σ ρ and JᵀJ the Gauss–Newton approximation with the
+    /// curvature term 2ρ″ Jᵀr rᵀJ dropped (it would make the normal matrix indefinite for
+    /// the provided losses, whose ρ″ ≤ 0; Triggs et al., "Bundle adjustment — a modern
+    /// synthesis", Sec. 4.3). Returns the cost ½ Σ ρ(‖r‖²), or the first non-finite value.
+    pub(crate) fn evaluate_all(
+        &self,
+        values: &[f64],
+        bufs: &mut [EvalBuf],
+        jac: bool,
+    ) -> Result<f64> {
+        let blocks = &self.blocks;
+        let results: Vec<Result<()>> = self
+            .residuals
+            .par_iter()
+            .zip(bufs.par_iter_mut())
+            .enumerate()
+            .with_min_len(64)
+            .map(|(i, (res, buf))| {
+                let params: Vec<&[f64]> = res
+                    .blocks
+                    .iter()
+                    .map(|b| {
+                        let blk = &blocks[b.0];
+                        &values[blk.offset..blk.offset + blk.manifold.ambient_dim()]
+                    })
+                    .collect();
+                let out = if jac {
+                    buf.jac.iter_mut().for_each(|j| j.fill(0.0));
+                    res.residual
+                        .evaluate(&params, &mut buf.r, Some(&mut buf.jac))
+                } else {
+                    res.residual.evaluate(&params, &mut buf.r, None)
+                };
+                out?;
+                if let Some((index, &value)) =
+                    buf.r.iter().enumerate().find(|(_, v)| !v.is_finite())
+                {
+                    return Err(EstimateError::NonFiniteResidual {
+                        residual: i,
+                        index,
+                        value,
+                        context: String::new(),
+                    });
+                }
+                let s: f64 = buf.r.iter().map(|v| v * v).sum();
+                let [rho, d1] = res.loss.evaluate(s);
+                buf.rho = rho;
+                if jac {
+                    for (k, j) in buf.jac.iter_mut().enumerate() {
+                        if let Some((index, &value)) =
+                            j.iter().enumerate().find(|(_, v)| !v.is_finite())
+                        {
+                            return Err(EstimateError::NonFiniteResidual {
+                                residual: i,
+                                index,
+                                value,
+                                context: format!(
+                                    " in its Jacobian w.r.t. block {}",
+                                    res.blocks[k].0
+                                ),
+                            });
+                        }
+                    }
+                    if d1 != 1.0 {
+                        let w = d1.max(0.0).sqrt();
+                        buf.r.iter_mut().for_each(|v| *v *= w);
+                        buf.jac.iter_mut().for_each(|j| *j *= w);
+                    }
+                }
+                Ok(())
+            })
+            .collect();
+        for r in results {
+            r?;
+        }
+        Ok(0.5 * bufs.iter().map(|b| b.rho).sum::<f64>())
+    }
+
+    pub(crate) fn make_buffers(&self) -> Vec<EvalBuf> {
+        self.residuals
+            .iter()
+            .map(|r| {
+                let m = r.residual.dim();
+                EvalBuf {
+                    r: vec![0.0; m],
+                    jac: r
+                        .blocks
+                        .iter()
+                        .map(|b| DMatrix::zeros(m, self.blocks[b.0].manifold.tangent_dim()))
+                        .collect(),
+                    rho: 0.0,
+                }
+            })
+            .collect()
+    }
+
+    /// Assembles JᵀJ (lower CSC values of `st.pattern`) and g = Jᵀr from evaluated buffers.
+    pub(crate) fn assemble(&self, st: &Structure, bufs: &[EvalBuf], h: &mut [f64], g: &mut [f64]) {
+        h.iter_mut().for_each(|v| *v = 0.0);
+        g.iter_mut().for_each(|v| *v = 0.0);
+        for ((res, buf), pairs) in self.residuals.iter().zip(bufs).zip(&st.res_pairs) {
+            for (k, b) in res.blocks.iter().enumerate() {
+                if let Some(f) = st.free_index[b.0] {
+                    let off = st.col_offset[f];
+                    let j = &buf.jac[k];
+                    for c in 0..j.ncols() {
+                        let col = j.column(c);
+                        g[off + c] += col.iter().zip(&buf.r).map(|(a, b)| a * b).sum::<f64>();
+                    }
+                }
+            }
+            for &(ka, kb, slot) in pairs {
+                st.pattern.add_product(h, slot, &buf.jac[ka], &buf.jac[kb]);
+            }
+        }
+    }
+
+    /// `out = values ⊕ δ` for the free blocks (fixed blocks copied).
+    pub(crate) fn retract(&self, st: &Structure, values: &[f64], delta: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(values);
+        for (f, &b) in st.free_blocks.iter().enumerate() {
+            let blk = &self.blocks[b];
+            let a = blk.manifold.ambient_dim();
+            let off = st.col_offset[f];
+            blk.manifold.plus(
+                &values[blk.offset..blk.offset + a],
+                &delta[off..off + st.dims[f]],
+                &mut out[blk.offset..blk.offset + a],
+            );
+        }
+    }
+
+    /// Minimises ½ Σ ρ(‖r‖²) from the current values, which are updated in place. Errors
+    /// on invalid options or a non-finite residual/Jacobian at the initial values; stops
+    /// with a [`Summary`] saying why otherwise.
+    pub fn solve(&mut self, options: &SolverOptions) -> Result<Summary> {
+        let t0 = Instant::now();
+        options.validate()?;
+        let st = Structure::new(self);
+        let mut bufs = self.make_buffers();
+        let num_residuals: usize = bufs.iter().map(|b| b.r.len()).sum();
+        let mut values = self.values.clone();
+        let t_setup = t0.elapsed().as_secs_f64();
+        let te = Instant::now();
+        let initial_cost = self.evaluate_all(&values, &mut bufs, true)?;
+        let mut time_eval = te.elapsed().as_secs_f64();
+        let n = st.n;
+        let mut summary = Summary {
+            iterations: 0,
+            successful_steps: 0,
+            initial_cost,
+            final_cost: initial_cost,
+            termination: Termination::NoFreeParameters,
+            message: String::new(),
+            time_s: 0.0,
+            linear_solver: options.linear_solver,
+            num_parameters: n,
+            num_residuals,
+            num_eliminated_blocks: 0,
+            gradient_max_norm: 0.0,
+            time_setup_s: 0.0,
+            time_evaluate_s: 0.0,
+            time_assemble_s: 0.0,
+            time_linear_s: 0.0,
+        };
+        if n == 0 || self.residuals.is_empty() {
+            summary.message = "no free parameters or no residuals".into();
+            summary.time_s = t0.elapsed().as_secs_f64();
+            return Ok(summary);
+        }
+        let ts = Instant::now();
+        let (resolved, mut chol) =
+            st.make_solver(options.linear_solver, options.dense_threshold)?;
+        summary.time_setup_s = t_setup + ts.elapsed().as_secs_f64();
+        let mut time_asm = 0.0;
+        let mut time_lin = 0.0;
+        summary.linear_solver = resolved;
+        if resolved == LinearSolver::SparseSchur {
+            summary.num_eliminated_blocks = st.eliminated.iter().filter(|e| **e).count();
+        }
+        let lm = options.method == Method::LevenbergMarquardt;
+        let mut h = vec![0.0; st.pattern.nnz()];
+        let mut hd = h.clone();
+        let mut g = vec![0.0; n];
+        let mut delta = vec![0.0; n];
+        let mut cand = values.clone();
+        let ta = Instant::now();
+        self.assemble(&st, &bufs, &mut h, &mut g);
+        time_asm += ta.elapsed().as_secs_f64();
+        let mut cost = initial_cost;
+        let mut mu = options.initial_damping;
+        let mut nu = 2.0;
+        let free_ambient = |v: &[f64]| -> f64 {
+            st.free_blocks
+                .iter()
+                .map(|&b| {
+                    let blk = &self.blocks[b];
+                    v[blk.offset..blk.offset + blk.manifold.ambient_dim()]
+                        .iter()
+                        .map(|x| x * x)
+                        .sum::<f64>()
+                })
+                .sum::<f64>()
+                .sqrt()
+        };
+        let gmax = |g: &[f64]| g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let (termination, message) = loop {
+            let gm = gmax(&g);
+            if gm <= options.gradient_tolerance {
+                break (
+                    Termination::GradientTolerance,
+                    format!("max |Jᵀr| = {gm:.3e} ≤ {:.1e}", options.gradient_tolerance),
+                );
+            }
+            if summary.iterations >= options.max_iterations {
+                break (
+                    Termination::MaxIterations,
+                    format!("reached max_iterations = {}", options.max_iterations),
+                );
+            }
+            summary.iterations += 1;
+            hd.copy_from_slice(&h);
+            let mut ddd = vec![0.0; n];
+            if lm {
+                for (c, &p) in st.pattern.diag_pos.iter().enumerate() {
+                    ddd[c] = h[p].clamp(1e-6, 1e32);
+                    hd[p] += mu * ddd[c];
+                }
+            }
+            let tl = Instant::now();
+            let factored = chol.factor(&st.pattern, &hd);
+            time_lin += tl.elapsed().as_secs_f64();
+            if let Err(col) = factored {
+                if lm {
+                    mu *= nu;
+                    nu *= 2.0;
+                    if mu > 1e32 {
+                        break (
+                            Termination::DampingLimit,
+                            "damping exceeded 1e32: the damped normal matrix never became positive definite".into(),
+                        );
+                    }
+                    continue;
+                }
+                let where_ = col
+                    .map(|c| self.describe_column(&st, c))
+                    .unwrap_or_else(|| "unknown column".into());
+                break (
+                    Termination::LinearSolverFailure,
+                    format!(
+                        "Gauss–Newton normal matrix is not positive definite (rank deficient at {where_}); use Levenberg–Marquardt, fix the gauge or add priors"
+                    ),
+                );
+            }
+            for (d, gi) in delta.iter_mut().zip(&g) {
+                *d = -gi;
+            }
+            let tl = Instant::now();
+            chol.solve_in_place(&mut delta, n, 1)?;
+            time_lin += tl.elapsed().as_secs_f64();
+            let step = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let xn = free_ambient(&values);
+            if step <= options.parameter_tolerance * (xn + options.parameter_tolerance) {
+                break (
+                    Termination::ParameterTolerance,
+                    format!("‖δ‖ = {step:.3e} ≤ parameter_tolerance·(‖x‖ + tol)"),
+                );
+            }
+            self.retract(&st, &values, &delta, &mut cand);
+            let te = Instant::now();
+            let new_cost = self
+                .evaluate_all(&cand, &mut bufs, false)
+                .unwrap_or(f64::INFINITY);
+            time_eval += te.elapsed().as_secs_f64();
+            let gd: f64 = g.iter().zip(&delta).map(|(a, b)| a * b).sum();
+            let dd: f64 = ddd.iter().zip(&delta).map(|(a, b)| a * b * b).sum();
+            let predicted = 0.5 * (-gd + mu * dd * f64::from(u8::from(lm)));
+            let actual = cost - new_cost;
+            let rho = if predicted > 0.0 {
+                actual / predicted
+            } else {
+                f64::NEG_INFINITY
+            };
+            let accept = if lm {
+                new_cost.is_finite() && rho > 0.0
+            } else {
+                new_cost.is_finite()
+            };
+            if !accept {
+                if !lm {
+                    break (
+                        Termination::NonFinite,
+                        "the Gauss–Newton step made a residual non-finite; values left at the last finite point".into(),
+                    );
+                }
+                mu *= nu;
+                nu *= 2.0;
+                if mu > 1e32 {
+                    break (
+                        Termination::DampingLimit,
+                        format!(
+                            "damping exceeded 1e32 without an acceptable step (last trial cost {new_cost:.6e})"
+                        ),
+                    );
+                }
+                continue;
+            }
+            summary.successful_steps += 1;
+            std::mem::swap(&mut values, &mut cand);
+            let old = cost;
+            let te = Instant::now();
+            let evaluated = self.evaluate_all(&values, &mut bufs, true);
+            time_eval += te.elapsed().as_secs_f64();
+            cost = match evaluated {
+                Ok(c) => c,
+                Err(e) => {
+                    // Go back to the last point where everything was finite.
+                    std::mem::swap(&mut values, &mut cand);
+                    break (
+                        Termination::NonFinite,
+                        format!("after an accepted step: {e}"),
+                    );
+                }
+            };
+            let ta = Instant::now();
+            self.assemble(&st, &bufs, &mut h, &mut g);
+            time_asm += ta.elapsed().as_secs_f64();
+            if lm {
+                let t = 2.0 * rho - 1.0;
+                mu *= (1.0f64 / 3.0).max(1.0 - t * t * t);
+                nu = 2.0;
+            }
+            if (old - cost).abs() <= options.function_tolerance * old {
+                break (
+                    Termination::FunctionTolerance,
+                    format!(
+                        "relative cost change {:.3e} ≤ {:.1e}",
+                        (old - cost).abs() / old.max(f64::MIN_POSITIVE),
+                        options.function_tolerance
+                    ),
+                );
+            }
+        };
+        // The cost of the values kept (the last evaluation may have been a rejected trial).
+        summary.final_cost = self.evaluate_all(&values, &mut bufs, false).unwrap_or(cost);
+        self.values = values;
+        summary.termination = termination;
+        summary.message = message;
+        summary.gradient_max_norm = gmax(&g);
+        summary.time_evaluate_s = time_eval;
+        summary.time_assemble_s = time_asm;
+        summary.time_linear_s = time_lin;
+        summary.time_s = t0.elapsed().as_secs_f64();
+        Ok(summary)
+    }
+
+    /// "block b (tangent component c)" for a scalar column of the free unknowns.
+    pub(crate) fn describe_column(&self, st: &Structure, col: usize) -> String {
+        match st.col_offset.iter().rposition(|&o| o <= col) {
+            Some(f) => format!(
+                "block {} ({:?}) tangent component {}",
+                st.free_blocks[f],
+                self.blocks[st.free_blocks[f]].manifold,
+                col - st.col_offset[f]
+            ),
+            None => format!("column {col}"),
+        }
+    }
+}

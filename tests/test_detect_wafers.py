@@ -1,0 +1,193 @@
+"""Wafer-rim detection (seed 000_3b1454b2b2194811.txt ch. 3.2, 3.5) against renderer ground truth."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import pathlib
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from autoteach.detect import WaferEdge, detect_wafers
+from autoteach.errors import InvalidInputError
+
+_BENCH = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "wafer_detection.py"
+_spec = importlib.util.spec_from_file_location("wafer_detection_bench", _BENCH)
+assert _spec is not None and _spec.loader is not None
+bench = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(bench)
+
+
+@pytest.fixture(scope="module")
+def scene() -> tuple[np.ndarray, list[dict]]:
+    """A fixed scene: target in slot 5, disturbance 3 slots above, neutral light."""
+    rng = np.random.default_rng(11)
+    return bench.make_scene(rng, 3)
+
+
+def test_robustness_on_20_rendered_images() -> None:
+    """Smaller version of benchmarks/wafer_detection.py (which runs 210 images)."""
+    # Regression floors at the measured level (recall 0.49, precision 0.59, median centre error
+    # 0.17 px on these 20 images), well short of the issue's goals (0.98 / 0.98 / 0.3 px): see
+    # docs/benchmarks.md for the failure modes.
+    r = bench.evaluate(20, seed=101)
+    assert r["visible_rims"] >= 40
+    assert r["recall"] >= 0.4, r
+    assert r["precision"] >= 0.5, r
+    assert r["median_centre_error_px"] <= 0.3, r
+    assert r["median_axis_error_rel"] <= 0.005, r
+
+
+def test_rims_are_paired_and_labelled(scene: tuple[np.ndarray, list[dict]]) -> None:
+    image, truth = scene
+    dets = detect_wafers(image)
+    assert dets and all(isinstance(d, WaferEdge) for d in dets)
+    pairs = bench.match(dets, truth)
+    assert len(pairs) >= 2
+    for d_i, j in pairs:
+        d, t = dets[d_i], truth[j]
+        assert d.kind == t["rim"]
+        assert d.points.ndim == 2 and d.points.shape[1] == 2 and len(d.points) >= 32
+        assert 0.0 <= d.residual < 0.25
+        assert d.covariance is not None and d.covariance.shape == (5, 5)
+        assert np.all(np.linalg.eigvalsh(d.covariance) > 0.0)
+        # Points lie on the detected ellipse: recomputed residual equals the reported one.
+        assert abs(np.mean(np.abs(d.ellipse.distance(d.points, "orthogonal"))) - d.residual) < 1e-6
+    # The two rims of one true wafer share a wafer_id, different wafers do not.
+    by_wafer: dict[int, set[int]] = {}
+    for d_i, j in pairs:
+        by_wafer.setdefault(truth[j]["wafer"], set()).add(dets[d_i].wafer_id)
+    assert all(len(ids) == 1 for ids in by_wafer.values())
+    ids = [next(iter(v)) for v in by_wafer.values()]
+    assert len(set(ids)) == len(ids)
+    # Upper rim before lower within a wafer, upper centre above lower centre.
+    for wid in {d.wafer_id for d in dets}:
+        rims = [d for d in dets if d.wafer_id == wid]
+        if len(rims) == 2:
+            assert [r.kind for r in rims] == ["upper", "lower"]
+            assert rims[0].ellipse.cy < rims[1].ellipse.cy
+
+
+def test_dtypes_agree(scene: tuple[np.ndarray, list[dict]]) -> None:
+    image, _ = scene
+    ref = detect_wafers(image)
+    for dtype in (np.float32, np.float64):
+        other = detect_wafers(image.astype(dtype) / 255.0)
+        assert len(other) == len(ref)
+        for a, b in zip(ref, other, strict=True):
+            assert a.kind == b.kind and a.wafer_id == b.wafer_id
+            assert abs(a.ellipse.cx - b.ellipse.cx) < 1e-3 and abs(a.ellipse.b - b.ellipse.b) < 1e-3
+    # Non-contiguous views are read correctly.
+    padded = np.zeros((image.shape[0], 2 * image.shape[1]), np.uint8)
+    padded[:, ::2] = image
+    view = detect_wafers(padded[:, ::2])
+    assert [(d.kind, d.ellipse.cx) for d in view] == [(d.kind, d.ellipse.cx) for d in ref]
+
+
+def test_deterministic(scene: tuple[np.ndarray, list[dict]]) -> None:
+    image, _ = scene
+    a, b = detect_wafers(image), detect_wafers(image)
+    assert [(d.kind, d.wafer_id, d.ellipse.cx, d.ellipse.a) for d in a] == [
+        (d.kind, d.wafer_id, d.ellipse.cx, d.ellipse.a) for d in b
+    ]
+
+
+def test_prior_gates_sizes(scene: tuple[np.ndarray, list[dict]]) -> None:
+    image, _ = scene
+    dets = detect_wafers(image)
+    a_values = sorted(d.ellipse.a for d in dets)
+    assert detect_wafers(image, semi_major_range=(1.0, a_values[0] - 1.0)) == []
+    kept = detect_wafers(image, semi_major_range=(a_values[0] - 1.0, a_values[-1] + 1.0))
+    assert len(kept) == len(dets)
+
+
+def test_blank_black_and_saturated_images_give_nothing() -> None:
+    for value in (0, 128, 255):
+        assert detect_wafers(np.full((720, 1280), value, np.uint8)) == []
+    rng = np.random.default_rng(0)
+    noise = np.clip(rng.normal(128, 2.0, (240, 320)), 0, 255).astype(np.uint8)
+    assert detect_wafers(noise) == []
+
+
+def test_synthetic_ellipse_band_is_found_exactly() -> None:
+    """An antialiased bright elliptic band drawn independently of the renderer."""
+    h, w = 300, 500
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    cx, cy, a, b = 250.3, 120.6, 200.0, 60.0
+    img = np.full((h, w), 25.0)
+    ss = 4
+    acc = np.zeros((h, w))
+    for i in range(ss):
+        for j in range(ss):
+            u = xx - 0.5 + (i + 0.5) / ss
+            v = yy - 0.5 + (j + 0.5) / ss
+            q_up = ((u - cx) / a) ** 2 + ((v - cy) / b) ** 2
+            q_lo = ((u - cx) / a) ** 2 + ((v - cy - 4.0) / b) ** 2
+            # The band between the two ellipses, on the lower half only (the visible front).
+            acc += (q_up > 1.0) & (q_lo <= 1.0) & (v > cy)
+    img += 200.0 * acc / ss**2
+    dets = detect_wafers(img.astype(np.uint8))
+    upper = [d for d in dets if d.kind == "upper"]
+    lower = [d for d in dets if d.kind == "lower"]
+    assert len(upper) == 1 and len(lower) == 1
+    assert upper[0].wafer_id == lower[0].wafer_id
+    # Known bias (see docs/benchmarks.md): toward the ends of the front arc the band narrows
+    # below the edge operator's support, both edges are pushed apart there, and the partial-arc
+    # fit turns that into a centre shift of ~0.5 px along v and a ~1 % shorter minor axis.
+    for d, ccy in ((upper[0], cy), (lower[0], cy + 4.0)):
+        assert math.hypot(d.ellipse.cx - cx, d.ellipse.cy - ccy) < 1.0
+        assert abs(d.ellipse.a - a) / a < 0.01 and abs(d.ellipse.b - b) / b < 0.02
+
+
+@pytest.mark.parametrize(
+    ("image", "match"),
+    [
+        (np.zeros((0, 10), np.uint8), "empty"),
+        (np.zeros((10,), np.uint8), "2-D"),
+        (np.zeros((4, 4, 3), np.uint8), "2-D"),
+        (np.zeros((10, 10), np.int32), "dtype"),
+        (np.zeros((10, 10), np.uint16), "dtype"),
+        (np.array([[0.0, np.nan], [0.0, 0.0]]), "non-finite"),
+    ],
+)
+def test_bad_images_raise(image: np.ndarray, match: str) -> None:
+    with pytest.raises(InvalidInputError, match=match):
+        detect_wafers(image)
+
+
+def test_bad_parameters_raise() -> None:
+    img = np.zeros((20, 20), np.uint8)
+    with pytest.raises(InvalidInputError, match="canny high"):
+        detect_wafers(img, canny_low=10.0, canny_high=5.0)
+    with pytest.raises(InvalidInputError, match="residual_threshold"):
+        detect_wafers(img, residual_threshold=-1.0)
+    with pytest.raises(InvalidInputError, match="up"):
+        detect_wafers(img, up=(0.0, 0.0))
+    with pytest.raises(InvalidInputError, match="min_points"):
+        detect_wafers(img, min_arc_points=3)
+
+
+def test_releases_the_gil(scene: tuple[np.ndarray, list[dict]]) -> None:
+    image, _ = scene
+    ticks = 0
+    done = threading.Event()
+
+    def counter() -> None:
+        nonlocal ticks
+        while not done.is_set():
+            ticks += 1
+            time.sleep(0.001)
+
+    t = threading.Thread(target=counter)
+    t.start()
+    t0 = time.perf_counter()
+    for _ in range(3):
+        detect_wafers(image)
+    elapsed = time.perf_counter() - t0
+    done.set()
+    t.join()
+    # With the GIL held, the counter could not run during detection.
+    assert ticks >= max(3, int(0.2 * elapsed / 0.0015)), (ticks, elapsed)

@@ -1,0 +1,118 @@
+"""Bindings of the hand-eye estimators (000_3b1454b2b2194811.txt ch. 5): inputs, closed forms, errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from autoteach import _core
+from autoteach.errors import InvalidInputError
+from autoteach.geometry import RobotParams
+from autoteach.pipeline import _robot_array
+from autoteach.sim import simulate_session, true_increments
+from autoteach.sim.odometry import integrate_odometry, simulate_odometry
+
+K = np.array([[1000.0, 0.0, 639.5], [0.0, 1000.0, 359.5], [0.0, 0.0, 1.0]])
+
+
+def _look_along_x(x: float, z: float) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, :3] = [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
+    t[:3, 3] = (x, 0.0, z)
+    return t
+
+
+def test_resolution_matches_the_pinhole_closed_form():
+    # A level wafer 0.6 m ahead at camera height: a 1 mm lateral (y) shift moves every rim point by
+    # f/Z px horizontally; its RMS over the rim is f·sqrt(mean(1/Z²)).
+    t = _look_along_x(-0.6, 0.0)
+    w = np.zeros(5)
+    r = _core.handeye_resolution(K, t, w, 0.15, 0.0, n=3600)
+    th = np.linspace(0, 2 * np.pi, 3600, endpoint=False)
+    z = 0.6 + 0.15 * np.cos(th)
+    u = 0.15 * np.sin(th)
+    # d(u_px)/dy = f/Z; d(v_px)/dy = 0 (point in the camera's horizontal plane through the centre)
+    expect = 1000.0 * np.sqrt(np.mean(1.0 / z**2)) * 1e-3
+    assert r[1] == pytest.approx(expect, rel=1e-6)
+    # d/dx (along the optical axis) moves points by f·u/Z²
+    expect_x = 1000.0 * np.sqrt(np.mean((u / z**2) ** 2)) * 1e-3
+    assert r[0] == pytest.approx(expect_x, rel=1e-6)
+
+
+def test_ukf_with_exact_odometry_recovers_the_offsets():
+    s = simulate_session(seed=7, frames=120, render=False)
+    inc = true_increments(s.camera_poses)
+    d = math.radians
+    noise = [1e-5] * 3 + [d(0.001)] * 3 + [1e-5] * 3 + [d(0.001)] * 3 + [d(0.002)] * 3 + [1e-5]
+    run = _core.handeye_ukf(_robot_array(s.config.robot), np.array(s.config.base_pose), s.joints_encoder, inc, noise)
+    true = s.calibration.joint_offsets[[0, 1, 3]]
+    err = np.abs(run["offsets"][-1] - true)
+    assert np.all(err < math.radians(0.05)), np.degrees(err)
+    assert np.all(err < 3 * run["offset_std"][-1]), (np.degrees(err), np.degrees(run["offset_std"][-1]))
+    # the first frame cannot tell the offsets from the pose: the prior (2°) is kept
+    assert np.all(run["offset_std"][0] > math.radians(1.0))
+
+
+def test_odometry_round_trip_and_drift():
+    s = simulate_session(seed=2, frames=30, render=False)
+    exact = integrate_odometry(s.camera_poses[0], true_increments(s.camera_poses))
+    np.testing.assert_allclose(exact, s.camera_poses, atol=1e-9)
+    drift = integrate_odometry(s.camera_poses[0], simulate_odometry(s.camera_poses, 2))
+    err = np.linalg.norm(drift[:, :3, 3] - s.camera_poses[:, :3, 3], axis=1)
+    assert err[-1] > err[3] > 0.0
+
+
+def test_slam_mot_rejects_inconsistent_observations():
+    p = _robot_array(RobotParams())
+    enc = np.zeros((3, 5))
+    with pytest.raises(InvalidInputError, match="obs_start"):
+        _core.handeye_slam_mot(
+            K, p, 0.15, 0.001, enc, [0], [0], [0], [0], np.zeros((4, 2)), np.eye(4), np.zeros(5), np.zeros((1, 5))
+        )
+    with pytest.raises(InvalidInputError, match="no wafer edge"):
+        _core.handeye_slam_mot(
+            K, p, 0.15, 0.001, enc, [], [], [], [0], np.zeros((0, 2)), np.eye(4), np.zeros(5), np.zeros((1, 5))
+        )
+    with pytest.raises(InvalidInputError, match="factor"):
+        _core.handeye_slam_mot(
+            K,
+            p,
+            0.15,
+            0.001,
+            enc,
+            [0],
+            [0],
+            [0],
+            [0, 4],
+            np.ones((4, 2)),
+            np.eye(4),
+            np.zeros(5),
+            np.zeros((1, 5)),
+            factor="x",
+        )
+    with pytest.raises(InvalidInputError, match="encoders"):
+        _core.handeye_slam_mot(
+            K,
+            p,
+            0.15,
+            0.001,
+            np.zeros((3, 4)),
+            [0],
+            [0],
+            [0],
+            [0, 4],
+            np.ones((4, 2)),
+            np.eye(4),
+            np.zeros(5),
+            np.zeros((1, 5)),
+        )
+
+
+def test_ukf_rejects_bad_lengths():
+    p = _robot_array(RobotParams())
+    with pytest.raises(InvalidInputError, match="increments"):
+        _core.handeye_ukf(p, np.eye(4), np.zeros((5, 5)), np.zeros((3, 6)))
+    with pytest.raises(InvalidInputError, match="noise"):
+        _core.handeye_ukf(p, np.eye(4), np.zeros((2, 5)), np.zeros((1, 6)), [1.0] * 3)
