@@ -30,13 +30,13 @@ def scene() -> tuple[np.ndarray, list[dict]]:
 
 def test_robustness_on_20_rendered_images() -> None:
     """Smaller version of benchmarks/wafer_detection.py (which runs 210 images)."""
-    # Regression floors at the measured level (recall 0.49, precision 0.59, median centre error
-    # 0.17 px on these 20 images), well short of the issue's goals (0.98 / 0.98 / 0.3 px): see
-    # docs/benchmarks.md for the failure modes.
+    # Regression floors just under the measured level (recall 0.54, precision 0.66, median
+    # centre error 0.17 px on these 20 images), well short of the issue's goals (0.98 / 0.98 /
+    # 0.3 px): see docs/benchmarks.md for the failure modes.
     r = bench.evaluate(20, seed=101)
     assert r["visible_rims"] >= 40
-    assert r["recall"] >= 0.4, r
-    assert r["precision"] >= 0.5, r
+    assert r["recall"] >= 0.5, r
+    assert r["precision"] >= 0.6, r
     assert r["median_centre_error_px"] <= 0.3, r
     assert r["median_axis_error_rel"] <= 0.005, r
 

@@ -87,9 +87,10 @@ pub struct DetectParams {
     /// validation stage of §3.2: a fit supported by too little of its ellipse is a chance
     /// alignment, e.g. of two straight-ish clutter arcs). Default 0.15.
     pub min_coverage: f64,
-    /// Rim points closer than this (pixels) to the other rim of their wafer are dropped and
-    /// the rim refitted: where the bright side face narrows to a few pixels the blurred edges
-    /// of the two rims push each other apart. 0 disables. Default 3.
+    /// Rim points whose distance to the other rim of their wafer is under this fraction of the
+    /// widest distance are dropped and the rim refitted: where the bright side face between the
+    /// rims narrows toward the ends of the front arc, the blurred edges of the two rims push
+    /// each other apart and bias the fit. 0 disables. Default 0.5.
     pub min_rim_separation: f64,
     /// Optional size prior.
     pub prior: Option<WaferPrior>,
@@ -107,7 +108,7 @@ impl Default for DetectParams {
             max_rim_axis_difference: 0.03,
             min_contrast_ratio: 0.45,
             min_coverage: 0.15,
-            min_rim_separation: 0.0,
+            min_rim_separation: 0.5,
             prior: None,
         }
     }
@@ -141,6 +142,13 @@ impl DetectParams {
                 what: "min_coverage",
                 value: self.min_coverage,
                 reason: "must be in [0, 1]",
+            });
+        }
+        if !(self.min_rim_separation >= 0.0 && self.min_rim_separation < 1.0) {
+            return Err(DetectError::InvalidParameter {
+                what: "min_rim_separation",
+                value: self.min_rim_separation,
+                reason: "must be in [0, 1)",
             });
         }
         if !(self.min_contrast_ratio >= 0.0 && self.min_contrast_ratio <= 1.0) {
@@ -370,8 +378,9 @@ fn pair_rims(
 
 /// Near the ends of the visible front arc the bright side face between the two rims of a wafer
 /// narrows to a few pixels; there the blurred edges of both rims push each other apart and bias
-/// the fits (centre and minor axis). Drops the points of rim `i` closer than
-/// [`DetectParams::min_rim_separation`] to the other rim `j`'s ellipse and refits the rest
+/// the fits (centre and minor axis). Drops the points of rim `i` whose distance to the other
+/// rim `j`'s ellipse is under [`DetectParams::min_rim_separation`] × the largest such distance
+/// and refits the rest
 /// (orthogonal-distance LM from the current ellipse), keeping the refit only when enough points
 /// remain and its residual is under the threshold.
 fn trim_close_ends(slots: &mut [Option<Candidate>], i: usize, j: usize, params: &DetectParams) {
@@ -379,18 +388,31 @@ fn trim_close_ends(slots: &mut [Option<Candidate>], i: usize, j: usize, params: 
     if !(sep > 0.0) {
         return;
     }
-    let Some(other) = slots.get(j).and_then(|c| c.as_ref()).map(|c| c.seg.fit.ellipse) else {
+    let Some(other) = slots
+        .get(j)
+        .and_then(|c| c.as_ref())
+        .map(|c| c.seg.fit.ellipse)
+    else {
         return;
     };
     let Some(c) = slots.get_mut(i).and_then(|c| c.as_mut()) else {
         return;
     };
+    let dist: Vec<f64> = c
+        .seg
+        .points
+        .iter()
+        .map(|p| other.orthogonal_distance(p).abs())
+        .collect();
+    let widest = dist.iter().copied().fold(0.0, f64::max);
+    let cut = sep * widest;
     let kept: Vec<Vector2<f64>> = c
         .seg
         .points
         .iter()
-        .filter(|p| other.orthogonal_distance(p).abs() >= sep)
-        .copied()
+        .zip(&dist)
+        .filter(|(_, d)| **d >= cut)
+        .map(|(p, _)| *p)
         .collect();
     let n = c.seg.points.len();
     if kept.len() == n || kept.len() < 20 || (kept.len() as f64) < 0.5 * n as f64 {
@@ -516,5 +538,12 @@ mod tests {
             ..DetectParams::default()
         };
         assert!(detect_wafers(&view, &bad).is_err());
+        for sep in [-0.1, 1.0, f64::NAN] {
+            let bad = DetectParams {
+                min_rim_separation: sep,
+                ..DetectParams::default()
+            };
+            assert!(detect_wafers(&view, &bad).is_err());
+        }
     }
 }
