@@ -17,11 +17,13 @@
 //! use autoteach_geometry::collision::{LinkDims, Obstacle, RobotShapes, Workspace};
 //! use autoteach_geometry::robot::{Joints, WaferRobot};
 //! use nalgebra::{Isometry3, Vector3};
-//! let shapes = RobotShapes::new(WaferRobot::default(), LinkDims::default()).unwrap();
-//! let wall = Obstacle::new("wall", Isometry3::translation(2.0, 0.0, 0.5), Vector3::new(0.05, 1.0, 1.0)).unwrap();
-//! let ws = Workspace::new(vec![wall]).unwrap();
-//! let c = shapes.clearance(&Joints::new(0.0, 0.0, 0.0, 0.0, 0.1), &ws).unwrap();
-//! assert!(c.distance > 0.5); // the fully extended arm reaches x = 1.04 m
+//! let shapes = RobotShapes::new(WaferRobot::default(), LinkDims::default())?;
+//! let wall = Obstacle::new("wall", Isometry3::translation(2.0, 0.0, 0.5), Vector3::new(0.05, 1.0, 1.0))?;
+//! let ws = Workspace::new(vec![wall])?;
+//! let c = shapes.clearance(&Joints::new(0.0, 0.0, 0.0, 0.0, 0.1), &ws)?;
+//! // `None` only for an empty workspace; the fully extended arm reaches x = 1.04 m.
+//! assert!(c.is_some_and(|c| c.distance > 0.5));
+//! # Ok::<(), autoteach_geometry::GeometryError>(())
 //! ```
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
