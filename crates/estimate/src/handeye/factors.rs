@@ -416,58 +416,43 @@ mod tests {
         // Nearest of 360 model points: within half the spacing of the projected samples.
         assert!(r0.iter().all(|r| r.abs() < 5.0), "{r0:?}");
         let h = 1e-7;
-        let mut r1 = vec![0.0; 2 * n];
-        for m in 0..6 {
-            let mut d = Vector6::zeros();
-            d[m] = h;
+        let residuals = |t: &Isometry3<f64>, wafer: &Vector5<f64>| {
+            let mut r = vec![0.0; 2 * n];
             point_reprojection_residuals(
                 &k,
-                &se3_plus(&t_wc, &d),
-                &w,
+                t,
+                wafer,
                 Rim::Lower,
                 0.15,
                 0.001,
                 &pts,
                 &angles,
                 1.0,
-                &mut r1,
+                &mut r,
                 None,
             )
             .unwrap();
+            r
+        };
+        let check = |what: &str, m: usize, r1: &[f64], analytic: &DMatrix<f64>| {
             for i in 0..2 * n {
                 let fd = (r1[i] - r0[i]) / h;
                 assert!(
-                    (fd - j.camera[(i, m)]).abs() < 1e-3 * (1.0 + fd.abs()),
-                    "cam {m}: {fd} vs {}",
-                    j.camera[(i, m)]
+                    (fd - analytic[(i, m)]).abs() < 1e-3 * (1.0 + fd.abs()),
+                    "{what} {m}: {fd} vs {}",
+                    analytic[(i, m)]
                 );
             }
+        };
+        for m in 0..6 {
+            let mut d = Vector6::zeros();
+            d[m] = h;
+            check("cam", m, &residuals(&se3_plus(&t_wc, &d), &w), &j.camera);
         }
         for m in 0..5 {
             let mut w2 = w;
             w2[m] += h;
-            point_reprojection_residuals(
-                &k,
-                &t_wc,
-                &w2,
-                Rim::Lower,
-                0.15,
-                0.001,
-                &pts,
-                &angles,
-                1.0,
-                &mut r1,
-                None,
-            )
-            .unwrap();
-            for i in 0..2 * n {
-                let fd = (r1[i] - r0[i]) / h;
-                assert!(
-                    (fd - j.wafer[(i, m)]).abs() < 1e-3 * (1.0 + fd.abs()),
-                    "wafer {m}: {fd} vs {}",
-                    j.wafer[(i, m)]
-                );
-            }
+            check("wafer", m, &residuals(&t_wc, &w2), &j.wafer);
         }
     }
 }
