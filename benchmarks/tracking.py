@@ -42,10 +42,13 @@ def evaluate(session: Any, detections: list[list[Any]], **params: Any) -> dict[s
         **params,
     )
     times = []
+    stages: dict[str, list[float]] = {"predict": [], "associate": [], "manage": []}
     for f, edges in enumerate(detections):
         t0 = time.perf_counter()
         tracker.update(edges, session.camera_poses[f])
         times.append(time.perf_counter() - t0)
+        for k, v in tracker.last_timings.items():
+            stages[k].append(v)
     tracks = tracker.all_tracks()
     frames = sequence_frames(detections, tracks)
     slots = session.wafer_slots
@@ -54,6 +57,8 @@ def evaluate(session: Any, detections: list[list[Any]], **params: Any) -> dict[s
     out.update(idf1(frames))
     out.update(changes)
     out["ms_per_frame"] = 1e3 * float(np.median(times))
+    for k, v in stages.items():
+        out[f"{k}_ms"] = 1e3 * float(np.median(v))
     return out
 
 
@@ -78,28 +83,41 @@ def sequence_frames(detections: list[list[Any]], tracks: list[Any]) -> list[tupl
 
 
 def main() -> None:
-    """Run the comparison and print one line per (wafers, seed, associator)."""
+    """Run the comparison: one line per (wafers, seed, associator), then one summary line per figure."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--frames", type=int, default=200)
+    ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--wafers", type=int, nargs="+", default=[12, 25])
     args = ap.parse_args()
     print(
         f"{'wafers':>6} {'seed':>4} {'associator':>12} {'MOTA':>7} {'IDF1':>7} {'IDSW':>5} "
-        f"{'changes':>7} {'nbr':>4} {'FP':>5} {'FN':>5} {'GT':>6} {'ms/frame':>8}"
+        f"{'changes':>7} {'nbr':>4} {'FP':>5} {'FN':>5} {'GT':>6} {'assoc ms':>8} {'pred ms':>7} "
+        f"{'mgmt ms':>7} {'update ms':>9}"
     )
+    results: dict[tuple[int, str], list[dict[str, float]]] = {}
     for n in args.wafers:
         for seed in args.seeds:
             session = scenario(n, seed, args.frames)
             dets = synthetic_detections(session, seed=seed)
             for name in ("hierarchical", "greedy"):
                 r = evaluate(session, dets, associator=name)
+                results.setdefault((n, name), []).append(r)
                 print(
                     f"{n:>6} {seed:>4} {name:>12} {r['mota']:7.4f} {r['idf1']:7.4f} {int(r['idsw']):>5} "
                     f"{r['changes']:>7} {r['neighbour_changes']:>4} {int(r['fp']):>5} {int(r['fn']):>5} "
-                    f"{int(r['num_gt']):>6} {r['ms_per_frame']:8.3f}",
+                    f"{int(r['num_gt']):>6} {r['associate_ms']:8.3f} {r['predict_ms']:7.3f} "
+                    f"{r['manage_ms']:7.3f} {r['ms_per_frame']:9.3f}",
                     flush=True,
                 )
+    print()
+    for (n, name), rs in results.items():
+        print(
+            f"SUMMARY wafers={n} {name}: MOTA {min(r['mota'] for r in rs):.4f}-{max(r['mota'] for r in rs):.4f}, "
+            f"IDF1 {min(r['idf1'] for r in rs):.4f}-{max(r['idf1'] for r in rs):.4f}, "
+            f"neighbour switches {sum(r['neighbour_changes'] for r in rs)}, IDSW {int(sum(r['idsw'] for r in rs))}, "
+            f"association median {np.median([r['associate_ms'] for r in rs]):.3f} ms/frame, "
+            f"update median {np.median([r['ms_per_frame'] for r in rs]):.3f} ms/frame ({len(rs)} seeds)"
+        )
 
 
 if __name__ == "__main__":

@@ -138,6 +138,20 @@ def test_truncated_e_step_agrees_with_dense() -> None:
     np.testing.assert_allclose(trunc.t, dense.t, atol=1e-6)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_fast_gauss_e_step_agrees_with_dense(dim: int) -> None:
+    # The fast Gauss transform serves the large-σ iterations, the dense E-step the rest: the
+    # registrations agree to far below the noise.
+    rng = np.random.default_rng(10)
+    y = rng.uniform(0, 10, (900, dim))
+    x = y + 0.3 * np.sin(0.4 * y[:, ::-1]) + rng.normal(0, 0.01, y.shape)
+    dense = cpd_nonrigid(x, y, low_rank=60, e_step="dense", w=0.1)
+    fast = cpd_nonrigid(x, y, low_rank=60, e_step="fast_gauss", w=0.1)
+    assert fast.iterations == dense.iterations
+    np.testing.assert_allclose(fast.transformed, dense.transformed, atol=1e-6)
+    assert fast.sigma2 == pytest.approx(dense.sigma2, rel=1e-5)
+
+
 def test_outlier_weight_resists_clutter() -> None:
     rng = np.random.default_rng(9)
     y = rng.uniform(-1, 1, (100, 2))

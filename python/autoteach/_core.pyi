@@ -733,6 +733,7 @@ class TrackWaferTracker:
         knn: int = 8,
         gate: float = 5.0,
         min_score: float = 0.0,
+        min_coverage: float = 0.0,
         associator: str = "hierarchical",
         greedy_gate: float = 40.0,
         max_points_per_segment: int = 48,
@@ -743,8 +744,15 @@ class TrackWaferTracker:
         intrinsics: NDArray[np.float64] | None = None,
         wafer_radius: float = 0.15,
         normal_prior: tuple[float, float, float] | None = None,
-        circle_window: int = 10,
+        circle_window: int = 6,
         prefer_projection: bool = False,
+        multiview_circle: bool = True,
+        normal_prior_sigma: float = 0.05,
+        circle_fit_iterations: int = 1,
+        projection_max_center_std: float = 0.003,
+        projection_max_rms: float = 2.0,
+        max_missed_3d: int = 300,
+        stack_axis_sigma: float | None = 0.002,
     ) -> None: ...
     def update(
         self,
@@ -753,6 +761,8 @@ class TrackWaferTracker:
     ) -> list[int | None]: ...
     def tracks(self) -> list[dict[str, object]]: ...
     def retired(self) -> list[dict[str, object]]: ...
+    @property
+    def last_timings(self) -> tuple[float, float, float]: ...
     @property
     def frame(self) -> int: ...
 
@@ -882,6 +892,7 @@ class CalibResult:
     def information(self) -> F64Array: ...
     def views(self) -> list[tuple[F64Array, F64Array, list[int]]]: ...
     def max_ere(self, samples: int = 200, grid: int = 5, seed: int = 0) -> tuple[float, tuple[float, float]]: ...
+    def max_ere_stats(self, samples: int = 200, grid: int = 5, seed: int = 0) -> dict[str, object]: ...
     def error_map(self, step: int = 1, samples: int = 100, seed: int = 0) -> F64Array: ...
     def suggest_next_view(
         self, target: F64Array, candidates: F64Array | None = None, samples: int = 100, grid: int = 5, seed: int = 0
@@ -922,6 +933,16 @@ def calib_random_poses(
     count: int,
     *,
     max_tilt: float = 0.7,
+    seed: int = 0,
+) -> F64Array: ...
+def calib_novice_poses(
+    model: str,
+    params: F64Array,
+    width: int,
+    height: int,
+    target: F64Array,
+    count: int,
+    *,
     seed: int = 0,
 ) -> F64Array: ...
 def calib_synthesize_view(
@@ -966,8 +987,15 @@ def handeye_slam_mot(
     init_heights: tuple[float, float, float] | None = None,
     prior_sigmas: tuple[float, float, float] = (0.035, 0.02, 0.035),
     encoder_sigma: tuple[float, float, float, float] | None = None,
+    estimate_mount: bool = False,
+    estimate_links: list[int] = [],
+    free_camera: tuple[list[float], NDArray[np.float64] | None, list[float]] | None = None,
 ) -> dict[str, object]:
-    """SLAM-MOT calibration (000_3b1454b2b2194811.txt §5.3): batch (and sliding-window) solve with covariances."""
+    """SLAM-MOT calibration (000_3b1454b2b2194811.txt §5.3): batch (and sliding-window) solve with covariances.
+
+    ``free_camera = (motion_sigma (6), odometry (F-1, 4, 4) or None, odometry_sigma (6))`` switches to
+    per-frame camera poses tied by the robot motion factor of eqs. (5.10)–(5.12).
+    """
 
 def handeye_ukf(
     robot_params: NDArray[np.float64],

@@ -83,6 +83,13 @@ def _parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--no-autoteach", dest="autoteach", action="store_false", help="only simulate, do not run auto-teaching"
     )
+    demo.add_argument(
+        "--frontend",
+        choices=("detect", "simulated"),
+        default="detect",
+        help="edge front end: detection + tracking on the rendered images (default) or the simulator's "
+        "ground-truth rims with pixel noise",
+    )
 
     info = sub.add_parser("info", parents=[common], help="describe an MCAP session log")
     info.add_argument("log", type=Path, help="the MCAP file")
@@ -139,7 +146,13 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         from autoteach.report import format_table, write_report
 
         try:
-            result = autoteach(session, seed=args.seed, baseline=True, progress=_progress_enabled(args))
+            result = autoteach(
+                session,
+                seed=args.seed,
+                baseline=True,
+                frontend=getattr(args, "frontend", "detect"),
+                progress=_progress_enabled(args),
+            )
         except AutoteachError as exc:
             # Too few frames (or nothing seen) to calibrate: the simulation summary still stands.
             summary["autoteach"] = {"skipped": str(exc)}

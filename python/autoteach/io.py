@@ -17,6 +17,14 @@ topic                          schema                      encoding   content
 ``/ground_truth/rims``         ``autoteach.VisibleRims``   json       per frame: visible rim records
 =============================  ==========================  =========  =====================================
 
+:func:`write_results` copies a log (every message, metadata record and attachment unchanged) and
+adds the auto-teaching results on their own channels, read back by :func:`read_results`:
+``/autoteach/calibration`` (once: base pose, joint offsets, standard deviations, covariance, errors
+against ground truth), ``/autoteach/wafers`` (once: wafer parameters, standard deviations, poses,
+slots, resolution), ``/autoteach/camera_pose`` (per frame, ``foxglove.PoseInFrame``),
+``/autoteach/ukf`` (per frame), ``/autoteach/history`` (per sliding window) and
+``/autoteach/edges`` (per frame: the edge points the solver used).
+
 The ``/session``, ``/camera/image`` and ``/joint_states`` channels are required; logs of a real robot
 have no ``/ground_truth/*`` channels and read back with ``None`` ground truth. Values round-trip
 bit-exactly: images and joints are raw bytes in the CDR messages, JSON floats are written with
@@ -43,7 +51,18 @@ from autoteach.errors import InvalidInputError, LogReadError
 from autoteach.sim.config import SimConfig
 from autoteach.sim.session import Calibration, CameraInfo, Session
 
-__all__ = ["FORMAT_VERSION", "TOPICS", "LogReadError", "Session", "log_info", "read_log", "write_log"]
+__all__ = [
+    "FORMAT_VERSION",
+    "RESULT_TOPICS",
+    "TOPICS",
+    "LogReadError",
+    "Session",
+    "log_info",
+    "read_log",
+    "read_results",
+    "write_log",
+    "write_results",
+]
 
 #: Version of the autoteach log layout written into the ``/session`` message.
 FORMAT_VERSION = 1
@@ -864,3 +883,297 @@ def _joint_positions(expected: tuple[str, ...], names: list[str], position: np.n
     if missing:
         raise ValueError(f"JointState lacks joints {missing} (has {names})")
     return position[[index[n] for n in expected]]
+
+
+# --------------------------------------------------------------------------------------------
+# Auto-teaching results written back into a log
+# --------------------------------------------------------------------------------------------
+
+TOPIC_RESULT_CALIBRATION = "/autoteach/calibration"
+TOPIC_RESULT_WAFERS = "/autoteach/wafers"
+TOPIC_RESULT_CAMERA_POSE = "/autoteach/camera_pose"
+TOPIC_RESULT_UKF = "/autoteach/ukf"
+TOPIC_RESULT_HISTORY = "/autoteach/history"
+TOPIC_RESULT_EDGES = "/autoteach/edges"
+
+#: Result channels added by :func:`write_results` (schema name, schema encoding, message encoding).
+RESULT_TOPICS: dict[str, tuple[str, str, str]] = {
+    TOPIC_RESULT_CALIBRATION: ("autoteach.Calibration", "jsonschema", "json"),
+    TOPIC_RESULT_WAFERS: ("autoteach.Wafers", "jsonschema", "json"),
+    TOPIC_RESULT_CAMERA_POSE: ("foxglove.PoseInFrame", "jsonschema", "json"),
+    TOPIC_RESULT_UKF: ("autoteach.UkfState", "jsonschema", "json"),
+    TOPIC_RESULT_HISTORY: ("autoteach.WindowEstimate", "jsonschema", "json"),
+    TOPIC_RESULT_EDGES: ("autoteach.EdgeObservations", "jsonschema", "json"),
+}
+_RESULT_SCHEMAS: dict[str, dict[str, Any]] = {
+    "autoteach.Calibration": {
+        "title": "autoteach.Calibration",
+        "description": "Auto-teaching result: effective base pose T_wb (reference-wafer frame), joint zero "
+        "offsets, standard deviations, joint covariance, errors against ground truth when known. Arrays are "
+        "base64 little-endian float64 with their shape (NaN: not estimated / unobservable).",
+        "type": "object",
+    },
+    "autoteach.Wafers": {
+        "title": "autoteach.Wafers",
+        "description": "Wafer estimates [cx, cy, cz, rx, ry] (reference-wafer frame), their standard "
+        "deviations, 4x4 poses, slots and theoretical resolution (eq. 5.14).",
+        "type": "object",
+    },
+    "foxglove.PoseInFrame": _POSE_SCHEMA,
+    "autoteach.UkfState": {
+        "title": "autoteach.UkfState",
+        "description": "Per frame: UKF camera pose (world) and joint-offset estimates with standard deviations.",
+        "type": "object",
+    },
+    "autoteach.WindowEstimate": {
+        "title": "autoteach.WindowEstimate",
+        "description": "Sliding-window estimate after a frame: base pose, joint offsets, standard deviations.",
+        "type": "object",
+    },
+    "autoteach.EdgeObservations": {
+        "title": "autoteach.EdgeObservations",
+        "description": "Per frame: the edge observations the solver used (wafer index, rim 0 upper / 1 lower, points).",
+        "type": "object",
+    },
+}
+
+
+def _jnum(v: Any) -> float | None:
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+def _clean(obj: Any) -> Any:
+    """JSON-safe copy: NaN/inf become ``None``, numpy scalars/arrays plain Python."""
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _clean(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return _jnum(obj)
+    return obj
+
+
+def _result_messages(result: Any, timestamps: np.ndarray) -> list[tuple[str, int, bytes]]:
+    """The (topic, time, payload) messages of an :class:`~autoteach.pipeline.AutoTeachResult`."""
+    t0 = int(timestamps[0]) if len(timestamps) else 0
+    dump = lambda d: json.dumps(_clean(d), allow_nan=False).encode()  # noqa: E731
+    out: list[tuple[str, int, bytes]] = []
+    d = result.to_dict()
+    cal = {
+        "timestamp": _stamp(t0),
+        "frame_id": "reference_wafer",
+        "frontend": result.frontend,
+        "base_pose": _array_to_json(result.base_pose),
+        "base_std": _array_to_json(result.base_std),
+        "joint_offsets": _array_to_json(result.joint_offsets),
+        "joint_offsets_std": _array_to_json(result.joint_offsets_std),
+        "offset_status": dict(result.offset_status),
+        "covariance": None if result.covariance is None else _array_to_json(np.asarray(result.covariance)),
+        "unobservable": result.unobservable,
+        "rms_px": _jnum(result.rms_px),
+        "n_observations": int(result.n_observations),
+        "errors": d["errors"],
+        "within_3sigma": d["within_3sigma"],
+        "frontend_stats": d["frontend_stats"],
+        "summary": d["estimates"],
+    }
+    out.append((TOPIC_RESULT_CALIBRATION, t0, dump(cal)))
+    wafers = {
+        "timestamp": _stamp(t0),
+        "frame_id": "reference_wafer",
+        "params": _array_to_json(result.wafer_params),
+        "std": _array_to_json(result.wafer_std),
+        "poses": _array_to_json(result.wafer_poses),
+        "slots": [int(s) for s in result.wafer_slots],
+        "resolution": _array_to_json(result.resolution),
+    }
+    out.append((TOPIC_RESULT_WAFERS, t0, dump(wafers)))
+    for f, t_wc in enumerate(np.asarray(result.camera_poses, dtype=np.float64)):
+        out.append((TOPIC_RESULT_CAMERA_POSE, int(timestamps[f]), _pose_json(int(timestamps[f]), t_wc)))
+    if result.ukf is not None:
+        for f in range(len(result.ukf["poses"])):
+            t = int(timestamps[f])
+            msg = {
+                "timestamp": _stamp(t),
+                "frame": f,
+                "pose": _array_to_json(np.asarray(result.ukf["poses"][f])),
+                "offsets": _array_to_json(np.asarray(result.ukf["offsets"][f])),
+                "offset_std": _array_to_json(np.asarray(result.ukf["offset_std"][f])),
+            }
+            out.append((TOPIC_RESULT_UKF, t, dump(msg)))
+    for h in result.history:
+        f = int(h["last_frame"])
+        t = int(timestamps[min(f, len(timestamps) - 1)])
+        msg = {
+            "timestamp": _stamp(t),
+            "last_frame": f,
+            "base_pose": _array_to_json(np.asarray(h["base_pose"])),
+            "joint_offsets": _array_to_json(np.asarray(h["joint_offsets"])),
+            "std": _array_to_json(np.asarray(h["std"])),
+        }
+        out.append((TOPIC_RESULT_HISTORY, t, dump(msg)))
+    obs = result.observations
+    if obs:
+        per_frame: dict[int, list[dict[str, Any]]] = defaultdict(list)
+        for i, (f, w) in enumerate(zip(obs["frames"], obs["wafers"], strict=True)):
+            pts = np.asarray(obs["points"][obs["start"][i] : obs["start"][i + 1]])
+            rim = int(obs["rims"][i]) if "rims" in obs else 0
+            per_frame[int(f)].append({"wafer": int(w), "rim": rim, "points": _array_to_json(pts)})
+        for f in sorted(per_frame):
+            t = int(timestamps[f])
+            out.append((TOPIC_RESULT_EDGES, t, dump({"timestamp": _stamp(t), "frame": f, "edges": per_frame[f]})))
+    return out
+
+
+def write_results(
+    result: Any,
+    log: str | os.PathLike[str],
+    out: str | os.PathLike[str] | None = None,
+    compression: str | None = "zstd",
+) -> Path:
+    """Copy a session log and add the auto-teaching results on their own ``/autoteach/*`` channels.
+
+    Every schema, channel, message (with its log/publish time and sequence), metadata record and
+    attachment of ``log`` is copied unchanged; the channels of :data:`RESULT_TOPICS` are added
+    (estimates with standard deviations and covariance, wafers, the per-frame camera poses through
+    the calibrated chain, the UKF states, the sliding-window history and the edge observations
+    used). ``out=None`` writes back into ``log`` (through a temporary file and an atomic rename).
+    Channels of a previous result are replaced, not duplicated.
+
+    Returns:
+        The path written.
+
+    Raises:
+        LogReadError: ``log`` cannot be read completely (as :func:`read_log`).
+        InvalidInputError: the result does not fit the log (frame count) or bad compression.
+
+    """
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, Writer
+
+    if compression not in _COMPRESSION:
+        raise InvalidInputError(f"compression must be 'zstd', 'lz4' or None, got {compression!r}")
+    log = Path(log)
+    session = read_log(log)
+    n = len(np.asarray(result.camera_poses))
+    if n != session.n_frames:
+        raise InvalidInputError(f"the result has {n} camera poses but the log {log} has {session.n_frames} frames")
+    target = Path(out) if out is not None else log
+    part = target.with_name(target.name + ".part")
+    ctype = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}.get(compression or "", CompressionType.NONE)
+    try:
+        with open(log, "rb") as fin, open(part, "wb") as fout:
+            reader = make_reader(fin)
+            header = reader.get_header()
+            writer = Writer(fout, chunk_size=_CHUNK_SIZE, compression=ctype, enable_data_crcs=True)
+            writer.start(profile=header.profile, library=header.library)
+            schema_map: dict[int, int] = {}
+            chan_map: dict[int, int] = {}
+            for schema, channel, message in reader.iter_messages(log_time_order=False):
+                if channel.topic in RESULT_TOPICS:
+                    continue
+                if channel.id not in chan_map:
+                    sid = 0
+                    if schema is not None:
+                        if schema.id not in schema_map:
+                            schema_map[schema.id] = writer.register_schema(
+                                name=schema.name, encoding=schema.encoding, data=schema.data
+                            )
+                        sid = schema_map[schema.id]
+                    chan_map[channel.id] = writer.register_channel(
+                        topic=channel.topic,
+                        message_encoding=channel.message_encoding,
+                        schema_id=sid,
+                        metadata=dict(channel.metadata),
+                    )
+                writer.add_message(
+                    channel_id=chan_map[channel.id],
+                    log_time=message.log_time,
+                    publish_time=message.publish_time,
+                    data=message.data,
+                    sequence=message.sequence,
+                )
+            for meta in reader.iter_metadata():
+                writer.add_metadata(name=meta.name, data=dict(meta.metadata))
+            for att in reader.iter_attachments():
+                writer.add_attachment(
+                    create_time=att.create_time,
+                    log_time=att.log_time,
+                    name=att.name,
+                    media_type=att.media_type,
+                    data=att.data,
+                )
+            new_schema: dict[str, int] = {}
+            new_chan: dict[str, int] = {}
+            seq: dict[str, int] = defaultdict(int)
+            for topic, t, data in _result_messages(result, np.asarray(session.timestamps, dtype=np.int64)):
+                if topic not in new_chan:
+                    name, schema_enc, msg_enc = RESULT_TOPICS[topic]
+                    if name not in new_schema:
+                        new_schema[name] = writer.register_schema(
+                            name=name, encoding=schema_enc, data=json.dumps(_RESULT_SCHEMAS[name]).encode()
+                        )
+                    new_chan[topic] = writer.register_channel(
+                        topic=topic, message_encoding=msg_enc, schema_id=new_schema[name]
+                    )
+                writer.add_message(
+                    channel_id=new_chan[topic], log_time=t, publish_time=t, data=data, sequence=seq[topic]
+                )
+                seq[topic] += 1
+            writer.finish()
+        os.replace(part, target)
+    except BaseException:
+        part.unlink(missing_ok=True)
+        raise
+    return target
+
+
+def read_results(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Read the ``/autoteach/*`` result channels written by :func:`write_results`.
+
+    Returns:
+        ``calibration`` and ``wafers`` (dicts with the arrays decoded), ``camera_poses`` (F, 4, 4),
+        ``ukf`` (list of per-frame dicts), ``history`` (list) and ``edges`` (per-frame lists of
+        ``{wafer, rim, points}``); missing channels give ``None``/empty.
+
+    Raises:
+        LogReadError: unreadable log or no ``/autoteach/calibration`` message.
+
+    """
+    path = Path(path)
+    scan = _scan(path)
+    if scan.error is not None:
+        raise LogReadError(scan.error)
+    msgs = scan.messages
+    if not msgs.get(TOPIC_RESULT_CALIBRATION):
+        raise LogReadError(f"{path} holds no auto-teaching result (no {TOPIC_RESULT_CALIBRATION} channel)")
+
+    def arrays(d: dict[str, Any]) -> dict[str, Any]:
+        return {
+            k: (_array_from_json(v) if isinstance(v, dict) and set(v) == {"dtype", "shape", "data"} else v)
+            for k, v in d.items()
+        }
+
+    def load(topic: str) -> list[dict[str, Any]]:
+        return [arrays(_decode_json(path, topic, i, data)) for i, (_, data) in enumerate(msgs.get(topic, []))]
+
+    wafers = load(TOPIC_RESULT_WAFERS)
+    edges = load(TOPIC_RESULT_EDGES)
+    for e in edges:
+        e["edges"] = [arrays(x) for x in e["edges"]]
+    poses = [np.array(p["matrix"], dtype=np.float64).reshape(4, 4) for p in load(TOPIC_RESULT_CAMERA_POSE)]
+    return {
+        "calibration": load(TOPIC_RESULT_CALIBRATION)[0],
+        "wafers": wafers[0] if wafers else None,
+        "camera_poses": np.stack(poses) if poses else np.zeros((0, 4, 4)),
+        "ukf": load(TOPIC_RESULT_UKF),
+        "history": load(TOPIC_RESULT_HISTORY),
+        "edges": edges,
+    }

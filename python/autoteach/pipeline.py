@@ -39,6 +39,8 @@ from autoteach.errors import InvalidInputError
 
 #: Joint names in the order of the joint vector.
 JOINTS: tuple[str, ...] = ("joint1", "joint2", "joint3", "joint4", "lift")
+#: Link lengths that SLAM-MOT can calibrate (``estimate_links``).
+LINKS: tuple[str, ...] = ("l1", "l2", "l4")
 #: Joints whose offsets the UKF estimates.
 _UKF_JOINTS: tuple[str, ...] = ("joint1", "joint2", "joint4")
 #: Offsets SLAM-MOT estimates by default (the observable ones, see the module docs).
@@ -83,6 +85,13 @@ class AutoTeachResult:
         rms_px: RMS edge-point distance to the fitted conics (pixels).
         n_observations: number of (frame, wafer, rim) edge observations used.
         frontend: which front end produced the edge points.
+        extra_calibration: the camera mode and, when estimated, the camera-mount correction
+            (``mount_correction`` 4×4, ``mount_std`` (6,)) and the link-length corrections
+            (``links``: name → ``correction_m``, ``std_m``); NaN standard deviations when the
+            session does not constrain them (see :attr:`unobservable`).
+        frontend_stats: detect front end: detections, tracks (used, too short, without slot),
+            slots found, frames/rims used by the first estimate (``initial``) and after gating
+            by the projected prior (``gated``); ground-truth slots missed / spurious when known.
         timings: seconds per stage.
 
     """
@@ -109,6 +118,8 @@ class AutoTeachResult:
     n_observations: int = 0
     frontend: str = "simulated"
     timings: dict[str, float] = field(default_factory=dict)
+    frontend_stats: dict[str, Any] = field(default_factory=dict)
+    extra_calibration: dict[str, Any] = field(default_factory=dict)
     observations: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
@@ -146,6 +157,8 @@ class AutoTeachResult:
             )
         out: dict[str, Any] = {
             "frontend": self.frontend,
+            "frontend_stats": self.frontend_stats,
+            "extra_calibration": _jsonable(self.extra_calibration),
             "estimates": est,
             "unobservable": self.unobservable,
             "errors": self.errors,
@@ -170,6 +183,18 @@ class AutoTeachResult:
         if self.baseline is not None:
             out["baseline"] = {k: v for k, v in self.baseline.items() if k in ("errors", "rms_px", "runtime_s")}
         return out
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return _num(obj)
+    return obj
 
 
 def _num(v: float) -> float | None:
@@ -237,6 +262,7 @@ class Observations:
     points: np.ndarray
     n_wafers: int
     slots: np.ndarray
+    stats: dict[str, Any] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -293,59 +319,340 @@ def simulated_frontend(
     return Observations(frames, wafers, rims, start, np.concatenate(pts) if pts else np.zeros((0, 2)), n_wafers, slots)
 
 
-def detect_frontend(
-    session: Any, *, points_per_rim: int = 24, min_points: int = 8, progress: bool = False
-) -> Observations:
-    """Edge observations from the images: wafer detection (ch. 3) and tracking (ch. 4).
+def rim_polyline(
+    k: np.ndarray, t_wc: np.ndarray, wafer: np.ndarray, rim: int, radius: float, thickness: float, n: int = 720
+) -> np.ndarray:
+    """Image of a wafer rim (eq. (5.13)'s circle) as a closed polyline ``(m, 2)`` (pixels).
 
-    Uses :func:`autoteach.detect.detect_wafers` per frame and :class:`autoteach.track.WaferTracker`
-    for the association over time; each track becomes one wafer (ordered by image height of its
-    first detection, lowest first). Raises :class:`InvalidInputError` when the images are missing.
+    ``wafer`` is ``[cx, cy, cz, rx, ry]`` (frame of ``t_wc``), ``rim`` 0 (upper, ``+h/2`` along the
+    normal) or 1 (lower). Samples behind or nearly in the camera plane are dropped.
     """
+    t = wafer_pose(np.asarray(wafer, dtype=np.float64))
+    ang = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
+    z = (0.5 if rim == 0 else -0.5) * thickness
+    local = np.stack([radius * np.cos(ang), radius * np.sin(ang), np.full(n, z), np.ones(n)])
+    t_cw = np.linalg.inv(t_wc)
+    pc = (t_cw @ t @ local)[:3]
+    ok = pc[2] > 1e-3
+    uvw = k @ pc[:, ok]
+    return (uvw[:2] / uvw[2]).T
+
+
+def polyline_distance(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Distance (pixels) of each point to a closed polyline: nearest vertex, then its two segments."""
+    if len(poly) < 3:
+        return np.full(len(points), np.inf)
+    d2 = ((points[:, None, :] - poly[None, :, :]) ** 2).sum(-1)
+    i = np.argmin(d2, axis=1)
+    best = np.sqrt(d2[np.arange(len(points)), i])
+    for j in ((i + 1) % len(poly), (i - 1) % len(poly)):
+        a, b = poly[i], poly[j]
+        ab = b - a
+        L = np.maximum((ab**2).sum(-1), 1e-12)
+        u = np.clip(((points - a) * ab).sum(-1) / L, 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(points - (a + u[:, None] * ab), axis=1))
+    return best
+
+
+def rim_conic(
+    k: np.ndarray, t_wc: np.ndarray, wafer: np.ndarray, rim: int, radius: float, thickness: float
+) -> np.ndarray:
+    """Image conic ``C`` (3×3, ``pᵀCp = 0``) of a wafer rim, eq. (5.13): ``C = H⁻ᵀ·C0·H⁻¹``.
+
+    ``H = K·[r1 r2 t]`` maps the rim plane (rim frame, ``z = 0``) to the image and
+    ``C0 = diag(1, 1, −radius²)``. Normalised to unit Frobenius norm.
+    """
+    t = wafer_pose(np.asarray(wafer, dtype=np.float64))
+    t[:3, 3] += t[:3, 2] * ((0.5 if rim == 0 else -0.5) * thickness)
+    t_co = np.linalg.inv(t_wc) @ t
+    h = k @ np.column_stack([t_co[:3, 0], t_co[:3, 1], t_co[:3, 3]])
+    hi = np.linalg.inv(h)
+    c = hi.T @ np.diag([1.0, 1.0, -radius * radius]) @ hi
+    return c / np.linalg.norm(c)
+
+
+def conic_distance(points: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Sampson (first-order geometric) distance of points to the conic ``C``, pixels.
+
+    ``|pᵀCp| / (2‖(Cp)₁,₂‖)``: the distance to the curve for points near it (the gating
+    range of a few pixels); an over- or under-estimate farther away.
+    """
+    ph = np.column_stack([points, np.ones(len(points))])
+    cp = ph @ c.T
+    alg = np.einsum("ij,ij->i", ph, cp)
+    grad = 2.0 * np.hypot(cp[:, 0], cp[:, 1])
+    return np.abs(alg) / np.maximum(grad, 1e-300)
+
+
+def _bbox(p: np.ndarray) -> np.ndarray:
+    return np.array([p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()])
+
+
+def _overlap(a: np.ndarray, b: np.ndarray, margin: float) -> bool:
+    return bool(a[0] - margin <= b[2] and b[0] - margin <= a[2] and a[1] - margin <= b[3] and b[1] - margin <= a[3])
+
+
+def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, **options: Any) -> list[list[Any]]:
+    """:func:`autoteach.detect.detect_wafers` on every image (threads: the detector releases the GIL)."""
+    from concurrent.futures import ThreadPoolExecutor
+
     from tqdm import tqdm
 
     from autoteach.detect import detect_wafers
-    from autoteach.track import WaferTracker
 
-    images = np.asarray(session.images)
+    images = np.asarray(images)
     if images.ndim != 3 or images.shape[0] == 0 or not images.any():
         raise InvalidInputError("the session has no images: the detection front end cannot run")
-    tracker = WaferTracker()
-    per_frame: list[tuple[int, Any]] = []
-    for f in tqdm(range(len(images)), desc="detecting", unit="frame", disable=not progress, leave=False):
-        edges = detect_wafers(images[f])
-        tracks = tracker.update(edges)
-        per_frame.append((f, tracks))
-    # Collect (frame, track id, rim kind, points).
-    ids: dict[int, int] = {}
+    with ThreadPoolExecutor(max(1, int(workers))) as ex:
+        it = ex.map(lambda im: detect_wafers(im, **options), images)
+        return list(tqdm(it, total=len(images), desc="detecting", unit="frame", disable=not progress, leave=False))
+
+
+def _edge_kind(e: Any) -> int:
+    return 1 if "lower" in str(getattr(e, "kind", "upper")).lower() else 0
+
+
+def detect_frontend(
+    session: Any,
+    detections: list[list[Any]],
+    *,
+    k: np.ndarray,
+    camera_poses: np.ndarray,
+    radius: float,
+    thickness: float,
+    pitch: float,
+    n_slots: int,
+    points_per_rim: int = 24,
+    min_points: int = 12,
+    min_track_frames: int = 5,
+    slot_gate_px: float = 15.0,
+    progress: bool = False,
+) -> Observations:
+    """Edge observations from detections (ch. 3) and tracking (ch. 4), with slots from the nominal chain.
+
+    The edges of every frame go through :class:`autoteach.track.WaferTracker` with the nominal
+    camera poses ``camera_poses`` (encoders through the nominal kinematic chain, eq. (5.9), zero
+    offsets) for its projection prediction (eq. (4.1)). Only *consistently tracked* wafers are
+    used: tracks registered in at least ``min_track_frames`` frames. Each track is then given a
+    carrier slot: the slot height (``(s − 1)·pitch`` above slot 1, carrier centre = median of the
+    tracks' 3D circle centres) whose rim conics, projected through the nominal chain, explain its
+    edge points best (mean distance truncated at ``slot_gate_px``). Tracks of one slot are one
+    wafer (a wafer lost and re-acquired gets a new track id). The statistics of the front end are
+    in :attr:`Observations.stats`.
+    """
+    from autoteach.track import WaferTracker
+
+    cam = session.camera
+    tracker = WaferTracker(
+        intrinsics=k, image_size=(cam.width, cam.height), wafer_radius=radius, normal_prior=(0.0, 0.0, 1.0)
+    )
+    for f, edges in enumerate(detections):
+        tracker.update(edges, camera_poses[f])
+    tracks = tracker.all_tracks()
+    used = [t for t in tracks if t.hits >= min_track_frames]
+    centres = np.array([t.circle[0] for t in used if t.circle is not None and np.all(np.isfinite(t.circle[0]))])
+    xy0 = np.median(centres[:, :2], axis=0) if len(centres) else np.zeros(2)
+    slot_of: dict[int, int] = {}
+    slot_cost: dict[int, float] = {}
+    for t in used:
+        hist = [(f, e) for f, e in t.history if len(np.asarray(e.points).reshape(-1, 2)) >= min_points]
+        if not hist:
+            continue
+        sample = hist[:: max(1, len(hist) // 12)]
+        best = (math.inf, -1)
+        for s in range(1, n_slots + 1):
+            w = np.array([xy0[0], xy0[1], (s - 1) * pitch, 0.0, 0.0])
+            costs = []
+            for f, e in sample:
+                p = _subsample(np.asarray(e.points, dtype=np.float64).reshape(-1, 2), 16)
+                poly = rim_polyline(k, camera_poses[f], w, _edge_kind(e), radius, thickness, n=360)
+                costs.append(np.minimum(polyline_distance(p, poly), slot_gate_px).mean())
+            c = float(np.mean(costs))
+            if c < best[0]:
+                best = (c, s)
+        if best[1] > 0 and best[0] < 0.8 * slot_gate_px:
+            slot_of[t.id] = best[1]
+            slot_cost[t.id] = best[0]
+    slots = sorted(set(slot_of.values()))
+    index = {s: i for i, s in enumerate(slots)}
     frames, wafers, rims, start, pts = [], [], [], [0], []
-    for f, tracks in per_frame:
-        for t in tracks:
-            if not getattr(t, "visible", True):
+    seen: set[tuple[int, int, int]] = set()
+    for t in used:
+        if t.id not in slot_of:
+            continue
+        w = index[slot_of[t.id]]
+        for f, e in t.history:
+            p = np.asarray(e.points, dtype=np.float64).reshape(-1, 2)
+            rim = _edge_kind(e)
+            if len(p) < min_points or (f, w, rim) in seen:
                 continue
-            for e in getattr(t, "edges", None) or [getattr(t, "edge", None)]:
-                if e is None:
-                    continue
-                p = np.asarray(e.points, dtype=np.float64).reshape(-1, 2)
-                if len(p) < min_points:
-                    continue
-                k = ids.setdefault(int(t.id), len(ids))
-                kind = str(getattr(e, "kind", "upper")).lower()
-                frames.append(f)
-                wafers.append(k)
-                rims.append(1 if "lower" in kind else 0)
-                q = _subsample(p, points_per_rim)
-                pts.append(q)
-                start.append(start[-1] + len(q))
-    return Observations(
+            seen.add((f, w, rim))
+            q = _subsample(p, points_per_rim)
+            frames.append(f)
+            wafers.append(w)
+            rims.append(rim)
+            pts.append(q)
+            start.append(start[-1] + len(q))
+    stats = {
+        "detections": int(sum(len(d) for d in detections)),
+        "tracks": len(tracks),
+        "tracks_used": len(slot_of),
+        "tracks_short": len(tracks) - len(used),
+        "tracks_no_slot": len(used) - len(slot_of),
+        "slots": [int(s) for s in slots],
+        "rims_used": len(frames),
+        "frames_used": len(set(frames)),
+        "stage": "tracked",
+    }
+    obs = Observations(
         frames,
         wafers,
         rims,
         start,
         np.concatenate(pts) if pts else np.zeros((0, 2)),
-        len(ids),
-        -np.ones(len(ids), dtype=np.int64),
+        len(slots),
+        np.array(slots, dtype=np.int64),
     )
+    obs.stats = stats
+    return obs
+
+
+def _drop_sparse_wafers(obs: Observations, min_frames: int) -> Observations:
+    """Remove the observations of wafers seen in fewer than ``min_frames`` frames (stats say which)."""
+    frames_of: dict[int, set[int]] = {}
+    for f, w in zip(obs.frames, obs.wafers, strict=True):
+        frames_of.setdefault(w, set()).add(f)
+    sparse = sorted(w for w, fs in frames_of.items() if len(fs) < min_frames)
+    stats = dict(obs.stats)
+    stats["wafers_too_few_views"] = [int(obs.slots[w]) for w in sparse]
+    if not sparse:
+        obs.stats = stats
+        return obs
+    keep = [i for i, w in enumerate(obs.wafers) if w not in sparse]
+    pts = [obs.points[obs.start[i] : obs.start[i + 1]] for i in keep]
+    start = np.concatenate([[0], np.cumsum([len(p) for p in pts])]).astype(int).tolist()
+    stats["rims_used"] = len(keep)
+    stats["frames_used"] = len({obs.frames[i] for i in keep})
+    return Observations(
+        [obs.frames[i] for i in keep],
+        [obs.wafers[i] for i in keep],
+        [obs.rims[i] for i in keep],
+        start,
+        np.concatenate(pts) if pts else np.zeros((0, 2)),
+        obs.n_wafers,
+        obs.slots,
+        stats,
+    )
+
+
+def gate_detections(
+    detections: list[list[Any]],
+    camera_poses: np.ndarray,
+    wafers: np.ndarray,
+    slots: np.ndarray,
+    *,
+    k: np.ndarray,
+    radius: float,
+    thickness: float,
+    gate_px: float = 2.0,
+    min_inlier_fraction: float = 0.6,
+    points_per_rim: int = 24,
+    min_points: int = 12,
+) -> Observations:
+    """Associate every detected edge with the projected prior, discarding outliers.
+
+    Once a first estimate exists, each wafer (``wafers``, frame of ``camera_poses``) is projected
+    through the chain into every frame (both rims, eq. (5.13)'s circles). Each detected edge is
+    scored against the predicted rims its bounding box overlaps with a truncated (robust) loss:
+    its points within ``gate_px`` of a predicted rim are inliers. The edge goes to the rim with
+    the most inliers if they are at least ``min_inlier_fraction`` of its points and
+    ``min_points``; only the inlier points are kept. Edges of wafers not in ``wafers`` (never
+    tracked), false arcs and mislabelled rims are thereby rejected or re-labelled; each (frame,
+    wafer, rim) keeps its best edge. Independent of the tracker's identities. Each edge is scored
+    on ``2·points_per_rim`` evenly spaced points (``min_points`` counts on that subsample).
+    """
+    n_w = len(wafers)
+    best: dict[tuple[int, int, int], tuple[int, np.ndarray]] = {}
+    n_edges = n_rejected = 0
+    # Rim frames (world) of every finite wafer, both rims, and 72 samples of each rim circle.
+    ids = [(w, rim) for w in range(n_w) if np.all(np.isfinite(wafers[w])) for rim in (0, 1)]
+    t_rims = np.zeros((len(ids), 4, 4))
+    for i, (w, rim) in enumerate(ids):
+        t = wafer_pose(np.asarray(wafers[w], dtype=np.float64))
+        t[:3, 3] += t[:3, 2] * ((0.5 if rim == 0 else -0.5) * thickness)
+        t_rims[i] = t
+    ang = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
+    circle = np.stack([radius * np.cos(ang), radius * np.sin(ang), np.zeros(72), np.ones(72)])
+    c0 = np.diag([1.0, 1.0, -radius * radius])
+    for f, edges in enumerate(detections):
+        if not edges or not ids:
+            continue
+        t_co = np.linalg.inv(camera_poses[f]) @ t_rims  # (R, 4, 4)
+        pc = t_co @ circle  # (R, 4, 72)
+        ok = np.all(pc[:, 2, :] > 1e-3, axis=1)  # whole rim in front: its image is an ellipse
+        uv = np.einsum("ij,rjn->rin", k, pc[:, :3, :])
+        uv = uv[:, :2, :] / np.where(ok[:, None, None], uv[:, 2:3, :], 1.0)
+        boxes = np.stack([uv[:, 0].min(1), uv[:, 1].min(1), uv[:, 0].max(1), uv[:, 1].max(1)], axis=1)
+        h = np.einsum("ij,rjk->rik", k, t_co[:, :3, [0, 1, 3]])
+        hi = np.linalg.inv(np.where(ok[:, None, None], h, np.eye(3)))
+        conics = np.transpose(hi, (0, 2, 1)) @ c0 @ hi
+        conics /= np.linalg.norm(conics, axis=(1, 2))[:, None, None]
+        margin = 3.0 * gate_px
+        for e in edges:
+            p = np.asarray(e.points, dtype=np.float64).reshape(-1, 2)
+            if len(p) < min_points:
+                continue
+            n_edges += 1
+            # Score on an even subsample (the solver keeps ``points_per_rim`` points anyway).
+            p = _subsample(p, max(2 * points_per_rim, min_points))
+            bb = _bbox(p)
+            near = (
+                ok
+                & (boxes[:, 0] - margin <= bb[2])
+                & (bb[0] - margin <= boxes[:, 2])
+                & (boxes[:, 1] - margin <= bb[3])
+                & (bb[1] - margin <= boxes[:, 3])
+            )
+            choice: tuple[int, int, int, np.ndarray | None] = (0, -1, -1, None)
+            for r in np.flatnonzero(near):
+                d = conic_distance(p, conics[r])
+                inl = d <= gate_px
+                n_in = int(inl.sum())
+                if n_in > choice[0]:
+                    choice = (n_in, ids[r][0], ids[r][1], p[inl])
+            n_in, w, rim, q = choice
+            if w < 0 or n_in < max(min_points, min_inlier_fraction * len(p)):
+                n_rejected += 1
+                continue
+            key = (f, w, rim)
+            if key not in best or n_in > best[key][0]:
+                best[key] = (n_in, q)
+    frames, wafer_idx, rims, start, pts = [], [], [], [0], []
+    for (f, w, rim), (_, q) in sorted(best.items()):
+        q = _subsample(q, points_per_rim)
+        frames.append(f)
+        wafer_idx.append(w)
+        rims.append(rim)
+        pts.append(q)
+        start.append(start[-1] + len(q))
+    obs = Observations(
+        frames,
+        wafer_idx,
+        rims,
+        start,
+        np.concatenate(pts) if pts else np.zeros((0, 2)),
+        n_w,
+        np.asarray(slots, dtype=np.int64),
+    )
+    obs.stats = {
+        "edges": n_edges,
+        "edges_rejected": n_rejected,
+        "rims_used": len(frames),
+        "frames_used": len(set(frames)),
+        "gate_px": gate_px,
+        "stage": "gated",
+    }
+    return obs
 
 
 # ---------------------------------------------------------------------------------------------
@@ -421,7 +728,15 @@ def autoteach(
     baseline: bool = False,
     huber: float | None = 3.0,
     encoder_sigma: tuple[float, float, float, float] | None = None,
-    max_iterations: int = 50,
+    max_iterations: int = 100,
+    min_track_frames: int = 5,
+    min_wafer_frames: int = 8,
+    reset_tilts: bool = True,
+    gate_px: tuple[float, ...] = (3.0, 1.5, 1.0),
+    camera_mode: str = "chain",
+    motion_sigma: tuple[float, ...] = (2e-5, 2e-5, 2e-5, 2e-5, 2e-5, 2e-5),
+    estimate_mount: bool = False,
+    estimate_links: tuple[str, ...] = (),
     seed: int = 0,
     progress: bool = False,
 ) -> AutoTeachResult:
@@ -431,7 +746,8 @@ def autoteach(
         log_or_session: a :class:`~autoteach.sim.Session` or the path of an MCAP log.
         frontend: ``"simulated"`` (ground-truth visible rims of a simulated session with pixel
             noise and ground-truth association), ``"detect"`` (wafer detection + tracking on the
-            images) or ``"auto"`` (``"simulated"`` when the session has ground-truth rims).
+            images, gated by the projected prior: the real pipeline) or ``"auto"`` (``"detect"``
+            when the session has images, else ``"simulated"`` when it has ground-truth rims).
         points_per_rim: edge points kept per rim and frame.
         pixel_noise: std of the noise added by the simulated front end (pixels).
         pixel_sigma: edge-point std assumed by the solver (default: ``max(pixel_noise, 0.3)``).
@@ -457,6 +773,22 @@ def autoteach(
             the simulated session's, else 2e-5 rad / 5e-6 m; ``()`` to tie the camera rigidly
             to the encoders).
         max_iterations: LM iteration limit.
+        min_track_frames: detect front end: tracks registered in fewer frames are not used for
+            the first estimate.
+        reset_tilts: detect front end: also run the gating chain from level wafers after the first
+            estimate and keep the chain that explains more edges (see the code comment).
+        min_wafer_frames: detect front end: wafers gated into fewer frames are reported as not
+            estimated (too few views to constrain a wafer pose; listed in ``frontend_stats``).
+        gate_px: detect front end: after each first estimate every detected edge is associated
+            with the projected prior within this gate (pixels), one round per value.
+        camera_mode: ``"chain"`` (camera poses through the kinematic chain, eq. (5.9)) or
+            ``"free"`` (a pose variable per frame tied to the robot by the relative motion
+            factor of eqs. (5.10)–(5.12), and a prior on the calibration around the nominal
+            values).
+        motion_sigma: free-camera mode: robot motion precision ``[σ_ω (3, rad); σ_ρ (3, m)]``
+            between consecutive frames.
+        estimate_mount: also estimate a correction of the camera mount ``T_ec`` (chain mode).
+        estimate_links: link lengths to calibrate, among ``"l1"``, ``"l2"``, ``"l4"``.
         seed: seed of the simulated front end's noise and odometry.
         progress: progress bars on stderr.
 
@@ -487,9 +819,19 @@ def autoteach(
     if bad:
         raise InvalidInputError(f"estimate_offsets names unknown joints {bad}; joints are {JOINTS}")
     if frontend == "auto":
-        frontend = "simulated" if session.rims is not None else "detect"
+        has_images = session.images is not None and np.asarray(session.images).any()
+        frontend = "detect" if has_images or session.rims is None else "simulated"
     if frontend not in ("simulated", "detect"):
         raise InvalidInputError(f"frontend must be 'auto', 'simulated' or 'detect', got {frontend!r}")
+    if camera_mode not in ("chain", "free"):
+        raise InvalidInputError(f"camera_mode must be 'chain' or 'free', got {camera_mode!r}")
+    bad_links = [name for name in estimate_links if name not in LINKS]
+    if bad_links:
+        raise InvalidInputError(f"estimate_links names unknown links {bad_links}; links are {LINKS}")
+    if camera_mode == "free" and (estimate_mount or estimate_links):
+        raise InvalidInputError(
+            "the camera mount and link lengths are calibrated through the chain (camera_mode='chain')"
+        )
 
     stages = tqdm(total=4, desc="auto-teaching", unit="stage", disable=not progress, leave=False)
     t0 = time.perf_counter()
@@ -498,7 +840,29 @@ def autoteach(
             session, points_per_rim=points_per_rim, pixel_noise=pixel_noise, min_axis_ratio=min_axis_ratio, seed=seed
         )
     else:
-        obs = detect_frontend(session, points_per_rim=points_per_rim, progress=progress)
+        from autoteach.geometry import WaferRobot
+        from autoteach.sim.config import DEFAULT_BASE_POSE
+
+        base_world = np.array(cfg.base_pose if cfg is not None else DEFAULT_BASE_POSE, dtype=np.float64)
+        nominal_cams = np.asarray(
+            WaferRobot(params=params, base=base_world).camera_pose(session.joints_encoder), dtype=np.float64
+        )
+        t1 = time.perf_counter()
+        detections = detect_all(session.images, progress=progress)
+        timings["detect_s"] = time.perf_counter() - t1
+        obs = detect_frontend(
+            session,
+            detections,
+            k=k,
+            camera_poses=nominal_cams,
+            radius=radius,
+            thickness=thickness,
+            pitch=cfg.slot_pitch if cfg is not None else 0.010,
+            n_slots=cfg.n_slots if cfg is not None else 26,
+            points_per_rim=points_per_rim,
+            min_track_frames=min_track_frames,
+            progress=progress,
+        )
     timings["frontend_s"] = time.perf_counter() - t0
     stages.update()
     if len(obs) == 0:
@@ -509,6 +873,7 @@ def autoteach(
     seen = sorted(set(obs.wafers))
     if obs.n_wafers == 0:
         raise InvalidInputError("no wafer was tracked")
+    frontend_stats: dict[str, Any] = {"initial": dict(obs.stats)} if obs.stats else {}
 
     # Reference wafer: the lowest slot (or the first track) among the observed wafers.
     if np.all(obs.slots >= 0):
@@ -581,7 +946,16 @@ def autoteach(
     if encoder_sigma is None:
         noise5 = cfg.encoder_noise if cfg is not None else (2e-5, 2e-5, 2e-5, 2e-5, 5e-6)
         encoder_sigma = tuple(max(float(noise5[j]), 1e-9) for j in (0, 1, 3, 4))
+    extra: dict[str, Any] = {}
+    if camera_mode == "free":
+        extra["free_camera"] = ([float(v) for v in motion_sigma], None, [1.0] * 6)
+        encoder_sigma = ()
+    if estimate_mount:
+        extra["estimate_mount"] = True
+    if estimate_links:
+        extra["estimate_links"] = [LINKS.index(name) for name in estimate_links]
     common = dict(
+        **extra,
         encoder_sigma=tuple(encoder_sigma) if encoder_sigma else None,
         pixel_sigma=sigma,
         estimate_offsets=est_idx,
@@ -604,13 +978,60 @@ def autoteach(
         offsets0,
         init_wafers,
     )
-    sol = _core.handeye_slam_mot(
-        *args,
-        factor="conic",
-        window=int(window),
-        init_heights=(-0.02, max(z_top, 0.05), 0.001),
-        **common,
-    )
+    heights = (-0.02, max(z_top, 0.05), 0.001)
+    if frontend == "detect":
+        # First estimate from the consistently tracked rims (robust loss), then re-associate
+        # every detected edge to the projected prior with shrinking gates and solve again.
+        # The tracks may mix wafers, so the first estimate can sit in a mirrored-tilt basin:
+        # the chain of gates runs from its tilts and from level wafers (the nominal carrier),
+        # and the one whose estimate explains more detected edges within the last gate wins.
+        tracked = _core.handeye_slam_mot(*args, factor="conic", window=0, init_heights=heights, **common)
+        heights = None
+        best: tuple[int, Observations, tuple[Any, ...]] | None = None
+        for reset in (False, True) if reset_tilts else (False,):
+            first, cand_obs, cand_args = tracked, obs, args
+            for gi, gate in enumerate(gate_px):
+                if gi > 0:
+                    first = _core.handeye_slam_mot(*cand_args, factor="conic", window=0, **common)
+                wafers_first = np.asarray(first["wafers"], dtype=np.float64).copy()
+                if gi == 0 and reset:
+                    wafers_first[:, 3:] = 0.0
+                cand_obs = gate_detections(
+                    detections,
+                    np.asarray(first["camera_poses"]),
+                    np.asarray(first["wafers"], dtype=np.float64),
+                    obs.slots,
+                    k=k,
+                    radius=radius,
+                    thickness=thickness,
+                    gate_px=gate,
+                    points_per_rim=points_per_rim,
+                )
+                if len(cand_obs) == 0:
+                    break
+                cand_args = (
+                    *args[:5],
+                    cand_obs.frames,
+                    cand_obs.wafers,
+                    cand_obs.rims,
+                    cand_obs.start,
+                    np.ascontiguousarray(cand_obs.points),
+                    np.asarray(first["base_pose"], dtype=np.float64),
+                    np.asarray(first["joint_offsets"], dtype=np.float64),
+                    wafers_first,
+                )
+            if len(cand_obs) > 0 and (best is None or len(cand_obs) > best[0]):
+                best = (len(cand_obs), cand_obs, cand_args)
+        if best is None:
+            raise InvalidInputError(
+                f"no detected edge lies within {gate_px} px of the projected wafer estimates: the first "
+                "estimate from the tracked rims is inconsistent with the detections"
+            )
+        _, obs, args = best
+        obs = _drop_sparse_wafers(obs, min_wafer_frames)
+        frontend_stats["gated"] = dict(obs.stats)
+        seen = sorted(set(obs.wafers))
+    sol = _core.handeye_slam_mot(*args, factor="conic", window=int(window), init_heights=heights, **common)
     timings["slam_mot_s"] = time.perf_counter() - t0
     stages.update()
 
@@ -631,6 +1052,17 @@ def autoteach(
             offsets_std[j] = d[6 + i]
         for i, w in enumerate(sol["covariance_wafers"]):
             wafer_std[w] = d[6 + n_off + 5 * i : 6 + n_off + 5 * i + 5]
+    extra_cal: dict[str, Any] = {"camera_mode": camera_mode}
+    tail = 6 + n_off + 5 * len(sol["covariance_wafers"])
+    if estimate_mount:
+        std = d[tail : tail + 6] if cov is not None else np.full(6, np.nan)
+        tail += 6
+        extra_cal["mount_correction"] = np.asarray(sol["mount"])
+        extra_cal["mount_std"] = std
+    for i, name in enumerate(estimate_links):
+        li = LINKS.index(name)
+        std = float(d[tail + i]) if cov is not None else math.nan
+        extra_cal.setdefault("links", {})[name] = {"correction_m": float(sol["links"][li]), "std_m": std}
     status: dict[str, str] = {}
     joint_offsets = np.full(5, np.nan)
     for j, name in enumerate(JOINTS):
@@ -645,6 +1077,7 @@ def autoteach(
             status[name] = "unobservable: " + UNOBSERVABLE_REASONS.get(name, "not estimated")
     unobserved = [w for w in range(obs.n_wafers) if w not in seen]
     wafers_hat[unobserved] = np.nan
+    wafer_std[unobserved] = np.nan
 
     # Theoretical resolution (5.14) from each wafer's best view (most edge points).
     t0 = time.perf_counter()
@@ -681,14 +1114,29 @@ def autoteach(
         n_observations=len(obs),
         frontend=frontend,
         timings=timings,
-        observations={"frames": obs.frames, "wafers": obs.wafers, "start": obs.start, "points": obs.points},
+        frontend_stats=frontend_stats,
+        extra_calibration=extra_cal,
+        observations={
+            "frames": obs.frames,
+            "wafers": obs.wafers,
+            "rims": obs.rims,
+            "start": obs.start,
+            "points": obs.points,
+        },
     )
     timings["resolution_s"] = time.perf_counter() - t0
 
+    truth_index: list[int] | None = None
+    if session.wafer_slots is not None and frontend == "detect":
+        true_slots = [int(v) for v in session.wafer_slots]
+        truth_index = [true_slots.index(int(sl)) if int(sl) in true_slots else -1 for sl in obs.slots]
+        frontend_stats["true_slots_missed"] = sorted(set(true_slots) - {int(v) for v in obs.slots[seen]})
+        frontend_stats["spurious_slots"] = [int(obs.slots[w]) for w in seen if truth_index[w] < 0]
     if baseline:
         t0 = time.perf_counter()
+        chain_only = {k: v for k, v in common.items() if k != "free_camera"}
         base_sol = _core.handeye_slam_mot(
-            *args, factor="point", window=0, init_heights=(-0.02, max(z_top, 0.05), 0.001), **common
+            *args, factor="point", window=0, init_heights=(-0.02, max(z_top, 0.05), 0.001), **chain_only
         )
         b = {
             "base_pose": np.asarray(base_sol["base_pose"]),
@@ -699,7 +1147,7 @@ def autoteach(
         }
         if session.has_ground_truth:
             b["errors"] = ground_truth_errors(
-                session, ref, b["base_pose"], b["joint_offsets"], b["wafers"], est_idx, seen
+                session, ref, b["base_pose"], b["joint_offsets"], b["wafers"], est_idx, seen, truth_index=truth_index
             )[0]
         result.baseline = b
         timings["baseline_s"] = b["runtime_s"]
@@ -708,7 +1156,17 @@ def autoteach(
 
     if session.has_ground_truth and session.calibration is not None:
         errs, sig = ground_truth_errors(
-            session, ref, base_hat, offsets_hat, wafers_hat, est_idx, seen, base_std, offsets_std, wafer_std
+            session,
+            ref,
+            base_hat,
+            offsets_hat,
+            wafers_hat,
+            est_idx,
+            seen,
+            base_std,
+            offsets_std,
+            wafer_std,
+            truth_index=truth_index,
         )
         result.errors = errs
         result.within_3sigma = sig
@@ -730,6 +1188,7 @@ def ground_truth_errors(
     base_std: np.ndarray | None = None,
     offsets_std: np.ndarray | None = None,
     wafer_std: np.ndarray | None = None,
+    truth_index: list[int] | None = None,
 ) -> tuple[dict[str, float], dict[str, bool]]:
     """Absolute errors of the estimates against a simulated session's ground truth.
 
@@ -738,10 +1197,15 @@ def ground_truth_errors(
     the reference normal. Returns the errors (``joint_offset_deg`` max over the estimated
     joints, ``base_translation_mm``, ``base_rotation_deg``, ``wafer_center_mm`` and
     ``wafer_tilt_deg`` max over the wafers) and, when standard deviations are given, whether each
-    group's every component lies within 3σ.
+    group's every component lies within 3σ. ``truth_index[w]`` is the ground-truth wafer of
+    estimated wafer ``w`` (default: the same index; ``-1``: a wafer the truth does not have,
+    skipped — the caller reports it).
     """
     cal = session.calibration
-    t_ref = np.asarray(session.wafer_poses[ref], dtype=np.float64)
+    truth = list(range(len(session.wafer_poses))) if truth_index is None else list(truth_index)
+    if truth[ref] < 0:
+        raise InvalidInputError("the reference wafer matches no ground-truth wafer: errors cannot be computed")
+    t_ref = np.asarray(session.wafer_poses[truth[ref]], dtype=np.float64)
     t_ref_inv = np.linalg.inv(t_ref)
     delta = np.asarray(cal.joint_offsets, dtype=np.float64)
     eff = np.eye(4)
@@ -764,9 +1228,9 @@ def ground_truth_errors(
     centre_err, tilt_err = [], []
     centre_ok, tilt_ok = True, True
     for w in seen:
-        if w == ref:
+        if w == ref or truth[w] < 0:
             continue
-        wt = t_ref_inv @ np.asarray(session.wafer_poses[w], dtype=np.float64)
+        wt = t_ref_inv @ np.asarray(session.wafer_poses[truth[w]], dtype=np.float64)
         c_hat = (g @ np.append(wafers_hat[w, :3], 1.0))[:3]
         n_hat = g[:3, :3] @ wafer_pose(wafers_hat[w])[:3, 2]
         n_true = wt[:3, 2]

@@ -58,7 +58,7 @@ __all__ = [
     "global_cpd",
 ]
 
-EStepMode = Literal["auto", "dense", "truncated"]
+EStepMode = Literal["auto", "dense", "truncated", "fast_gauss"]
 
 
 @dataclass(frozen=True)
@@ -148,8 +148,8 @@ def _common(
         raise InvalidInputError(f"max_iterations must be ≥ 0, got {max_iterations}")
     tolerance = as_float(tolerance, "tolerance")
     s2 = None if sigma2 is None else as_float(sigma2, "sigma2")
-    if e_step not in ("auto", "dense", "truncated"):
-        raise InvalidInputError(f"e_step must be 'auto', 'dense' or 'truncated', got {e_step!r}")
+    if e_step not in ("auto", "dense", "truncated", "fast_gauss"):
+        raise InvalidInputError(f"e_step must be 'auto', 'dense', 'truncated' or 'fast_gauss', got {e_step!r}")
     return w, max_iterations, tolerance, s2, e_step
 
 
@@ -175,7 +175,9 @@ def cpd_rigid(
         tolerance: Stop when the objective changes by at most this much.
         sigma2: Initial σ²; ``None`` for ``Σ‖x − y‖²/(D N M)``.
         e_step: ``"dense"`` evaluates every pair; ``"truncated"`` only pairs within ~8.6 σ
-            (grid, relative error below 1e-8 per row); ``"auto"`` truncates when it pays off.
+            (grid, relative error below 1e-8 per row); ``"fast_gauss"`` uses a Chebyshev fast
+            Gauss transform (kernel values to ~1e-12) when σ allows it; ``"auto"`` truncates
+            when it pays off and, above 10⁷ pairs, uses the fast Gauss transform at large σ.
         return_P: Also return the ``(M, N)`` posterior matrix of the last E-step.
 
     Returns:

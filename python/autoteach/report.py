@@ -89,6 +89,19 @@ def format_table(result: AutoTeachResult) -> str:
                 "  point-reprojection baseline (nearest-point association): "
                 + ", ".join(f"{k} {v:.4f}" for k, v in b.items())
             )
+    st = result.frontend_stats
+    if st.get("initial"):
+        ini, gated = st["initial"], st.get("gated", {})
+        lines.append(
+            f"front end {result.frontend}: {ini.get('detections', 0)} detected rims, {ini.get('tracks', 0)} tracks "
+            f"({ini.get('tracks_used', 0)} consistently tracked and placed in slots {ini.get('slots', [])}); "
+            f"after gating by the projected prior ({gated.get('gate_px', 'n/a')} px): "
+            f"{gated.get('rims_used', 0)} rims in {gated.get('frames_used', 0)} frames used, "
+            f"{gated.get('edges_rejected', 0)} edges rejected"
+            + (f"; too few views: slots {gated['wafers_too_few_views']}" if gated.get("wafers_too_few_views") else "")
+        )
+        if "spurious_slots" in st:
+            lines.append(f"  vs ground truth: slots missed {st['true_slots_missed']}, spurious {st['spurious_slots']}")
     lines.append(
         f"edge rms {result.rms_px:.3f} px over {result.n_observations} rim observations; runtime "
         f"{sum(result.timings.values()):.2f} s"

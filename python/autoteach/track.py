@@ -146,6 +146,9 @@ class WaferTracker:
         knn: ``K`` of the kNN search of Algorithm 5.
         gate: pairs farther than ``gate·σ`` are left out of the E-step sums.
         min_score: a segment pair is registered only if its score ``C(k, l)`` (4.10) exceeds it.
+        min_coverage: a pair whose prediction is tight (projected from a well-estimated 3D rim)
+            is registered only if it explains at least this fraction of the observed or of the
+            predicted segment's points (0: off, the default).
         associator: ``"hierarchical"`` (Algorithm 5) or ``"greedy"`` (nearest centre baseline).
         greedy_gate: largest centre distance the greedy associator registers (pixels).
         max_points_per_segment: edge points per segment used for registration.
@@ -157,8 +160,22 @@ class WaferTracker:
         intrinsics: ``(3, 3)`` pinhole ``K``, for the projection prediction (eq. 4.1).
         wafer_radius: wafer radius (m).
         normal_prior: expected wafer normal (world), resolves the two-fold circle ambiguity.
-        circle_window: views averaged per 3D rim estimate.
+        circle_window: views per 3D rim estimate (averaged back-projections, or the views of the
+            multi-view fit).
         prefer_projection: use eq. (4.1) also for rims seen in the previous frame.
+        multiview_circle: estimate each rim's 3D circle from the edge points of its last
+            ``circle_window`` views and camera poses (Levenberg–Marquardt on the eq. (5.13)
+            conics) instead of averaging single-ellipse back-projections.
+        normal_prior_sigma: std (rad) of a wafer's tilt from ``normal_prior`` in that fit.
+        circle_fit_iterations: Levenberg–Marquardt iterations per registered frame.
+        projection_max_center_std: a rim whose multi-view estimate has a centre std below this
+            (m) and an RMS point distance below ``projection_max_rms`` (px) is predicted by
+            eq. (4.1) also when seen in the previous frame.
+        projection_max_rms: see ``projection_max_center_std``.
+        max_missed_3d: frames a confirmed track with such a 3D estimate is kept unseen, so a
+            wafer that leaves the image is re-acquired by its projected position.
+        stack_axis_sigma: std (m) of a prior that each wafer centre lies on the carrier axis (the
+            mean centre and normal of the well-estimated tracks); ``None`` switches it off.
 
     Raises:
         InvalidInputError: an option out of range.
@@ -181,6 +198,17 @@ class WaferTracker:
     def frame(self) -> int:
         """Number of frames processed."""
         return int(self._inner.frame)
+
+    @property
+    def last_timings(self) -> dict[str, float]:
+        """Seconds spent in the stages of the last :meth:`update` (inside Rust).
+
+        ``predict`` (§4.2), ``associate`` (Algorithm 5: point sets, kd-tree, kNN, E-step, cost
+        matrix, assignment — or the greedy baseline) and ``manage`` (Algorithm 4, including the
+        multi-view 3D rim estimates).
+        """
+        p, a, m = self._inner.last_timings
+        return {"predict": float(p), "associate": float(a), "manage": float(m)}
 
     def update(self, edges: Iterable[Any], camera_pose: ArrayLike | None = None) -> list[Track]:
         """Process one frame and return the live confirmed tracks.

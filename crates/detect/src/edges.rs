@@ -30,6 +30,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use nalgebra::Vector2;
+use rayon::prelude::*;
 
 use crate::{DetectError, Result};
 
@@ -259,27 +260,30 @@ pub(crate) fn sobel(img: &[f32], w: usize, h: usize) -> (Vec<f32>, Vec<f32>) {
     if w < 3 || h < 3 {
         return (gx, gy);
     }
-    for y in 1..h - 1 {
-        let (r0, r1, r2) = (
-            &img[(y - 1) * w..y * w],
-            &img[y * w..(y + 1) * w],
-            &img[(y + 1) * w..(y + 2) * w],
-        );
-        let ox = &mut gx[y * w..(y + 1) * w];
-        let oy = &mut gy[y * w..(y + 1) * w];
-        for x in 1..w - 1 {
-            let a = r0[x - 1];
-            let b = r0[x];
-            let c = r0[x + 1];
-            let d = r1[x - 1];
-            let f = r1[x + 1];
-            let g = r2[x - 1];
-            let hh = r2[x];
-            let i = r2[x + 1];
-            ox[x] = ((c - a) + 2.0 * (f - d) + (i - g)) * 0.125;
-            oy[x] = ((g - a) + 2.0 * (hh - b) + (i - c)) * 0.125;
-        }
-    }
+    // Rows in parallel (rayon); each output row reads three input rows.
+    gx.par_chunks_mut(w)
+        .zip(gy.par_chunks_mut(w))
+        .enumerate()
+        .filter(|(y, _)| *y >= 1 && *y + 1 < h)
+        .for_each(|(y, (ox, oy))| {
+            let (r0, r1, r2) = (
+                &img[(y - 1) * w..y * w],
+                &img[y * w..(y + 1) * w],
+                &img[(y + 1) * w..(y + 2) * w],
+            );
+            for x in 1..w - 1 {
+                let a = r0[x - 1];
+                let b = r0[x];
+                let c = r0[x + 1];
+                let d = r1[x - 1];
+                let f = r1[x + 1];
+                let g = r2[x - 1];
+                let hh = r2[x];
+                let i = r2[x + 1];
+                ox[x] = ((c - a) + 2.0 * (f - d) + (i - g)) * 0.125;
+                oy[x] = ((g - a) + 2.0 * (hh - b) + (i - c)) * 0.125;
+            }
+        });
     (gx, gy)
 }
 
@@ -294,7 +298,7 @@ pub(crate) fn sobel(img: &[f32], w: usize, h: usize) -> (Vec<f32>, Vec<f32>) {
 pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<EdgeMap> {
     params.validate()?;
     let (w, h) = (image.width, image.height);
-    let mut img: Vec<f32> = image.data.iter().map(|p| p.grey()).collect();
+    let mut img: Vec<f32> = image.data.par_iter().map(|p| p.grey()).collect();
     if params.blur_sigma > 0.0 {
         gaussian_blur(&mut img, w, h, params.blur_sigma);
     }
@@ -303,38 +307,48 @@ pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<
     let high = params.high as f32;
     // Squared magnitudes: monotone in the magnitude, so the suppression can compare them; the
     // square roots are taken only for the parabolic refinement of the maxima.
-    let mag: Vec<f32> = gx.iter().zip(&gy).map(|(a, b)| a * a + b * b).collect();
+    let mag: Vec<f32> = gx
+        .par_iter()
+        .zip(gy.par_iter())
+        .map(|(a, b)| a * a + b * b)
+        .collect();
     let (low, high) = (low * low, high * high);
-    // Non-maximum suppression; `state`: 0 none, 1 candidate (≥ low), 2 strong (≥ high).
+    // Non-maximum suppression (rows in parallel); `state`: 0 none, 1 candidate (≥ low),
+    // 2 strong (≥ high).
     let mut state = vec![0u8; w * h];
     let mut offset = vec![0.0f32; w * h];
     if w >= 5 && h >= 5 {
-        for y in 2..h - 2 {
-            for x in 2..w - 2 {
-                let k = y * w + x;
-                let m = mag[k];
-                if !(m >= low) || m == 0.0 {
-                    continue;
-                }
-                let horizontal = gx[k].abs() >= gy[k].abs();
-                let (ma, mb) = if horizontal {
-                    (mag[k - 1], mag[k + 1])
-                } else {
-                    (mag[k - w], mag[k + w])
-                };
-                // Strict on one side, non-strict on the other (von Gioi & Randall 2017).
-                if m > ma && m >= mb {
-                    state[k] = if m >= high { 2 } else { 1 };
-                    let (ma, m, mb) = (ma.sqrt(), m.sqrt(), mb.sqrt());
-                    let den = ma - 2.0 * m + mb;
-                    offset[k] = if den < 0.0 {
-                        (0.5 * (ma - mb) / den).clamp(-0.5, 0.5)
+        state
+            .par_chunks_mut(w)
+            .zip(offset.par_chunks_mut(w))
+            .enumerate()
+            .filter(|(y, _)| *y >= 2 && *y + 2 < h)
+            .for_each(|(y, (srow, orow))| {
+                for x in 2..w - 2 {
+                    let k = y * w + x;
+                    let m = mag[k];
+                    if !(m >= low) || m == 0.0 {
+                        continue;
+                    }
+                    let horizontal = gx[k].abs() >= gy[k].abs();
+                    let (ma, mb) = if horizontal {
+                        (mag[k - 1], mag[k + 1])
                     } else {
-                        0.0
+                        (mag[k - w], mag[k + w])
                     };
+                    // Strict on one side, non-strict on the other (von Gioi & Randall 2017).
+                    if m > ma && m >= mb {
+                        srow[x] = if m >= high { 2 } else { 1 };
+                        let (ma, m, mb) = (ma.sqrt(), m.sqrt(), mb.sqrt());
+                        let den = ma - 2.0 * m + mb;
+                        orow[x] = if den < 0.0 {
+                            (0.5 * (ma - mb) / den).clamp(-0.5, 0.5)
+                        } else {
+                            0.0
+                        };
+                    }
                 }
-            }
-        }
+            });
     }
     // Hysteresis: grow from strong pixels through 8-connected candidates.
     let mut keep = vec![false; w * h];

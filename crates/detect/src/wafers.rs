@@ -45,9 +45,10 @@ pub struct WaferEdge {
 }
 
 use crate::assembly::{AssemblyParams, Segment, assemble};
-use crate::edges::{ArcParams, CannyParams, GrayView, LinkParams, Pixel, detect_arcs};
+use crate::edges::{Arc, ArcParams, CannyParams, GrayView, LinkParams, Pixel, detect_arcs};
 use crate::{DetectError, Result};
 use nalgebra::{DMatrix, Vector2};
+use rayon::prelude::*;
 
 /// Optional prior on the wafer rims in the image (for example from the expected wafer radius
 /// and a rough camera pose): fitted ellipses outside these ranges are rejected.
@@ -92,6 +93,18 @@ pub struct DetectParams {
     /// rims narrows toward the ends of the front arc, the blurred edges of the two rims push
     /// each other apart and bias the fit. 0 disables. Default 0.5.
     pub min_rim_separation: f64,
+    /// An arc of an assembled segment whose median distance (pixels) to the segment's ellipse
+    /// exceeds this is dropped and the rest refitted (worst arc first). The two rims of a wafer
+    /// are near-copies of one ellipse a few pixels apart, so the assembly can join the front
+    /// arc of one rim with a back-arc silhouette of the other into an ellipse whose mean
+    /// residual still passes. 0 disables. Default 0.6.
+    pub max_arc_deviation: f64,
+    /// Re-locates the rim points with the two-edge band model of the rim profile (see
+    /// [`refine_band_edges`]) before the final fit. Default true.
+    pub band_refinement: bool,
+    /// Refits the less covered rim of a pair with the semi-major axis and orientation of the
+    /// better covered one (see [`share_shape`]). Default true.
+    pub share_rim_shape: bool,
     /// Optional size prior.
     pub prior: Option<WaferPrior>,
 }
@@ -109,6 +122,9 @@ impl Default for DetectParams {
             min_contrast_ratio: 0.45,
             min_coverage: 0.15,
             min_rim_separation: 0.5,
+            max_arc_deviation: 0.6,
+            band_refinement: true,
+            share_rim_shape: true,
             prior: None,
         }
     }
@@ -149,6 +165,13 @@ impl DetectParams {
                 what: "min_rim_separation",
                 value: self.min_rim_separation,
                 reason: "must be in [0, 1)",
+            });
+        }
+        if !(self.max_arc_deviation >= 0.0 && self.max_arc_deviation.is_finite()) {
+            return Err(DetectError::InvalidParameter {
+                what: "max_arc_deviation",
+                value: self.max_arc_deviation,
+                reason: "must be finite and >= 0",
             });
         }
         if !(self.min_contrast_ratio >= 0.0 && self.min_contrast_ratio <= 1.0) {
@@ -215,7 +238,8 @@ pub fn detect_wafers<T: Pixel>(
     let arcs = detect_arcs(image, &params.canny, &params.link, &params.arcs)?;
     let segments = assemble(&arcs, &params.assembly)?;
     let mut candidates = Vec::new();
-    for seg in segments {
+    for mut seg in segments {
+        drop_outlier_arcs(&mut seg, &arcs, params);
         // The assembly's fit of the union is the final estimate (with its covariance).
         let fit = seg.fit.clone();
         if !(fit.residual_mean < params.assembly.residual_threshold) {
@@ -266,7 +290,182 @@ pub fn detect_wafers<T: Pixel>(
         });
     }
     reject_reflections(&mut candidates, params.min_contrast_ratio);
+    if params.band_refinement {
+        for c in &mut candidates {
+            refine_band_edges(image, &mut c.seg, params.assembly.residual_threshold);
+        }
+    }
     pair_rims(candidates, up, params)
+}
+
+/// Most profiles used to estimate the blur σ of a rim (first pass of [`refine_band_edges`]).
+const SIGMA_PROFILES: usize = 48;
+/// Most points of a rim re-located by [`refine_band_edges`] (evenly spread; the refit uses
+/// these): 240 points at ≈ 0.05 px edge noise determine the ellipse far below the 0.3 px goal.
+const BAND_POINTS: usize = 240;
+
+/// Moves each point of `seg` to the edge position of the two-edge band model ([`band`]) fitted
+/// to the image profile along the ellipse normal through it, then refits the ellipse
+/// (orthogonal-distance LM from the current one) and keeps the refit when its mean residual is
+/// under `threshold`. At most [`BAND_POINTS`] evenly spread points are used (they replace the
+/// segment's points); the profiles are fitted in parallel (rayon).
+///
+/// First pass: σ (the blur) is fitted freely on up to [`SIGMA_PROFILES`] evenly spread
+/// profiles and its median over the unclipped ones (all, if fewer than 5) taken for the rim; second pass: every profile is fitted with σ
+/// fixed to it (five parameters: two edges and three levels; a free σ per profile would trade
+/// off against the clipped band level). A point is moved only when its profile is a band —
+/// both edges within the window, `|t₁| ≤ 1.5 px`, the band at least 8 grey levels above both
+/// sides — and otherwise keeps its Canny position (a lone step, whose Sobel maximum is
+/// unbiased).
+pub fn refine_band_edges<T: Pixel>(image: &GrayView<'_, T>, seg: &mut Segment, threshold: f64) {
+    let e = seg.fit.ellipse;
+    let (ct, st) = (e.theta.cos(), e.theta.sin());
+    let normal = |p: &Vector2<f64>| {
+        let (dx, dy) = (p.x - e.cx, p.y - e.cy);
+        let (xl, yl) = (dx * ct + dy * st, -dx * st + dy * ct);
+        let (gx, gy) = (xl / (e.a * e.a), yl / (e.b * e.b));
+        let n = Vector2::new(gx * ct - gy * st, gx * st + gy * ct);
+        let len = n.norm();
+        (len > 0.0).then(|| n / len)
+    };
+    let n = seg.points.len();
+    if n < 10 {
+        return;
+    }
+    let mut buf = Vec::new();
+    let mut sigmas = Vec::new();
+    let mut clipped_sigmas = Vec::new();
+    let stride = (n / SIGMA_PROFILES).max(1);
+    for p in seg.points.iter().step_by(stride) {
+        let Some(nv) = normal(p) else { continue };
+        if band::profile(image, *p, nv, &mut buf).is_none() {
+            continue;
+        }
+        let Some(p0) = band::start(&buf) else {
+            continue;
+        };
+        if let Some((q, _)) = band::fit(&buf, p0, true)
+            && is_band(&q)
+        {
+            if buf.iter().any(|s| s.1.is_infinite()) {
+                clipped_sigmas.push(q[5]);
+            } else {
+                sigmas.push(q[5]);
+            }
+        }
+    }
+    // σ from unclipped profiles (on clipped ones it trades off against the unseen band level);
+    // all of them only when too few are unclipped.
+    if sigmas.len() < 5 {
+        sigmas.append(&mut clipped_sigmas);
+    }
+    if sigmas.len() < 5 {
+        return;
+    }
+    let sigma = median(&mut sigmas);
+    let stride = n.div_ceil(BAND_POINTS);
+    let picked: Vec<Vector2<f64>> = seg.points.iter().step_by(stride).copied().collect();
+    let moved: Vec<Vector2<f64>> = picked
+        .par_iter()
+        .map(|p| {
+            let mut buf = Vec::new();
+            let Some(nv) = normal(p) else { return *p };
+            let Some(d) = band::profile(image, *p, nv, &mut buf) else {
+                return *p;
+            };
+            let Some(mut p0) = band::start(&buf) else {
+                return *p;
+            };
+            p0[5] = sigma;
+            match band::fit(&buf, p0, false) {
+                Some((q, _)) if is_band(&q) => p + d * q[3],
+                _ => *p,
+            }
+        })
+        .collect();
+    let Ok(fit) = crate::ellipse::fit_ellipse_geometric(
+        &moved,
+        Some(e),
+        &crate::ellipse::GeometricFitOptions::default(),
+    ) else {
+        return;
+    };
+    if fit.residual_mean < threshold {
+        seg.points = moved;
+        seg.fit = fit;
+    }
+}
+
+/// Whether fitted band-model parameters describe a band at the edge point (see
+/// [`refine_band_edges`]).
+fn is_band(q: &[f64; 6]) -> bool {
+    let [l0, lb, l2, t1, t2, _] = *q;
+    t1.abs() <= 1.5
+        && t2 > t1
+        && t2 < band::T_MAX
+        && lb - l0 >= 8.0
+        && lb - l2 >= 8.0
+        && q.iter().all(|x| x.is_finite())
+}
+
+/// Drops, worst first, the arcs of `seg` whose median orthogonal distance to the segment's
+/// ellipse exceeds [`DetectParams::max_arc_deviation`], refitting the remaining arcs
+/// (orthogonal-distance LM from the current ellipse) after each drop; stops when every arc
+/// agrees, one arc is left, or a refit fails (the segment is then left as it was last).
+fn drop_outlier_arcs(seg: &mut Segment, arcs: &[Arc], params: &DetectParams) {
+    let limit = params.max_arc_deviation;
+    if !(limit > 0.0) {
+        return;
+    }
+    while seg.arcs.len() > 1 {
+        let e = seg.fit.ellipse;
+        let mut worst: Option<(usize, f64)> = None;
+        for (slot, &k) in seg.arcs.iter().enumerate() {
+            let Some(arc) = arcs.get(k) else { return };
+            let mut d = e.orthogonal_distances(&arc.points);
+            d.iter_mut().for_each(|x| *x = x.abs());
+            let m = median(&mut d);
+            if worst.is_none_or(|(_, w)| m > w) {
+                worst = Some((slot, m));
+            }
+        }
+        let Some((slot, m)) = worst else { return };
+        if !(m > limit) {
+            return;
+        }
+        let kept: Vec<usize> = seg
+            .arcs
+            .iter()
+            .enumerate()
+            .filter(|&(s, _)| s != slot)
+            .map(|(_, &k)| k)
+            .collect();
+        let points: Vec<Vector2<f64>> = kept
+            .iter()
+            .filter_map(|&k| arcs.get(k))
+            .flat_map(|a| a.points.iter().copied())
+            .collect();
+        let Ok(fit) = crate::ellipse::fit_ellipse_geometric(
+            &points,
+            Some(e),
+            &crate::ellipse::GeometricFitOptions::default(),
+        ) else {
+            return;
+        };
+        seg.arcs = kept;
+        seg.points = points;
+        seg.fit = fit;
+    }
+}
+
+/// Median of `v` (reordered); NaN for an empty slice.
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mid = v.len() / 2;
+    let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    *m
 }
 
 /// Drops candidates whose contrast is under `ratio` × the strongest contrast among candidates
@@ -355,6 +554,9 @@ fn pair_rims(
         if let [u, l] = g[..] {
             trim_close_ends(&mut slots, u, l, params);
             trim_close_ends(&mut slots, l, u, params);
+            if params.share_rim_shape {
+                share_shape(&mut slots, u, l, params);
+            }
         }
     }
     let mut out = Vec::new();
@@ -374,6 +576,72 @@ fn pair_rims(
         }
     }
     Ok(out)
+}
+
+/// Fraction of 36 equal sectors of eccentric angle on `e` that hold at least one of `points`.
+fn angular_coverage(e: &Ellipse, points: &[Vector2<f64>]) -> f64 {
+    let (s, c) = e.theta.sin_cos();
+    let mut bins = [false; 36];
+    for p in points {
+        let (dx, dy) = (p.x - e.cx, p.y - e.cy);
+        let (xl, yl) = (dx * c + dy * s, -dx * s + dy * c);
+        let t = (yl / e.b).atan2(xl / e.a);
+        let k = ((t + std::f64::consts::PI) / std::f64::consts::TAU * 36.0) as usize;
+        if let Some(b) = bins.get_mut(k.min(35)) {
+            *b = true;
+        }
+    }
+    bins.iter().filter(|b| **b).count() as f64 / 36.0
+}
+
+/// The two rims of a wafer are images of two parallel circles one wafer thickness apart:
+/// their semi-major axes differ by the relative depth change `t·sin(pitch)/depth` (≈ 0.03 %
+/// for 1 mm at 0.5 m) and their orientations agree to the same order, while their minor axes
+/// and centres differ visibly (the view elevation changes). One rim of a pair is usually seen
+/// all round (the rim of the face turned to the camera: its back arc is a silhouette) and the
+/// other only along the front arc, where `a`, `b` and the centre of a 40 % arc trade off
+/// against each other. When one rim's angular coverage exceeds the other's by more than 0.15,
+/// the other is refitted with `a` and `θ` fixed to the first one's
+/// ([`crate::ellipse::fit_ellipse_geometric_masked`], `cx`, `cy`, `b` free), keeping the refit
+/// when its mean residual is under the threshold.
+fn share_shape(slots: &mut [Option<Candidate>], i: usize, j: usize, params: &DetectParams) {
+    let cover = |slots: &[Option<Candidate>], k: usize| {
+        slots.get(k).and_then(|c| c.as_ref()).map(|c| {
+            (
+                angular_coverage(&c.seg.fit.ellipse, &c.seg.points),
+                c.seg.fit.ellipse,
+            )
+        })
+    };
+    let (Some((ci, ei)), Some((cj, ej))) = (cover(slots, i), cover(slots, j)) else {
+        return;
+    };
+    let (reference, target) = if ci > cj + 0.15 {
+        (ei, j)
+    } else if cj > ci + 0.15 {
+        (ej, i)
+    } else {
+        return;
+    };
+    let Some(c) = slots.get_mut(target).and_then(|c| c.as_mut()) else {
+        return;
+    };
+    let start = Ellipse {
+        a: reference.a,
+        theta: reference.theta,
+        ..c.seg.fit.ellipse
+    };
+    let Ok(fit) = crate::ellipse::fit_ellipse_geometric_masked(
+        &c.seg.points,
+        start,
+        [true, true, false, true, false],
+        &crate::ellipse::GeometricFitOptions::default(),
+    ) else {
+        return;
+    };
+    if fit.residual_mean < params.assembly.residual_threshold {
+        c.seg.fit = fit;
+    }
 }
 
 /// Near the ends of the visible front arc the bright side face between the two rims of a wafer
@@ -428,6 +696,238 @@ fn trim_close_ends(slots: &mut [Option<Candidate>], i: usize, j: usize, params: 
     if fit.residual_mean < params.assembly.residual_threshold {
         c.seg.points = kept;
         c.seg.fit = fit;
+    }
+}
+
+/// The two-edge band model of a wafer rim (000_3b1454b2b2194811.txt §3.2, Fig. 3.2: "the
+/// bright boundary of the wafer forms two edges: an upper one corresponding to the upper surface
+/// and lower one corresponding to the lower surface"). Across the rim the image is a bright band
+/// (the wafer's side face, 2–4 px wide) between darker surroundings, blurred by the optics. The
+/// Sobel/Canny maximum of a step lies on the step, but the two edges of a band this narrow
+/// pull each other's gradient maxima apart (the derivative of a blurred box peaks outside the
+/// box: ≈ 0.2 px for a 2.5 px band at the ≈ 1 px combined blur of the renderer and the Sobel
+/// difference), which shrinks the lower rim's minor axis by 1–3 %. This module fits the profile
+/// itself, `I(t) = L₀ + (L_b − L₀)·Φ((t − t₁)/σ) + (L₂ − L_b)·Φ((t − t₂)/σ)` along the rim
+/// normal (Φ the standard normal CDF: a box `[t₁, t₂]` of level `L_b` on a background stepping
+/// from `L₀` to `L₂`, convolved with a Gaussian of σ), by Levenberg–Marquardt with the analytic
+/// Jacobian; clipped (saturated) samples are censored data — they only require the model to
+/// reach the clip level there (one-sided residual) — so the band's edges stay determined even
+/// when its top is clipped.
+mod band {
+    use super::{GrayView, Pixel, Vector2};
+    use nalgebra::{Matrix6, Vector6};
+
+    /// First profile offset (pixels, from the edge point toward the bright side).
+    pub(super) const T_MIN: f64 = -3.0;
+    /// Last profile offset.
+    pub(super) const T_MAX: f64 = 6.0;
+    /// Profile sample spacing.
+    pub(super) const STEP: f64 = 0.5;
+    /// A sample at or above this grey level (0–255 scale) counts as clipped.
+    const CLIP: f32 = 254.5;
+
+    /// Standard normal CDF.
+    pub(super) fn cdf(z: f64) -> f64 {
+        0.5 * libm::erfc(-z * std::f64::consts::FRAC_1_SQRT_2)
+    }
+
+    /// Standard normal density.
+    pub(super) fn pdf(z: f64) -> f64 {
+        (-0.5 * z * z).exp()
+            * (0.5 * std::f64::consts::FRAC_2_SQRT_PI * std::f64::consts::FRAC_1_SQRT_2)
+    }
+
+    /// The model at `t` for `p = [L₀, L_b, L₂, t₁, t₂, σ]`, and its gradient with respect to `p`.
+    pub(super) fn model(p: &[f64; 6], t: f64) -> (f64, [f64; 6]) {
+        let [l0, lb, l2, t1, t2, s] = *p;
+        let (z1, z2) = ((t - t1) / s, (t - t2) / s);
+        let (c1, c2) = (cdf(z1), cdf(z2));
+        let (d1, d2) = (pdf(z1), pdf(z2));
+        let (h1, h2) = (lb - l0, l2 - lb);
+        let f = l0 + h1 * c1 + h2 * c2;
+        let g = [
+            1.0 - c1,
+            c1 - c2,
+            c2,
+            -h1 * d1 / s,
+            -h2 * d2 / s,
+            -(h1 * d1 * z1 + h2 * d2 * z2) / s,
+        ];
+        (f, g)
+    }
+
+    /// Bilinear grey level (0–255 scale) at `(x, y)`, `None` outside the image.
+    fn bilinear<T: Pixel>(img: &GrayView<'_, T>, x: f64, y: f64) -> Option<f32> {
+        let (w, h) = (img.width(), img.height());
+        if !(x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64) {
+            return None;
+        }
+        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+        let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
+        let d = img.data();
+        let at = |u: usize, v: usize| d.get(v * w + u).map(|p| p.grey());
+        let (a, b, c, e) = (at(x0, y0)?, at(x1, y0)?, at(x0, y1)?, at(x1, y1)?);
+        let top = a + fx * (b - a);
+        let bottom = c + fx * (e - c);
+        Some(top + fy * (bottom - top))
+    }
+
+    /// The profile through `p` along the unit direction `n` or `−n`, whichever points to the
+    /// brighter side (returned): samples `(t, grey)` into `out`, a clipped sample as
+    /// `(t, +∞)`, samples outside the image left out; `None` if fewer than 8 samples remain.
+    pub(super) fn profile<T: Pixel>(
+        img: &GrayView<'_, T>,
+        p: Vector2<f64>,
+        n: Vector2<f64>,
+        out: &mut Vec<(f64, f64)>,
+    ) -> Option<Vector2<f64>> {
+        let ahead = bilinear(img, p.x + 1.5 * n.x, p.y + 1.5 * n.y)?;
+        let behind = bilinear(img, p.x - 1.5 * n.x, p.y - 1.5 * n.y)?;
+        let d = if ahead >= behind { n } else { -n };
+        out.clear();
+        let count = ((T_MAX - T_MIN) / STEP).round() as usize + 1;
+        for k in 0..count {
+            let t = T_MIN + k as f64 * STEP;
+            let q = p + d * t;
+            if let Some(v) = bilinear(img, q.x, q.y) {
+                out.push((
+                    t,
+                    if v < CLIP {
+                        f64::from(v)
+                    } else {
+                        f64::INFINITY
+                    },
+                ));
+            }
+        }
+        (out.len() >= 8).then_some(d)
+    }
+
+    /// A starting point for [`fit`] from the samples: dark level before the edge, band level
+    /// (the brightest sample in `[−1, 4]`, or 1.3× the clip level if the band top is clipped),
+    /// far level, `t₁ = 0`, `t₂` where the profile falls back below the middle of band and far
+    /// level, `σ = 1`.
+    pub(super) fn start(samples: &[(f64, f64)]) -> Option<[f64; 6]> {
+        let first = samples.first().filter(|s| s.1.is_finite())?;
+        let last = samples.last().filter(|s| s.1.is_finite())?;
+        let mut peak = (f64::NEG_INFINITY, 0.0);
+        for &(t, v) in samples {
+            if (-1.0..=4.0).contains(&t) && v > peak.0 {
+                peak = (v, t);
+            }
+        }
+        let lb = if peak.0.is_infinite() {
+            1.3 * f64::from(CLIP)
+        } else {
+            peak.0
+        };
+        let l2 = last.1;
+        let mid = 0.5 * (lb + l2);
+        let t2 = samples
+            .iter()
+            .find(|&&(t, v)| t > peak.1 && v < mid)
+            .map_or(T_MAX, |&(t, _)| t - 0.5 * STEP);
+        Some([first.1, lb, l2, 0.0, t2.max(0.5), 1.0])
+    }
+
+    /// Levenberg–Marquardt fit of the band model to `samples` from `p0`; `sigma_free` fits σ,
+    /// else keeps `p0[5]`. Returns the parameters and the RMS residual (σ stays in (0.2, 5));
+    /// `None` if no sample is left.
+    pub(super) fn fit(
+        samples: &[(f64, f64)],
+        p0: [f64; 6],
+        sigma_free: bool,
+    ) -> Option<([f64; 6], f64)> {
+        let k = if sigma_free { 6 } else { 5 };
+        // A clipped sample (v = +∞) only asks the model to reach the clip level.
+        let residual = |f: f64, v: f64| {
+            if v.is_finite() {
+                f - v
+            } else {
+                (f - f64::from(CLIP)).min(0.0)
+            }
+        };
+        let cost = |p: &[f64; 6]| -> f64 {
+            samples
+                .iter()
+                .map(|&(t, v)| {
+                    let r = residual(model(p, t).0, v);
+                    r * r
+                })
+                .sum()
+        };
+        let mut p = p0;
+        let mut c = cost(&p);
+        let mut lambda = 1e-3;
+        for _ in 0..20 {
+            let mut a = Matrix6::<f64>::zeros();
+            let mut g = Vector6::<f64>::zeros();
+            for &(t, v) in samples {
+                let (f, j) = model(&p, t);
+                let r = residual(f, v);
+                if !v.is_finite() && r == 0.0 {
+                    continue;
+                }
+                for i in 0..k {
+                    g[i] += j[i] * r;
+                    for m in 0..=i {
+                        a[(i, m)] += j[i] * j[m];
+                    }
+                }
+            }
+            for i in 0..k {
+                for m in 0..i {
+                    a[(m, i)] = a[(i, m)];
+                }
+            }
+            for i in k..6 {
+                a[(i, i)] = 1.0;
+            }
+            let mut improved = false;
+            while lambda < 1e10 {
+                let mut damped = a;
+                for i in 0..k {
+                    damped[(i, i)] += lambda * a[(i, i)].max(1e-12);
+                }
+                let Some(ch) = damped.cholesky() else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let step = ch.solve(&(-g));
+                let mut q = p;
+                for i in 0..k {
+                    q[i] += step[i];
+                }
+                if !(q[5] > 0.2 && q[5] < 5.0) {
+                    lambda *= 10.0;
+                    continue;
+                }
+                let cq = cost(&q);
+                if cq < c {
+                    let moved = step
+                        .iter()
+                        .take(k)
+                        .skip(3)
+                        .map(|x| x.abs())
+                        .fold(0.0, f64::max);
+                    p = q;
+                    let small = c - cq <= 1e-8 * c || moved < 1e-4;
+                    c = cq;
+                    lambda = (lambda * 0.3).max(1e-9);
+                    improved = true;
+                    if small {
+                        return Some((p, (c / samples.len() as f64).sqrt()));
+                    }
+                    break;
+                }
+                lambda *= 10.0;
+            }
+            if !improved {
+                break;
+            }
+        }
+        Some((p, (c / samples.len() as f64).sqrt()))
     }
 }
 
@@ -516,6 +1016,161 @@ mod tests {
     }
 
     #[test]
+    fn band_model_jacobian_matches_finite_differences() {
+        let p = [40.0, 230.0, 55.0, 0.3, 2.8, 0.9];
+        for t in [-2.0, -0.4, 0.3, 1.1, 2.5, 3.7, 5.5] {
+            let (_, g) = band::model(&p, t);
+            for k in 0..6 {
+                let h = 1e-6 * (1.0 + p[k].abs());
+                let (mut a, mut b) = (p, p);
+                a[k] += h;
+                b[k] -= h;
+                let fd = (band::model(&a, t).0 - band::model(&b, t).0) / (2.0 * h);
+                assert!(
+                    (fd - g[k]).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "t={t} k={k}: {fd} vs {}",
+                    g[k]
+                );
+            }
+        }
+    }
+
+    /// A horizontal blurred band rendered by supersampling (independent of the model's closed
+    /// form): rows `y0 ≤ y < y0 + width` at `band`, above at `above`, below at `below`, blurred
+    /// by a Gaussian of `sigma` (numerical convolution), clipped to 255.
+    fn band_image(y0: f64, width: f64, sigma: f64, levels: [f64; 3]) -> Vec<u8> {
+        let (w, h) = (40usize, 40usize);
+        let mut out = vec![0u8; w * h];
+        for row in 0..h {
+            let mut acc = 0.0;
+            let mut norm = 0.0;
+            for k in -400..=400 {
+                let s = k as f64 * 0.01;
+                let weight = (-0.5 * s * s / (sigma * sigma)).exp();
+                // Pixel area: average over the pixel's extent too.
+                for sub in 0..4 {
+                    let y = row as f64 - 0.5 + (sub as f64 + 0.5) / 4.0 + s;
+                    let v = if y < y0 {
+                        levels[0]
+                    } else if y < y0 + width {
+                        levels[1]
+                    } else {
+                        levels[2]
+                    };
+                    acc += weight * v;
+                    norm += weight;
+                }
+            }
+            let v = (acc / norm).round().clamp(0.0, 255.0) as u8;
+            for col in 0..w {
+                out[row * w + col] = v;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn band_fit_recovers_both_edges_where_the_gradient_maximum_is_biased() {
+        // Edges at 17.3 and 19.8 (a 2.5 px band), blur 0.8 px; first unclipped with σ free,
+        // then with the band top clipped at 255 and σ fixed to the first estimate (a free σ
+        // trades off against the unseen band level, which is why the detector estimates σ on
+        // unclipped profiles).
+        let mut sigma = None;
+        for band_level in [210.0, 320.0] {
+            let img = band_image(17.3, 2.5, 0.8, [40.0, band_level, 60.0]);
+            let view = GrayView::new(&img, 40, 40).unwrap();
+            // Start 0.3 px off the true upper edge, looking down into the band.
+            let p = Vector2::new(20.0, 17.0);
+            let mut buf = Vec::new();
+            let d = band::profile(&view, p, Vector2::new(0.0, 1.0), &mut buf).unwrap();
+            assert_eq!(d, Vector2::new(0.0, 1.0));
+            assert_eq!(buf.iter().any(|s| s.1.is_infinite()), band_level > 255.0);
+            let mut p0 = band::start(&buf).unwrap();
+            if let Some(s) = sigma {
+                p0[5] = s;
+            }
+            let (q, rms) = band::fit(&buf, p0, sigma.is_none()).unwrap();
+            sigma = Some(q[5]);
+            assert!(is_band(&q), "{q:?}");
+            let upper = p.y + q[3];
+            let lower = p.y + q[4];
+            assert!(
+                (upper - 17.3).abs() < 0.05,
+                "level {band_level}: upper {upper} {q:?}"
+            );
+            assert!(
+                (lower - 19.8).abs() < 0.05,
+                "level {band_level}: lower {lower} {q:?}"
+            );
+            // u8 rounding and bilinear sampling of the rendered profile leave a few grey levels.
+            assert!(rms < 4.0, "{rms}");
+            // The Sobel maximum (what Canny reports) of the same image is measurably biased
+            // outward, which is what the band model removes.
+            let map = crate::edges::canny(&view, &CannyParams::default()).unwrap();
+            let canny_upper = map
+                .edgels
+                .iter()
+                .filter(|e| e.px == 20 && e.grad.y > 0.0)
+                .map(|e| e.pos.y)
+                .next()
+                .unwrap();
+            assert!(17.3 - canny_upper > 0.08, "Canny edge {canny_upper}");
+        }
+    }
+
+    #[test]
+    fn band_fit_with_fixed_sigma_and_degenerate_profiles() {
+        let img = band_image(15.0, 3.0, 0.9, [30.0, 200.0, 30.0]);
+        let view = GrayView::new(&img, 40, 40).unwrap();
+        let mut buf = Vec::new();
+        band::profile(
+            &view,
+            Vector2::new(20.0, 15.2),
+            Vector2::new(0.0, -1.0),
+            &mut buf,
+        )
+        .unwrap();
+        let mut p0 = band::start(&buf).unwrap();
+        p0[5] = 0.95;
+        let d = band::profile(
+            &view,
+            Vector2::new(20.0, 15.2),
+            Vector2::new(0.0, -1.0),
+            &mut buf,
+        )
+        .unwrap();
+        // The bright side (the band) lies below: the profile turns around.
+        assert_eq!(d, Vector2::new(0.0, 1.0));
+        let (q, _) = band::fit(&buf, p0, false).unwrap();
+        assert_eq!(q[5], 0.95);
+        // σ fixed ≈ 5 % off the effective blur: the edges stay within 0.1 px.
+        assert!((15.2 + d.y * q[3] - 15.0).abs() < 0.1, "{q:?}");
+        assert!((15.2 + d.y * q[4] - 18.0).abs() < 0.1, "{q:?}");
+        // A flat profile is no band; outside the image there is no profile.
+        let flat = vec![90u8; 1600];
+        let view = GrayView::new(&flat, 40, 40).unwrap();
+        let ok = band::profile(
+            &view,
+            Vector2::new(20.0, 20.0),
+            Vector2::new(0.0, 1.0),
+            &mut buf,
+        );
+        if ok.is_some() {
+            let p0 = band::start(&buf).unwrap();
+            assert!(band::fit(&buf, p0, true).is_none_or(|(q, _)| !is_band(&q)));
+        }
+        assert!(
+            band::profile(
+                &view,
+                Vector2::new(-5.0, 20.0),
+                Vector2::new(1.0, 0.0),
+                &mut buf
+            )
+            .is_none()
+        );
+    }
+
+    #[test]
     fn blank_images_give_no_rims_and_bad_params_are_errors() {
         for v in [0u8, 255] {
             let data = vec![v; 320 * 240];
@@ -538,6 +1193,13 @@ mod tests {
             ..DetectParams::default()
         };
         assert!(detect_wafers(&view, &bad).is_err());
+        for dev in [-0.1, f64::NAN, f64::INFINITY] {
+            let bad = DetectParams {
+                max_arc_deviation: dev,
+                ..DetectParams::default()
+            };
+            assert!(detect_wafers(&view, &bad).is_err());
+        }
         for sep in [-0.1, 1.0, f64::NAN] {
             let bad = DetectParams {
                 min_rim_separation: sep,

@@ -1,8 +1,10 @@
 //! Benchmarks of the hand-eye factors (000_3b1454b2b2194811.txt eq. (5.13)) and the UKF model.
 
 use autoteach_estimate::handeye::{
-    AutoTeachUkfModel, EdgeJacobians, Rim, conic_edge_residuals, point_reprojection_residuals,
+    AutoTeachUkfModel, EdgeJacobians, Rim, RobotMotionResidual, conic_edge_residuals,
+    point_reprojection_residuals,
 };
+use autoteach_estimate::lsq::{Residual, se3_to_params};
 use autoteach_estimate::ukf::UkfModel;
 use autoteach_geometry::conic::project_circle;
 use autoteach_geometry::robot::{Joints, WaferRobot};
@@ -89,6 +91,33 @@ fn bench(c: &mut Criterion) {
         let mut z = DVector::zeros(4);
         b.iter(|| {
             m.hx(black_box(x.column(0)), &mut z)
+                .expect("valid bench input")
+        })
+    });
+    let q2 = Joints::new(0.21, 1.38, 0.3, -1.48, 0.101);
+    let motion =
+        RobotMotionResidual::new(robot.params, q, q2, Joints::zeros(), vec![1, 3], [2e-5; 6])
+            .expect("valid bench input");
+    let vals: Vec<Vec<f64>> = vec![
+        se3_to_params(&robot.camera_pose(&q)).to_vec(),
+        se3_to_params(&robot.camera_pose(&q2)).to_vec(),
+        se3_to_params(&robot.base).to_vec(),
+        vec![0.001],
+        vec![-0.002],
+    ];
+    c.bench_function("handeye robot motion factor (5.11) + jacobians", |b| {
+        let p: Vec<&[f64]> = vals.iter().map(|v| v.as_slice()).collect();
+        let mut r = vec![0.0; 6];
+        let mut j = vec![
+            DMatrix::zeros(6, 6),
+            DMatrix::zeros(6, 6),
+            DMatrix::zeros(6, 6),
+            DMatrix::zeros(6, 1),
+            DMatrix::zeros(6, 1),
+        ];
+        b.iter(|| {
+            motion
+                .evaluate(black_box(&p), &mut r, Some(&mut j))
                 .expect("valid bench input")
         })
     });

@@ -18,6 +18,34 @@ fn bench(c: &mut Criterion) {
             linear_solver: solver,
             ..Default::default()
         };
+        // Where the time goes (one solve, printed once; median of 5 stage timings).
+        let mut stages: Vec<[f64; 7]> = (0..5)
+            .map(|_| {
+                let (mut p, _, _) = scene.problem(Loss::Trivial, true).expect("scene");
+                let s = p.solve(&opts).expect("solve");
+                [
+                    s.time_s,
+                    s.time_setup_s,
+                    s.time_evaluate_s,
+                    s.time_assemble_s,
+                    s.time_linear_s,
+                    s.time_schur_reduce_s,
+                    s.time_schur_factor_s,
+                ]
+            })
+            .collect();
+        stages.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        let m = stages[2];
+        eprintln!(
+            "lsq_bundle_50x500_{name}: solve {:.2} ms = setup {:.2} + evaluate {:.2} + assemble {:.2} + linear {:.2} ms (Schur: reduce {:.2}, factor {:.2})",
+            m[0] * 1e3,
+            m[1] * 1e3,
+            m[2] * 1e3,
+            m[3] * 1e3,
+            m[4] * 1e3,
+            m[5] * 1e3,
+            m[6] * 1e3
+        );
         c.bench_function(&format!("lsq_bundle_50x500_{name}"), |b| {
             b.iter_batched(
                 || scene.problem(Loss::Trivial, true).expect("scene"),

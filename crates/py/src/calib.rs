@@ -5,7 +5,9 @@ use std::str::FromStr;
 
 use autoteach_estimate::EstimateError;
 use autoteach_estimate::calib::View;
-use autoteach_estimate::calib::guide::{candidate_poses, random_poses, synthesize_view_seeded};
+use autoteach_estimate::calib::guide::{
+    candidate_poses, novice_poses, random_poses, synthesize_view_seeded,
+};
 use autoteach_estimate::calib::solve::{
     CalibOptions, Calibration, RobustLoss, calibrate, select_model,
 };
@@ -311,6 +313,26 @@ impl PyCalibResult {
         Ok((m.value, (m.pixel[0], m.pixel[1])))
     }
 
+    /// Max ERE statistics (dict: `max_ere`, `pixel`, `expected_max` = E over the samples of the
+    /// largest error over the grid).
+    #[pyo3(signature = (samples=200, grid=5, seed=0))]
+    fn max_ere_stats<'py>(
+        &self,
+        py: Python<'py>,
+        samples: usize,
+        grid: usize,
+        seed: u64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let m = convert::detached(py, || {
+            self.inner.max_ere(samples, grid, seed).map_err(calib_err)
+        })?;
+        let d = PyDict::new(py);
+        d.set_item("max_ere", m.value)?;
+        d.set_item("pixel", (m.pixel[0], m.pixel[1]))?;
+        d.set_item("expected_max", m.expected_max)?;
+        Ok(d)
+    }
+
     /// Per-pixel expected reprojection error map, `(ceil(h/step), ceil(w/step))`.
     #[pyo3(signature = (step=1, samples=100, seed=0))]
     fn error_map<'py>(
@@ -526,6 +548,27 @@ fn calib_random_poses<'py>(
     poses_out(py, &poses)
 }
 
+/// `count` target poses `(count, 4, 4)` (seeded) of a simulated novice following the ROS
+/// checklist of the seed's ch. 5.4 (left/right/top/bottom, close/far, tilted).
+#[pyfunction]
+#[pyo3(signature = (model, params, width, height, target, count, *, seed=0))]
+#[allow(clippy::too_many_arguments)]
+fn calib_novice_poses<'py>(
+    py: Python<'py>,
+    model: &str,
+    params: &Bound<'py, PyAny>,
+    width: u32,
+    height: u32,
+    target: &Bound<'py, PyAny>,
+    count: usize,
+    seed: u64,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let cam = camera_arg(model, params, width, height)?;
+    let target = target_arg(target)?;
+    let poses = novice_poses(&cam, &target, count, seed).map_err(calib_err)?;
+    poses_out(py, &poses)
+}
+
 /// A synthetic view: `(object (N, 3), image (N, 2), rows (N,))` of the visible target points
 /// with Gaussian pixel noise `sigma` (seeded), or `None` if fewer than 4 are visible.
 #[pyfunction]
@@ -576,6 +619,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(calib_select_model, m)?)?;
     m.add_function(wrap_pyfunction!(calib_candidate_poses, m)?)?;
     m.add_function(wrap_pyfunction!(calib_random_poses, m)?)?;
+    m.add_function(wrap_pyfunction!(calib_novice_poses, m)?)?;
     m.add_function(wrap_pyfunction!(calib_synthesize_view, m)?)?;
     Ok(())
 }

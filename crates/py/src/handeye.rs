@@ -4,8 +4,9 @@
 //! `autoteach.pipeline.autoteach`.
 
 use autoteach_estimate::handeye::{
-    EdgeFactor, EdgeObservation, PriorSigmas, Rim, SlamMot, SlamMotConfig, SlamMotSolution,
-    SlamMotState, UkfNoise, WaferGeometry, WindowRecord, run_autoteach_ukf, theoretical_resolution,
+    EdgeFactor, EdgeObservation, FreeCamera, PriorSigmas, Rim, SlamMot, SlamMotConfig,
+    SlamMotSolution, SlamMotState, UkfNoise, WaferGeometry, WindowRecord, run_autoteach_ukf,
+    theoretical_resolution,
 };
 use autoteach_geometry::lie::se3_log;
 use autoteach_geometry::robot::{Joints, RobotParams, WaferRobot};
@@ -15,6 +16,10 @@ use pyo3::types::{PyDict, PyList};
 
 use crate::convert::{self, to_numpy};
 use crate::errors;
+
+/// `free_camera` argument: motion σ (6), visual-odometry increments `(F−1, 4, 4)` or `None`,
+/// odometry σ (6).
+type FreeCameraArgs<'py> = (Vec<f64>, Option<Bound<'py, PyAny>>, Vec<f64>);
 
 /// Adds the handeye functions to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -75,14 +80,12 @@ fn state_dict<'py>(py: Python<'py>, s: &SlamMotState) -> PyResult<Bound<'py, PyD
     )?;
     let w: Vec<f64> = s.wafers.iter().flat_map(|w| w.iter().copied()).collect();
     d.set_item("wafers", to_numpy(py, w, &[s.wafers.len(), 5])?)?;
+    d.set_item("mount", pose_array(py, &[s.mount])?.get_item(0)?)?;
+    d.set_item("links", to_numpy(py, s.links.to_vec(), &[3])?)?;
     Ok(d)
 }
 
-fn solution_dict<'py>(
-    py: Python<'py>,
-    slam: &SlamMot,
-    sol: &SlamMotSolution,
-) -> PyResult<Bound<'py, PyDict>> {
+fn solution_dict<'py>(py: Python<'py>, sol: &SlamMotSolution) -> PyResult<Bound<'py, PyDict>> {
     let d = state_dict(py, &sol.state)?;
     match &sol.uncertainty.covariance {
         Some(c) => d.set_item(
@@ -102,10 +105,7 @@ fn solution_dict<'py>(
     d.set_item("iterations", sol.iterations)?;
     d.set_item("rms_px", sol.rms_px)?;
     d.set_item("n_residuals", sol.n_residuals)?;
-    d.set_item(
-        "camera_poses",
-        pose_array(py, &slam.camera_poses(&sol.state))?,
-    )?;
+    d.set_item("camera_poses", pose_array(py, &sol.camera_poses)?)?;
     Ok(d)
 }
 
@@ -133,7 +133,8 @@ fn history_list<'py>(py: Python<'py>, hist: &[WindowRecord]) -> PyResult<Bound<'
 #[pyo3(signature = (k, robot_params, wafer_radius, wafer_thickness, encoders, obs_frames, obs_wafers, obs_rims,
     obs_start, points, initial_base, initial_offsets, initial_wafers, *, pixel_sigma=0.5, estimate_offsets=vec![1, 3],
     reference_wafer=0, huber=Some(3.0), factor="conic", n_model=360, rounds=3, max_iterations=50, window=0,
-    init_heights=None, prior_sigmas=(0.035, 0.02, 0.035), encoder_sigma=None))]
+    init_heights=None, prior_sigmas=(0.035, 0.02, 0.035), encoder_sigma=None, estimate_mount=false,
+    estimate_links=vec![], free_camera=None))]
 #[allow(clippy::too_many_arguments)]
 fn handeye_slam_mot<'py>(
     py: Python<'py>,
@@ -162,6 +163,9 @@ fn handeye_slam_mot<'py>(
     init_heights: Option<(f64, f64, f64)>,
     prior_sigmas: (f64, f64, f64),
     encoder_sigma: Option<[f64; 4]>,
+    estimate_mount: bool,
+    estimate_links: Vec<usize>,
+    free_camera: Option<FreeCameraArgs<'py>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let k = k_matrix(k)?;
     let params = read_robot_params(robot_params)?;
@@ -207,6 +211,52 @@ fn handeye_slam_mot<'py>(
     let offsets = Joints::from_column_slice(
         &convert::finite_array(initial_offsets, "initial_offsets")?.exact(&[5])?,
     );
+    let free_camera = match free_camera {
+        None => None,
+        Some((motion, odo, odo_sigma)) => {
+            let six = |v: &[f64], what: &str| -> PyResult<[f64; 6]> {
+                <[f64; 6]>::try_from(v).map_err(|_| {
+                    errors::invalid_input(format!(
+                        "{what} needs 6 standard deviations, got {}",
+                        v.len()
+                    ))
+                })
+            };
+            let odometry = match odo {
+                None => Vec::new(),
+                Some(a) => {
+                    let arr = convert::finite_array(&a, "odometry")?;
+                    let shape = arr.shape().to_vec();
+                    if shape.len() != 3 || shape[1] != 4 || shape[2] != 4 {
+                        return Err(errors::invalid_input(format!(
+                            "odometry must have shape (F-1, 4, 4), got {shape:?}"
+                        )));
+                    }
+                    let view = arr.view();
+                    let mut out = Vec::with_capacity(shape[0]);
+                    for i in 0..shape[0] {
+                        let m = nalgebra::Matrix4::from_fn(|r, c| view[[i, r, c]]);
+                        out.push(convert::matrix_to_isometry(&m, "odometry increment")?);
+                    }
+                    out
+                }
+            };
+            Some(FreeCamera {
+                motion_sigma: six(&motion, "free_camera motion sigma")?,
+                odometry,
+                odometry_sigma: six(&odo_sigma, "free_camera odometry sigma")?,
+                calibration_prior: Some((
+                    base,
+                    offsets,
+                    PriorSigmas {
+                        base_rotation: prior_sigmas.0,
+                        base_translation: prior_sigmas.1,
+                        offset: prior_sigmas.2,
+                    },
+                )),
+            })
+        }
+    };
     let wafers: Vec<Vector5<f64>> = rows(initial_wafers, "initial_wafers", 5)?
         .iter()
         .map(|r| Vector5::from_column_slice(r))
@@ -218,6 +268,9 @@ fn handeye_slam_mot<'py>(
     config.huber = huber;
     config.max_iterations = max_iterations;
     config.encoder_sigma = encoder_sigma;
+    config.estimate_mount = estimate_mount;
+    config.estimate_links = estimate_links;
+    config.free_camera = free_camera;
     config.factor = match factor {
         "conic" => EdgeFactor::Conic,
         "point" => EdgeFactor::NearestPoint { n_model, rounds },
@@ -228,13 +281,9 @@ fn handeye_slam_mot<'py>(
         }
     };
     let n_wafers = wafers.len();
-    let (sol, hist, slam, init) = convert::detached(py, move || {
+    let (sol, hist, init) = convert::detached(py, move || {
         let slam = SlamMot::new(config, enc, observations, n_wafers).map_err(errors::estimate)?;
-        let mut state = SlamMotState {
-            base,
-            offsets,
-            wafers,
-        };
+        let mut state = SlamMotState::new(base, offsets, wafers);
         if let Some((lo, hi, step)) = init_heights {
             state.wafers = slam
                 .initial_wafer_heights(&state, (lo, hi), step)
@@ -256,9 +305,9 @@ fn handeye_slam_mot<'py>(
             }
         }
         let sol = slam.solve_batch(&state).map_err(errors::estimate)?;
-        Ok((sol, hist, slam, init))
+        Ok((sol, hist, init))
     })?;
-    let d = solution_dict(py, &slam, &sol)?;
+    let d = solution_dict(py, &sol)?;
     d.set_item("history", history_list(py, &hist)?)?;
     d.set_item("initial", state_dict(py, &init)?)?;
     Ok(d)

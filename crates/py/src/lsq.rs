@@ -115,6 +115,8 @@ fn summary_dict<'py>(py: Python<'py>, s: &Summary) -> PyResult<Bound<'py, PyDict
     d.set_item("time_evaluate_s", s.time_evaluate_s)?;
     d.set_item("time_assemble_s", s.time_assemble_s)?;
     d.set_item("time_linear_s", s.time_linear_s)?;
+    d.set_item("time_schur_reduce_s", s.time_schur_reduce_s)?;
+    d.set_item("time_schur_factor_s", s.time_schur_factor_s)?;
     Ok(d)
 }
 

@@ -49,8 +49,9 @@ fn e_step_arg(name: &str) -> PyResult<EStep> {
         "auto" => Ok(EStep::Auto),
         "dense" => Ok(EStep::Dense),
         "truncated" => Ok(EStep::Truncated),
+        "fast_gauss" => Ok(EStep::FastGauss),
         other => Err(errors::invalid_input(format!(
-            "e_step must be 'auto', 'dense' or 'truncated', got {other:?}"
+            "e_step must be 'auto', 'dense', 'truncated' or 'fast_gauss', got {other:?}"
         ))),
     }
 }

@@ -109,11 +109,12 @@ fn track_dict<'py>(py: Python<'py>, t: &Track) -> PyResult<Bound<'py, PyDict>> {
 impl PyTracker {
     /// Builds the tracker; every option as in `autoteach.track.WaferTracker`.
     #[new]
-    #[pyo3(signature = (*, sigma = 3.0, omega = 1e-4, knn = 8, gate = 5.0, min_score = 0.0,
+    #[pyo3(signature = (*, sigma = 3.0, omega = 1e-4, knn = 8, gate = 5.0, min_score = 0.0, min_coverage = 0.0,
         associator = "hierarchical", greedy_gate = 40.0, max_points_per_segment = 48,
         max_missed = 30, min_hits = 2, rim_merge_distance = 4.0, image_size = None,
-        intrinsics = None, wafer_radius = 0.15, normal_prior = None, circle_window = 10,
-        prefer_projection = false))]
+        intrinsics = None, wafer_radius = 0.15, normal_prior = None, circle_window = 6,
+        prefer_projection = false, multiview_circle = true, normal_prior_sigma = 0.05,
+        circle_fit_iterations = 1, projection_max_center_std = 0.003, projection_max_rms = 2.0, max_missed_3d = 300, stack_axis_sigma = Some(0.002)))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         sigma: f64,
@@ -121,6 +122,7 @@ impl PyTracker {
         knn: usize,
         gate: f64,
         min_score: f64,
+        min_coverage: f64,
         associator: &str,
         greedy_gate: f64,
         max_points_per_segment: usize,
@@ -133,6 +135,13 @@ impl PyTracker {
         normal_prior: Option<(f64, f64, f64)>,
         circle_window: usize,
         prefer_projection: bool,
+        multiview_circle: bool,
+        normal_prior_sigma: f64,
+        circle_fit_iterations: usize,
+        projection_max_center_std: f64,
+        projection_max_rms: f64,
+        max_missed_3d: usize,
+        stack_axis_sigma: Option<f64>,
     ) -> PyResult<Self> {
         let associator = match associator {
             "hierarchical" => Associator::Hierarchical,
@@ -156,6 +165,7 @@ impl PyTracker {
                 knn,
                 gate,
                 min_score,
+                min_coverage,
             },
             associator,
             greedy_gate,
@@ -169,6 +179,13 @@ impl PyTracker {
             normal_prior: normal_prior.map(|(x, y, z)| Vector3::new(x, y, z)),
             circle_window,
             prefer_projection,
+            multiview_circle,
+            normal_prior_sigma,
+            circle_fit_iterations,
+            projection_max_center_std,
+            projection_max_rms,
+            max_missed_3d,
+            stack_axis_sigma,
         };
         Ok(PyTracker {
             inner: Tracker::new(options).map_err(errors::detect)?,
@@ -217,6 +234,14 @@ impl PyTracker {
             .iter()
             .map(|t| track_dict(py, t))
             .collect()
+    }
+
+    /// Stage timings (seconds) of the last update: `predict`, `associate` (Algorithm 5 or the
+    /// greedy baseline), `manage` (Algorithm 4 with the 3D rim estimates).
+    #[getter]
+    fn last_timings(&self) -> (f64, f64, f64) {
+        let t = self.inner.timings();
+        (t.predict, t.associate, t.manage)
     }
 
     /// Number of frames processed.

@@ -3,7 +3,7 @@
 Usage::
 
     autoteach calibrate views.npz [--model brown_conrady] [--out calib.json] [--json]
-    autoteach calibrate --simulate [--lens medium] [--strategy guided] [--threshold 0.5] [--json]
+    autoteach calibrate --simulate [--lens medium] [--strategy guided|random|novice] [--threshold 0.5] [--json]
 
 ``views.npz`` holds ``image_size`` (``[width, height]``) and either ``object_points`` /
 ``image_points`` as ``(V, N, 3)`` / ``(V, N, 2)`` arrays (NaN rows: missing points) or per-view
@@ -25,7 +25,7 @@ from autoteach.errors import InvalidInputError
 
 def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:  # type: ignore[type-arg]
     """Add the ``calibrate`` sub-command."""
-    from autoteach.calib import LENSES, MODELS
+    from autoteach.calib import LENSES, MODELS, STRATEGIES
 
     p = sub.add_parser(
         "calibrate",
@@ -43,7 +43,12 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--out", type=Path, default=None, help="write the calibration as JSON here")
     p.add_argument("--simulate", action="store_true", help="run a simulated guided session instead")
     p.add_argument("--lens", choices=tuple(LENSES), default="medium", help="simulated lens (default medium)")
-    p.add_argument("--strategy", choices=("guided", "random"), default="guided", help="how views are chosen")
+    p.add_argument(
+        "--strategy",
+        choices=STRATEGIES,
+        default="guided",
+        help="how views are chosen: suggestions, random, or a novice following the ROS checklist (default guided)",
+    )
     p.add_argument("--threshold", type=float, default=0.5, help="stop when Max ERE < this many pixels (default 0.5)")
     p.add_argument("--max-views", type=int, default=12, help="at most this many views (default 12)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -94,12 +99,21 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidInputError("give either a views file or --simulate, not both")
         if not args.json:
             print(f"simulated {args.strategy} session, lens {args.lens}, stop when Max ERE < {args.threshold} px")
-            print(" views  Max ERE [px]  test p99.5 [px]  test mean [px]  train rms [px]")
+            print(
+                "test set: 60 views; 'vs truth' = rays of the true lens (ch. 5.5.3), 're-fit' = poses re-fit (ch. 5.5)"
+            )
+            print(" views  Max ERE [px]  E[max] [px]  p99.5 vs truth  mean vs truth  p99.5 re-fit  train rms [px]")
 
         def show(step: Any) -> None:
             if not args.json:
-                ere = "   (bootstrap)" if not math.isfinite(step.max_ere) else f"{step.max_ere:13.3f}"
-                print(f" {step.views:5d} {ere}  {step.test_p995:15.3f}  {step.test_mean:14.3f}  {step.rms:14.3f}")
+                if math.isfinite(step.max_ere):
+                    ere = f"{step.max_ere:13.3f}  {step.expected_max:11.3f}"
+                else:
+                    ere = f"{'(bootstrap)':>13}  {'':>11}"
+                print(
+                    f" {step.views:5d} {ere}  {step.test_p995:14.3f}  {step.test_mean:13.3f}"
+                    f"  {step.refit_p995:12.3f}  {step.rms:14.3f}"
+                )
 
         res = simulate_session(
             args.lens,

@@ -11,12 +11,25 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     """Add the ``run`` sub-command."""
     p = sub.add_parser("run", parents=[common], help="auto-teach from an MCAP session log and write a report")
     p.add_argument("log", type=Path, help="the MCAP file")
-    p.add_argument("--out", type=Path, default=None, help="report folder (default: LOG without suffix + '-report')")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="OUT.mcap: write a copy of the log with the results on /autoteach/* channels; any other path: the "
+        "report folder (default: LOG without suffix + '-report')",
+    )
+    p.add_argument("--report", type=Path, default=None, help="report folder (overrides the default)")
+    p.add_argument(
+        "--write-back",
+        action="store_true",
+        help="add the results to LOG itself on /autoteach/* channels (every input message is kept)",
+    )
     p.add_argument(
         "--frontend",
         choices=("auto", "simulated", "detect"),
-        default="auto",
-        help="edge front end: ground-truth rims of simulated logs or detection + tracking (default auto)",
+        default="detect",
+        help="edge front end: detection + tracking on the images (default), the ground-truth rims of a "
+        "simulated log, or auto (detect when the log has images)",
     )
     p.add_argument("--window", type=int, default=5, help="sliding-window size in frames (0: batch only)")
     p.add_argument("--baseline", action="store_true", help="also solve with the point-reprojection baseline")
@@ -26,7 +39,7 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
 def _run(args: argparse.Namespace) -> int:
     from autoteach.cli import _progress_enabled
     from autoteach.errors import InvalidInputError
-    from autoteach.io import read_log
+    from autoteach.io import read_log, write_results
     from autoteach.pipeline import autoteach
     from autoteach.report import format_table, write_report
 
@@ -36,14 +49,24 @@ def _run(args: argparse.Namespace) -> int:
     result = autoteach(
         session, frontend=args.frontend, window=args.window, baseline=args.baseline, progress=_progress_enabled(args)
     )
-    out = args.out or args.log.with_name(args.log.stem + "-report")
+    out_log = args.out if args.out is not None and args.out.suffix == ".mcap" else None
+    out = args.report or (args.out if args.out is not None and out_log is None else None)
+    out = out or args.log.with_name(args.log.stem + "-report")
     files = write_report(result, out, session)
+    written: list[str] = []
+    if out_log is not None:
+        written.append(str(write_results(result, args.log, out_log)))
+    if args.write_back:
+        written.append(str(write_results(result, args.log)))
     if args.json:
         d = result.to_dict()
         d["report"] = str(out)
         d["report_files"] = files
+        d["result_logs"] = written
         print(json.dumps(d))
     else:
         print(format_table(result))
+        for w in written:
+            print(f"results written to {w} (channels /autoteach/*)")
         print(f"report: {out}")
     return 0

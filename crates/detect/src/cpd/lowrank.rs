@@ -18,7 +18,8 @@ use rayon::prelude::*;
 
 use super::estep::exp_neg;
 
-/// Row block `rows` of `G` times `v` (M × k), accumulated into `out` rows.
+/// `G v` for `v` (M × k) without storing `G`: one row of `G` at a time (rows in parallel), under
+/// runtime instruction-set dispatch so the exponentials and the row products vectorise.
 fn kernel_times<const D: usize>(y: &[[f64; D]], inv2b2: f64, v: &DMatrix<f64>) -> DMatrix<f64> {
     let m = y.len();
     let k = v.ncols();
@@ -28,26 +29,54 @@ fn kernel_times<const D: usize>(y: &[[f64; D]], inv2b2: f64, v: &DMatrix<f64>) -
         .map(|(i, c)| v[(i, c)])
         .collect();
     let mut out = vec![0.0; m * k];
+    let arch = pulp::Arch::new();
     out.par_chunks_mut(k).zip(y.par_iter()).for_each_init(
         || vec![0.0; m],
         |g, (orow, yi)| {
-            for (gj, yj) in g.iter_mut().zip(y) {
-                let mut d = 0.0;
-                for a in 0..D {
-                    let e = yi[a] - yj[a];
-                    d += e * e;
-                }
-                *gj = exp_neg(-d * inv2b2);
-            }
-            for (j, gj) in g.iter().enumerate() {
-                let vrow = &vr[j * k..(j + 1) * k];
-                for (o, vv) in orow.iter_mut().zip(vrow) {
-                    *o += gj * vv;
-                }
-            }
+            arch.dispatch(KernelRow {
+                y,
+                yi,
+                inv2b2,
+                vr: &vr,
+                g,
+                orow,
+            })
         },
     );
     DMatrix::from_row_slice(m, k, &out)
+}
+
+/// One row of [`kernel_times`].
+struct KernelRow<'a, const D: usize> {
+    y: &'a [[f64; D]],
+    yi: &'a [f64; D],
+    inv2b2: f64,
+    vr: &'a [f64],
+    g: &'a mut [f64],
+    orow: &'a mut [f64],
+}
+
+impl<const D: usize> pulp::WithSimd for KernelRow<'_, D> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
+        let k = self.orow.len();
+        for (gj, yj) in self.g.iter_mut().zip(self.y) {
+            let mut d = 0.0;
+            for (a, b) in self.yi.iter().zip(yj) {
+                let e = a - b;
+                d += e * e;
+            }
+            *gj = exp_neg(-d * self.inv2b2);
+        }
+        for (j, gj) in self.g.iter().enumerate() {
+            let vrow = &self.vr[j * k..(j + 1) * k];
+            for (o, vv) in self.orow.iter_mut().zip(vrow) {
+                *o += gj * vv;
+            }
+        }
+    }
 }
 
 /// The dense kernel matrix `G` (M × M).

@@ -21,7 +21,8 @@
 //! (rigid, affine: the negative log-likelihood bound `Q` of eq. (3.15)) or of σ² (non-rigid)
 //! falls to `tolerance` — the same rules as pycpd 2.0, so results can be compared directly.
 //! A σ² that reaches ≤ 0 on exact data is reset to `tolerance / 10` (as pycpd; `1e−12·σ²₀`
-//! when `tolerance` is 0).
+//! when `tolerance` is 0); so is one at the rounding level of its own formula, and in both
+//! cases the fit is exact and the iteration stops as converged.
 //!
 //! ```
 //! use autoteach_detect::cpd::{rigid, RigidOptions};
@@ -48,6 +49,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod estep;
+mod fgt;
 mod global;
 mod lowrank;
 #[cfg(test)]
@@ -426,12 +428,21 @@ impl<const D: usize> Em<D> {
         Ok(e)
     }
 
-    fn set_sigma2(&mut self, s2: f64, tolerance: f64) {
-        self.sigma2 = if s2 > 0.0 {
-            s2
-        } else {
+    /// Sets σ² from the M-step value `s2`, computed as a difference of terms of size about
+    /// `scale`: a value that is not above the rounding error of that difference
+    /// (`64 ε · scale`) is indistinguishable from 0 and gets the floor, as a value ≤ 0 does.
+    /// Returns true in that case: the transform explains the data exactly (to rounding) and
+    /// the iteration stops as converged — the objective alone would oscillate between the
+    /// floor and the next rounding-level σ² without ever meeting the tolerance.
+    #[must_use]
+    fn set_sigma2(&mut self, s2: f64, scale: f64, tolerance: f64) -> bool {
+        let exact = !(s2 > 64.0 * f64::EPSILON * scale.abs());
+        self.sigma2 = if exact {
             sigma2_floor(tolerance, self.sigma2_0)
+        } else {
+            s2
         };
+        exact
     }
 
     fn p(&self, x: &[[f64; D]], return_p: bool) -> Option<DMatrix<f64>> {
@@ -515,10 +526,10 @@ fn rigid_d<const D: usize>(
         } else {
             (xpx - 2.0 * tr_ar + ypy) / (e.np * D as f64)
         };
-        em.set_sigma2(s2, o.tolerance);
+        let exact = em.set_sigma2(s2, xpx / (e.np * D as f64), o.tolerance);
         ty = transform_rigid(&ys, &r, &t, s);
         iterations += 1;
-        if diff <= o.tolerance {
+        if diff <= o.tolerance || exact {
             converged = true;
             break;
         }
@@ -623,10 +634,14 @@ fn affine_d<const D: usize>(
             + D as f64 * e.np / 2.0 * em.sigma2.ln();
         let diff = (q_new - q).abs();
         q = q_new;
-        em.set_sigma2((xpx - tr_ab) / (e.np * D as f64), o.tolerance);
+        let exact = em.set_sigma2(
+            (xpx - tr_ab) / (e.np * D as f64),
+            xpx / (e.np * D as f64),
+            o.tolerance,
+        );
         ty = transform_rigid(&ys, &b, &t, 1.0);
         iterations += 1;
-        if diff <= o.tolerance {
+        if diff <= o.tolerance || exact {
             converged = true;
             break;
         }
@@ -783,9 +798,13 @@ fn nonrigid_d<const D: usize>(
             }
         }
         let prev = em.sigma2;
-        em.set_sigma2((xpx - 2.0 * trpxt + tpt) / (e.np * D as f64), o.tolerance);
+        let exact = em.set_sigma2(
+            (xpx - 2.0 * trpxt + tpt) / (e.np * D as f64),
+            (xpx + tpt) / (e.np * D as f64),
+            o.tolerance,
+        );
         iterations += 1;
-        if (em.sigma2 - prev).abs() <= o.tolerance {
+        if (em.sigma2 - prev).abs() <= o.tolerance || exact {
             converged = true;
             break;
         }

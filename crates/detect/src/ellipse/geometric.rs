@@ -242,3 +242,183 @@ fn levenberg_marquardt(
 fn oriented(q: [f64; 6]) -> [f64; 6] {
     if q[0] + q[2] < 0.0 { q.map(|v| -v) } else { q }
 }
+
+/// Orthogonal-distance fit of the ellipse parameters `(cx, cy, a, b, θ)` marked in `free`,
+/// the others held at their values in `initial` (Levenberg–Marquardt on the analytic
+/// Jacobian `∂r/∂p = −n̂·∂x'/∂p` at the foot points, as for the covariance of
+/// [`fit_ellipse_geometric`]; 000_3b1454b2b2194811.txt §3.2, ellipse of eq. 3.2).
+///
+/// For a rim seen only along a short front arc whose shape parameters are known from a better
+/// covered ellipse (the two rims of a wafer share `a` and `θ` to ≈ 0.03 %; see
+/// [`crate::wafers`]). The covariance is that of the free parameters with the fixed ones
+/// taken as exact (zero rows and columns), `σ̂² = SSR/(n − k)`.
+///
+/// # Errors
+/// [`DetectError::TooFewPoints`] for fewer than `k + 1` points (`k` free parameters);
+/// [`DetectError::NonFinite`] for a NaN or infinite coordinate;
+/// [`DetectError::InvalidParameter`] for bad options, no free parameter, or a non-finite or
+/// non-positive `initial`; [`DetectError::RankDeficient`] when the free parameters are not
+/// determined by the points.
+pub fn fit_ellipse_geometric_masked(
+    points: &[Vector2<f64>],
+    initial: Ellipse,
+    free: [bool; 5],
+    options: &GeometricFitOptions,
+) -> Result<EllipseFit> {
+    let k = free.iter().filter(|f| **f).count();
+    if k == 0 {
+        return Err(DetectError::InvalidParameter {
+            what: "free parameters",
+            value: 0.0,
+            reason: "at least one parameter must be free",
+        });
+    }
+    if options.max_iterations == 0 || !(options.tolerance > 0.0 && options.tolerance.is_finite()) {
+        return Err(DetectError::InvalidParameter {
+            what: "options",
+            value: options.tolerance,
+            reason: "max_iterations must be >= 1 and tolerance positive and finite",
+        });
+    }
+    if points.len() <= k {
+        return Err(DetectError::TooFewPoints {
+            got: points.len(),
+            needed: k + 1,
+        });
+    }
+    if let Some((index, p)) = points
+        .iter()
+        .enumerate()
+        .find(|(_, p)| !(p.x.is_finite() && p.y.is_finite()))
+    {
+        return Err(DetectError::NonFinite {
+            what: "points",
+            index,
+            value: if p.x.is_finite() { p.y } else { p.x },
+        });
+    }
+    let params = [initial.cx, initial.cy, initial.a, initial.b, initial.theta];
+    if !(params.iter().all(|v| v.is_finite()) && initial.a > 0.0 && initial.b > 0.0) {
+        return Err(DetectError::InvalidParameter {
+            what: "initial ellipse",
+            value: params
+                .into_iter()
+                .find(|v| !v.is_finite() || *v <= 0.0)
+                .unwrap_or(f64::NAN),
+            reason: "parameters must be finite and the semi-axes positive",
+        });
+    }
+    // Centre the points for conditioning.
+    let n = points.len() as f64;
+    let c = points.iter().fold(Vector2::zeros(), |s, p| s + p) / n;
+    let centred: Vec<Vector2<f64>> = points.iter().map(|p| p - c).collect();
+    let idx: Vec<usize> = (0..5).filter(|&i| free[i]).collect();
+    let to_vec = |e: &Ellipse| [e.cx, e.cy, e.a, e.b, e.theta];
+    let from_vec = |v: [f64; 5]| Ellipse {
+        cx: v[0],
+        cy: v[1],
+        a: v[2],
+        b: v[3],
+        theta: v[4],
+    };
+    let mut e = Ellipse {
+        cx: initial.cx - c.x,
+        cy: initial.cy - c.y,
+        ..initial
+    };
+    let mut acc = residual::accumulate(&e, &centred, None);
+    let mut lambda = LAMBDA_START;
+    let mut iterations = 0;
+    let mut converged = false;
+    while iterations < options.max_iterations {
+        iterations += 1;
+        let mut a = nalgebra::DMatrix::<f64>::zeros(k, k);
+        let mut g = nalgebra::DVector::<f64>::zeros(k);
+        for (r, &i) in idx.iter().enumerate() {
+            g[r] = acc.jtr[i];
+            for (s, &j) in idx.iter().enumerate() {
+                a[(r, s)] = acc.jtj[(i, j)];
+            }
+        }
+        let mut accepted = false;
+        while lambda <= LAMBDA_MAX {
+            let mut damped = a.clone();
+            for r in 0..k {
+                damped[(r, r)] += lambda * a[(r, r)].max(1e-300);
+            }
+            let Some(step) = damped.cholesky().map(|ch| ch.solve(&(-&g))) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut v = to_vec(&e);
+            for (r, &i) in idx.iter().enumerate() {
+                v[i] += step[r];
+            }
+            if !(v[2] > 0.0 && v[3] > 0.0 && v.iter().all(|x| x.is_finite())) {
+                lambda *= 10.0;
+                continue;
+            }
+            let next = from_vec(v);
+            let next_acc = residual::accumulate(&next, &centred, None);
+            if next_acc.ssr < acc.ssr {
+                let gain = acc.ssr - next_acc.ssr;
+                let small = gain <= options.tolerance * acc.ssr
+                    || step.amax() <= options.tolerance * (1.0 + e.a);
+                e = next;
+                acc = next_acc;
+                lambda = (lambda * 0.1).max(1e-15);
+                accepted = true;
+                converged = small;
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !accepted {
+            // No decrease possible: at the minimum to rounding.
+            converged = true;
+        }
+        if converged {
+            break;
+        }
+    }
+    let mut a = nalgebra::DMatrix::<f64>::zeros(k, k);
+    for (r, &i) in idx.iter().enumerate() {
+        for (s, &j) in idx.iter().enumerate() {
+            a[(r, s)] = acc.jtj[(i, j)];
+        }
+    }
+    let names = ["cx", "cy", "a", "b", "theta"];
+    let Some(inv) = a
+        .clone()
+        .try_inverse()
+        .filter(|m| m.iter().all(|x| x.is_finite()))
+    else {
+        let free_names: Vec<&str> = idx.iter().map(|&i| names[i]).collect();
+        return Err(DetectError::RankDeficient {
+            reason: format!(
+                "the free parameters {free_names:?} are not determined by the {} points",
+                points.len()
+            ),
+        });
+    };
+    let dof = points.len() - k;
+    let sigma2 = acc.ssr / dof as f64;
+    let mut cov = nalgebra::Matrix5::<f64>::zeros();
+    for (r, &i) in idx.iter().enumerate() {
+        for (s, &j) in idx.iter().enumerate() {
+            cov[(i, j)] = sigma2 * inv[(r, s)];
+        }
+    }
+    Ok(EllipseFit {
+        ellipse: Ellipse {
+            cx: e.cx + c.x,
+            cy: e.cy + c.y,
+            ..e
+        },
+        residual_mean: acc.sum_abs / n,
+        residual_rms: (acc.ssr / n).sqrt(),
+        covariance: Some(cov),
+        iterations,
+        converged,
+    })
+}

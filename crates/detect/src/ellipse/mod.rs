@@ -43,7 +43,7 @@ use nalgebra::{Matrix3, Matrix5, SymmetricEigen, Vector2};
 use crate::{DetectError, Result};
 
 pub use direct::fit_ellipse_direct;
-pub use geometric::{GeometricFitOptions, fit_ellipse_geometric};
+pub use geometric::{GeometricFitOptions, fit_ellipse_geometric, fit_ellipse_geometric_masked};
 
 /// The result of an ellipse fit.
 #[derive(Debug, Clone, PartialEq)]

@@ -526,3 +526,59 @@ fn short_arc_whose_best_fit_degenerates_is_an_error() {
     );
     eprintln!("{failures} of 200 60° arcs have no bounded least-squares ellipse");
 }
+
+#[test]
+fn masked_fit_recovers_the_free_parameters_and_matches_the_full_fit_when_all_are_free() {
+    let mut rng = Pcg64::seed_from_u64(31);
+    // A flat rim ellipse seen along its front arc (eccentric angles 0.1π…0.9π, 40 %).
+    let truth = Ellipse::new(640.0, 300.0, 300.0, 22.0, 0.01).unwrap();
+    let pts = arc(&truth, 0.1 * PI, 0.8 * PI, 400, 0.05, &mut rng);
+    let start = Ellipse {
+        cx: truth.cx + 1.5,
+        cy: truth.cy - 1.0,
+        b: truth.b * 1.05,
+        ..truth
+    };
+    let opts = GeometricFitOptions::default();
+    let fit =
+        fit_ellipse_geometric_masked(&pts, start, [true, true, false, true, false], &opts).unwrap();
+    assert!(fit.converged);
+    let err = param_error(&fit.ellipse, &truth);
+    assert_eq!((err[2], err[4]), (0.0, 0.0), "fixed parameters moved");
+    let cov = fit.covariance.unwrap();
+    for k in [0, 1, 3] {
+        // Within 4σ of the fit's own covariance (an independent check of the Jacobian scale).
+        assert!(
+            err[k].abs() < 4.0 * cov[(k, k)].sqrt() + 1e-9,
+            "k={k}: {err:?} {cov}"
+        );
+    }
+    assert_eq!(cov[(2, 2)], 0.0);
+    assert!(fit.residual_rms < 0.07);
+    // All free: the same minimum as the conic-space LM.
+    let full = fit_ellipse_geometric(&pts, None, &opts).unwrap();
+    let all = fit_ellipse_geometric_masked(&pts, full.ellipse, [true; 5], &opts).unwrap();
+    let d = param_error(&all.ellipse, &full.ellipse);
+    assert!(d.amax() < 1e-6 * 300.0, "{d:?}");
+    assert!((all.residual_rms - full.residual_rms).abs() < 1e-9);
+}
+
+#[test]
+fn masked_fit_rejects_bad_input() {
+    let e = Ellipse::new(0.0, 0.0, 10.0, 5.0, 0.0).unwrap();
+    let pts = e.sample(20, 0.0, 2.0).unwrap();
+    let opts = GeometricFitOptions::default();
+    assert!(fit_ellipse_geometric_masked(&pts, e, [false; 5], &opts).is_err());
+    assert!(matches!(
+        fit_ellipse_geometric_masked(&pts[..3], e, [true, true, false, true, false], &opts),
+        Err(DetectError::TooFewPoints { .. })
+    ));
+    let mut nan = pts.clone();
+    nan[4].x = f64::NAN;
+    assert!(matches!(
+        fit_ellipse_geometric_masked(&nan, e, [true; 5], &opts),
+        Err(DetectError::NonFinite { .. })
+    ));
+    let bad = Ellipse { b: -1.0, ..e };
+    assert!(fit_ellipse_geometric_masked(&pts, bad, [true; 5], &opts).is_err());
+}

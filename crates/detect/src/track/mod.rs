@@ -13,9 +13,14 @@
 //! Prediction follows §4.2. A rim seen in the previous frame is moved by image motion: a
 //! constant-velocity model on the ellipse parameters, each edge point keeping its eccentric
 //! angle (the seed uses dense optical flow here; the motion model needs no image). A rim seen
-//! earlier is predicted by eq. (4.1): its 3D circle `w_k` — estimated from its past ellipses,
-//! the camera poses and the known wafer radius ([`circle`]) — is projected through the current
-//! camera pose at the rim angles of its last visible points. Tracks unseen for more than
+//! earlier is predicted by eq. (4.1): its 3D circle `w_k` — estimated from the edge points of its
+//! recent views, the camera poses and the known wafer radius ([`circle_fit`], started from the
+//! single-ellipse back-projections of [`circle`]; with a normal prior and a carrier-axis prior,
+//! see [`TrackerOptions::stack_axis_sigma`]) — is projected through the current camera pose at
+//! the rim angles where it was seen. A rim whose estimate is tight
+//! ([`TrackerOptions::projection_max_center_std`]) is projected also when it was seen in the
+//! previous frame, and its track is kept [`TrackerOptions::max_missed_3d`] frames for
+//! re-acquisition. Tracks unseen for more than
 //! [`TrackerOptions::max_missed`] frames are retired, as the seed discards long-invisible
 //! wafers.
 //!
@@ -42,6 +47,7 @@
 //! ```
 
 pub mod circle;
+pub mod circle_fit;
 pub mod registration;
 
 use std::collections::VecDeque;
@@ -53,7 +59,10 @@ use crate::assignment::Assignment;
 use crate::wafers::{RimKind, WaferEdge};
 use crate::{DetectError, Result};
 use circle::{Circle3, check_intrinsics, circles_from_ellipse, project};
-use registration::{RegistrationOptions, SegmentPoints, greedy_nearest_centre, register_segments};
+use circle_fit::{CircleFit, CircleFitOptions, RimView, refine_circle};
+use registration::{
+    RegistrationOptions, SegmentPoints, greedy_nearest_centre, register_segments_gated,
+};
 
 /// Which associator registers predicted and observed segments.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -99,6 +108,33 @@ pub struct TrackerOptions {
     /// the previous frame with a known image velocity (the seed uses image motion there; a rim
     /// seen only once has no velocity and is projected whenever possible).
     pub prefer_projection: bool,
+    /// Estimate each rim's 3D circle from the edge points of its last `circle_window` views
+    /// with their camera poses ([`circle_fit::refine_circle`]) instead of averaging per-view
+    /// ellipse back-projections (needs poses and `intrinsics`).
+    pub multiview_circle: bool,
+    /// Standard deviation (radians) of a wafer's tilt from `normal_prior` in the multi-view fit.
+    pub normal_prior_sigma: f64,
+    /// Levenberg–Marquardt iterations of the multi-view fit per registered frame (warm start).
+    pub circle_fit_iterations: usize,
+    /// A rim whose multi-view estimate has a centre standard deviation below this (metres) and
+    /// an RMS point distance below `projection_max_rms` is predicted by the projection (4.1)
+    /// also when it was seen in the previous frame: with known camera poses it is exact up to
+    /// the estimate's error, while image motion extrapolates noisy ellipse fits.
+    pub projection_max_center_std: f64,
+    /// See `projection_max_center_std` (pixels).
+    pub projection_max_rms: f64,
+    /// A confirmed track whose 3D estimate is good enough for the projection prediction (see
+    /// `projection_max_center_std`) is kept this many frames unseen (instead of `max_missed`),
+    /// so that a wafer leaving the image and coming back is re-acquired by its projected 3D
+    /// position (Algorithm 4's re-acquisition, prediction case 2 of §4.2).
+    pub max_missed_3d: usize,
+    /// Carrier-axis prior (metres; `None`: off). The carrier stacks the wafers coaxially at a
+    /// fixed pitch, so every wafer centre lies near one line along the common normal. The line
+    /// is the mean centre and mean normal of the tracks with well-estimated rims (at least
+    /// three); a young rim's multi-view fit gets a prior with this standard deviation across
+    /// it, so that one partial or edge-on view already fixes its height on the stack and the
+    /// projection prediction (4.1) replaces image-motion extrapolation of noisy ellipses.
+    pub stack_axis_sigma: Option<f64>,
 }
 
 impl Default for TrackerOptions {
@@ -115,8 +151,15 @@ impl Default for TrackerOptions {
             intrinsics: None,
             wafer_radius: 0.15,
             normal_prior: None,
-            circle_window: 10,
+            circle_window: 6,
             prefer_projection: false,
+            multiview_circle: true,
+            normal_prior_sigma: 0.05,
+            circle_fit_iterations: 1,
+            projection_max_center_std: 0.003,
+            projection_max_rms: 2.0,
+            max_missed_3d: 300,
+            stack_axis_sigma: Some(0.002),
         }
     }
 }
@@ -139,6 +182,12 @@ impl TrackerOptions {
         positive("greedy_gate", self.greedy_gate)?;
         positive("rim_merge_distance", self.rim_merge_distance)?;
         positive("wafer_radius", self.wafer_radius)?;
+        positive("normal_prior_sigma", self.normal_prior_sigma)?;
+        positive("projection_max_center_std", self.projection_max_center_std)?;
+        positive("projection_max_rms", self.projection_max_rms)?;
+        if let Some(s) = self.stack_axis_sigma {
+            positive("stack_axis_sigma", s)?;
+        }
         for (what, v) in [
             ("max_points_per_segment", self.max_points_per_segment),
             ("min_hits", self.min_hits),
@@ -188,6 +237,13 @@ struct RimState {
     candidates: VecDeque<[Circle3; 2]>,
     /// The current 3D estimate (world frame).
     circle: Option<Circle3>,
+    /// The rim's most recent views (pose and edge points) for the multi-view estimate.
+    views: VecDeque<RimView>,
+    /// The multi-view estimate, if it ran.
+    fit: Option<CircleFit>,
+    /// Per view in `views`: the rim-angle bins (`ANGLE_BINS` over the circle) its points fell
+    /// in, located on the estimate of that frame.
+    bins: VecDeque<u64>,
 }
 
 /// The predicted segment of one track in the current frame.
@@ -195,6 +251,8 @@ struct RimState {
 struct Prediction {
     points: Vec<[f64; 2]>,
     ellipse: Option<Ellipse>,
+    /// Every rim was projected from a well-estimated 3D circle (a tight prediction).
+    tight: bool,
 }
 
 /// One tracked wafer.
@@ -239,11 +297,26 @@ impl Track {
     }
 }
 
+/// Edge points per view kept for the multi-view circle estimate.
+const MULTIVIEW_POINTS: usize = 24;
+
 fn rim_index(kind: RimKind) -> usize {
     match kind {
         RimKind::Upper => 0,
         RimKind::Lower => 1,
     }
+}
+
+/// Wall-clock time (seconds) of the stages of the last [`Tracker::update`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct UpdateTimings {
+    /// Prediction of every track's segment (§4.2).
+    pub predict: f64,
+    /// Association: point sets, kd-tree, kNN, E-step, cost matrix and assignment (Algorithm 5),
+    /// or the greedy baseline.
+    pub associate: f64,
+    /// Track management (Algorithm 4), including the 3D rim estimates.
+    pub manage: f64,
 }
 
 /// The multi-wafer tracker of 000_3b1454b2b2194811.txt Algorithm 4 (see the module doc).
@@ -255,6 +328,9 @@ pub struct Tracker {
     frame: usize,
     next_id: u64,
     edge_tracks: Vec<Option<u64>>,
+    timings: UpdateTimings,
+    /// The carrier axis (point, unit direction) of this frame, if estimated.
+    axis: Option<(Vector3<f64>, Vector3<f64>)>,
 }
 
 impl Tracker {
@@ -268,6 +344,8 @@ impl Tracker {
             frame: 0,
             next_id: 0,
             edge_tracks: Vec::new(),
+            timings: UpdateTimings::default(),
+            axis: None,
         })
     }
 
@@ -289,6 +367,11 @@ impl Tracker {
     /// Number of frames processed so far (the index of the next frame).
     pub fn frame(&self) -> usize {
         self.frame
+    }
+
+    /// Stage timings of the last [`Tracker::update`].
+    pub fn timings(&self) -> UpdateTimings {
+        self.timings
     }
 
     /// For each edge of the last [`Tracker::update`], the track it was registered to
@@ -331,11 +414,13 @@ impl Tracker {
                 None => groups.push((e.wafer_id, vec![i])),
             }
         }
+        let t0 = std::time::Instant::now();
         let predictions: Vec<Prediction> = self
             .tracks
             .iter()
             .map(|t| self.predict(t, frame, t_wc))
             .collect();
+        let t1 = std::time::Instant::now();
         let assignment = match self.options.associator {
             Associator::Hierarchical => self.register_hierarchical(edges, &groups, &predictions)?,
             Associator::GreedyNearestCentre => {
@@ -357,6 +442,8 @@ impl Tracker {
                 greedy_nearest_centre(&observed, &predicted, self.options.greedy_gate)?
             }
         };
+        let t2 = std::time::Instant::now();
+        self.axis = self.stack_axis();
         // Track management (Algorithm 4).
         self.edge_tracks = vec![None; edges.len()];
         for (t, p) in self.tracks.iter_mut().zip(&predictions) {
@@ -399,7 +486,12 @@ impl Tracker {
                 if !t.confirmed {
                     continue;
                 }
-                if t.missed > max_missed {
+                let limit = if t.rims.iter().flatten().any(|r| self.well_estimated(r)) {
+                    max_missed.max(self.options.max_missed_3d)
+                } else {
+                    max_missed
+                };
+                if t.missed > limit {
                     self.retired.push(t);
                     continue;
                 }
@@ -432,6 +524,12 @@ impl Tracker {
             }
         }
         self.frame += 1;
+        let t3 = std::time::Instant::now();
+        self.timings = UpdateTimings {
+            predict: (t1 - t0).as_secs_f64(),
+            associate: (t2 - t1).as_secs_f64(),
+            manage: (t3 - t2).as_secs_f64(),
+        };
         Ok(())
     }
 
@@ -455,7 +553,14 @@ impl Tracker {
         for p in predictions {
             predicted.push_segment(p.points.iter().copied());
         }
-        Ok(register_segments(&observed, &predicted, &self.options.registration)?.assignment)
+        let tight: Vec<bool> = predictions.iter().map(|p| p.tight).collect();
+        Ok(register_segments_gated(
+            &observed,
+            &predicted,
+            &self.options.registration,
+            Some(&tight),
+        )?
+        .assignment)
     }
 
     /// The track registered in this frame whose edges the group's edges lie next to
@@ -508,6 +613,7 @@ impl Tracker {
         t_wc: Option<&Isometry3<f64>>,
     ) {
         let opts = self.options.clone();
+        let axis = self.axis;
         let t = &mut self.tracks[l];
         if !t.visible {
             t.visible = true;
@@ -534,10 +640,25 @@ impl Tracker {
                 continue;
             };
             let slot = &mut t.rims[rim_index(kind)];
-            let (prev, mut candidates) = match slot.take() {
-                Some(s) if s.frame == frame => (s.prev, s.candidates),
-                Some(s) => (Some((s.frame, s.edge.ellipse)), s.candidates),
-                None => (None, VecDeque::new()),
+            let (prev, mut candidates, mut views, mut bins, old_fit, same_frame) = match slot.take()
+            {
+                Some(s) if s.frame == frame => (s.prev, s.candidates, s.views, s.bins, s.fit, true),
+                Some(s) => (
+                    Some((s.frame, s.edge.ellipse)),
+                    s.candidates,
+                    s.views,
+                    s.bins,
+                    s.fit,
+                    false,
+                ),
+                None => (
+                    None,
+                    VecDeque::new(),
+                    VecDeque::new(),
+                    VecDeque::new(),
+                    None,
+                    false,
+                ),
             };
             let cands = match (t_wc, opts.intrinsics.as_ref()) {
                 (Some(pose), Some(k)) => circles_from_ellipse(k, &e.ellipse, opts.wafer_radius)
@@ -551,7 +672,67 @@ impl Tracker {
                 }
                 candidates.push_back(c);
             }
-            let circle = estimate_circle(&candidates, opts.normal_prior.as_ref());
+            let mut circle = estimate_circle(&candidates, opts.normal_prior.as_ref());
+            let mut fit = None;
+            if let (true, Some(pose), Some(k)) =
+                (opts.multiview_circle, t_wc, opts.intrinsics.as_ref())
+            {
+                let view = RimView {
+                    t_cw: pose.inverse(),
+                    points: subsample(&edge_points(e), MULTIVIEW_POINTS),
+                };
+                // A second registration of this rim in the same frame (merged edge) replaces
+                // the frame's view.
+                if same_frame && t_wc.is_some() {
+                    views.pop_back();
+                    if bins.len() > views.len() {
+                        bins.pop_back();
+                    }
+                }
+                if views.len() == opts.circle_window {
+                    views.pop_front();
+                    if bins.len() > views.len() {
+                        bins.pop_front();
+                    }
+                }
+                views.push_back(view);
+                // Warm start from the previous estimate while it is well constrained, else
+                // from the back-projected candidates.
+                let init = old_fit
+                    .filter(|f| f.center_std() < 10.0 * opts.projection_max_center_std)
+                    .map(|f| f.circle)
+                    .or(circle);
+                if let Some(init) = init {
+                    let o = CircleFitOptions {
+                        max_iterations: opts.circle_fit_iterations,
+                        pixel_sigma: 1.0,
+                        huber: 2.0,
+                        normal_prior: opts.normal_prior,
+                        normal_sigma: opts.normal_prior_sigma,
+                        axis_prior: match (axis, opts.stack_axis_sigma) {
+                            (Some((p, d)), Some(s)) => Some((p, d, s)),
+                            _ => None,
+                        },
+                    };
+                    let init = Circle3 {
+                        radius: opts.wafer_radius,
+                        ..init
+                    };
+                    if let Ok(f) = refine_circle(k, views.make_contiguous(), &init, &o) {
+                        circle = Some(f.circle);
+                        fit = Some(f);
+                    }
+                }
+                // Keep `bins` aligned with `views` (0: no estimate to locate the points on).
+                while bins.len() + 1 < views.len() {
+                    bins.push_front(0);
+                }
+                let b = match (fit.as_ref(), views.back()) {
+                    (Some(f), Some(v)) => angle_bins(&f.circle, pose, k, &v.points),
+                    _ => 0,
+                };
+                bins.push_back(b);
+            }
             *slot = Some(RimState {
                 edge: e.clone(),
                 frame,
@@ -559,6 +740,9 @@ impl Tracker {
                 prev,
                 candidates,
                 circle,
+                views,
+                fit,
+                bins,
             });
         }
     }
@@ -569,17 +753,28 @@ impl Tracker {
         let mut out = Prediction {
             points: Vec::new(),
             ellipse: None,
+            tight: t.rims.iter().any(Option::is_some),
         };
         for rim in t.rims.iter().flatten() {
             let gap = frame.saturating_sub(rim.frame).max(1);
             let projected = match (t_wc, self.options.intrinsics.as_ref(), rim.circle, rim.pose) {
+                (Some(pose), Some(k), Some(c), _)
+                    if self.well_estimated(rim) && rim.bins.iter().any(|&b| b != 0) =>
+                {
+                    let seen = rim.bins.iter().fold(0, |a, &b| a | b);
+                    project_bins(k, pose, &c, seen, m)
+                }
                 (Some(pose), Some(k), Some(c), Some(old_pose))
-                    if gap > 1 || self.options.prefer_projection || !has_velocity(rim) =>
+                    if gap > 1
+                        || self.options.prefer_projection
+                        || !has_velocity(rim)
+                        || self.well_estimated(rim) =>
                 {
                     project_rim(k, pose, &old_pose, &c, &rim.edge, m)
                 }
                 _ => None,
             };
+            out.tight &= projected.is_some() && self.well_estimated(rim);
             let (pts, ell) = match projected {
                 Some(p) => p,
                 None => {
@@ -604,12 +799,107 @@ impl Tracker {
         out
     }
 
+    /// The carrier axis: mean centre and sign-aligned mean normal of the upper rims (else lower)
+    /// of the tracks whose estimate is good enough for the projection prediction; `None` with
+    /// fewer than three such tracks or without `stack_axis_sigma`.
+    fn stack_axis(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        self.options.stack_axis_sigma?;
+        let mut centre = Vector3::zeros();
+        let mut normal = Vector3::zeros();
+        let mut count = 0usize;
+        for t in &self.tracks {
+            let Some(f) = t
+                .rims
+                .iter()
+                .flatten()
+                .find(|r| self.well_estimated(r))
+                .and_then(|r| r.fit)
+            else {
+                continue;
+            };
+            let n = f.circle.normal;
+            normal += if count > 0 && n.dot(&normal) < 0.0 {
+                -n
+            } else {
+                n
+            };
+            centre += f.circle.center;
+            count += 1;
+        }
+        if count < 3 {
+            return None;
+        }
+        let dir = normal.try_normalize(1e-12)?;
+        Some((centre / count as f64, dir))
+    }
+
+    /// Whether the rim's multi-view 3D estimate is good enough to predict it by projection.
+    fn well_estimated(&self, rim: &RimState) -> bool {
+        rim.fit.is_some_and(|f| {
+            f.center_std() < self.options.projection_max_center_std
+                && f.rms < self.options.projection_max_rms
+        })
+    }
+
     fn in_image(&self, p: &[f64; 2]) -> bool {
         match self.options.image_size {
             Some((w, h)) => p[0] >= -0.5 && p[1] >= -0.5 && p[0] <= w - 0.5 && p[1] <= h - 0.5,
             None => true,
         }
     }
+}
+
+/// Number of rim-angle bins over the circle (10° each) recording where a rim was seen.
+const ANGLE_BINS: usize = 36;
+
+/// The rim-angle bins (bit `b` for `φ ∈ [−π + b·10°, −π + (b+1)·10°)`) of the points of a view
+/// taken from camera pose `t_wc`, located on the circle `c` by their rays.
+fn angle_bins(c: &Circle3, t_wc: &Isometry3<f64>, k: &Matrix3<f64>, points: &[[f64; 2]]) -> u64 {
+    let Some(k_inv) = k.try_inverse() else {
+        return 0;
+    };
+    let origin = t_wc.translation.vector;
+    let mut bins = 0u64;
+    for p in points {
+        let ray = t_wc.rotation * (k_inv * Vector3::new(p[0], p[1], 1.0));
+        if let Some(phi) = rim_angle_of_ray(c, &origin, &ray) {
+            let b =
+                ((phi + std::f64::consts::PI) / std::f64::consts::TAU * ANGLE_BINS as f64).floor();
+            if b.is_finite() {
+                bins |= 1 << (b as usize).min(ANGLE_BINS - 1);
+            }
+        }
+    }
+    bins
+}
+
+/// Eq. (4.1) for a well-estimated rim: the circle `c` projected through the current pose at
+/// the rim angles where the rim was seen in its recent views (`seen` bins, 3 samples per bin,
+/// at most `m` points), and the projected ellipse of the whole rim.
+fn project_bins(
+    k: &Matrix3<f64>,
+    t_wc: &Isometry3<f64>,
+    c: &Circle3,
+    seen: u64,
+    m: usize,
+) -> Option<(Vec<[f64; 2]>, Option<Ellipse>)> {
+    let t_cw = t_wc.inverse();
+    let width = std::f64::consts::TAU / ANGLE_BINS as f64;
+    let mut pts = Vec::with_capacity(3 * ANGLE_BINS);
+    for b in (0..ANGLE_BINS).filter(|b| seen & (1 << b) != 0) {
+        for s in 0..3 {
+            let phi = -std::f64::consts::PI + width * (b as f64 + (s as f64 + 0.5) / 3.0);
+            let x_c = t_cw * nalgebra::Point3::from(c.point_at(phi));
+            if let Some(q) = project(k, &x_c.coords) {
+                pts.push([q.x, q.y]);
+            }
+        }
+    }
+    if pts.is_empty() {
+        return None;
+    }
+    let ell = project_circle_world(k, &t_cw, &c.center, &c.normal, c.radius).ok();
+    Some((subsample(&pts, m), ell))
 }
 
 /// Eq. (4.1): the rim points of the last visible segment, located on the 3D circle `c` by
@@ -630,7 +920,7 @@ fn project_rim(
         .iter()
         .filter_map(|p| {
             let ray = old_pose.rotation * (k_inv * Vector3::new(p[0], p[1], 1.0));
-            let phi = c.angle_of_ray(&origin, &ray)?;
+            let phi = rim_angle_of_ray(c, &origin, &ray)?;
             let x_c = t_cw * nalgebra::Point3::from(c.point_at(phi));
             project(k, &x_c.coords).map(|q| [q.x, q.y])
         })
@@ -640,6 +930,28 @@ fn project_rim(
     }
     let ell = project_circle_world(k, &t_cw, &c.center, &c.normal, c.radius).ok();
     Some((pts, ell))
+}
+
+/// Rim angle of the circle point seen along a ray: where the ray meets the circle's plane, or,
+/// when the view is within ~6° of edge-on (where that intersection is ill-conditioned), where
+/// it enters the sphere through the rim (the near side, which is the visible front rim);
+/// `None` if the ray misses both.
+fn rim_angle_of_ray(c: &Circle3, origin: &Vector3<f64>, ray: &Vector3<f64>) -> Option<f64> {
+    let d = ray.try_normalize(1e-300)?;
+    if c.normal.dot(&d).abs() > 0.1 {
+        return c.angle_of_ray(origin, &d);
+    }
+    let oc = origin - c.center;
+    let b = oc.dot(&d);
+    let disc = b * b - (oc.norm_squared() - c.radius * c.radius);
+    // A ray passing beside the sphere: its closest approach.
+    let s = if disc >= 0.0 { -b - disc.sqrt() } else { -b };
+    if !(s > 0.0 && s.is_finite()) {
+        return None;
+    }
+    let x = oc + d * s;
+    let (u, v) = c.basis();
+    Some(x.dot(&v).atan2(x.dot(&u)))
 }
 
 /// Whether the rim has a recent previous observation to estimate its image velocity from.

@@ -1,6 +1,6 @@
 //! Hierarchical segment registration with a Gaussian mixture, 000_3b1454b2b2194811.txt §4.3,
 //! Algorithm 5, and the greedy nearest-centre associator it is compared with (the strategy of
-//! the seed's reference [90], §4.3).
+//! the seed's reference \[90\], §4.3).
 //!
 //! Observed edge points `x_i` (segment `k = f(i)`) are explained by predicted points `x̂_j`
 //! (segment `l = g(j)`) through the mixture of eq. (4.6): a Gaussian `N(x̂_j, σ²)` when the
@@ -41,6 +41,13 @@ pub struct RegistrationOptions {
     pub gate: f64,
     /// A segment pair is registered only if its score `C(k, l)` exceeds this value.
     pub min_score: f64,
+    /// A segment pair is registered only if it explains at least this fraction of the observed
+    /// segment's points (`Σ_{I(k),J(l)} Q(i, j) / |I(k)|`, the soft count of eq. 4.7) or of the
+    /// predicted segment's points (those with an observed point of `k` within 2σ). `C(k, l) > 0`
+    /// alone accepts a neighbouring wafer's rim when the track's own wafer is missing: two
+    /// ellipses a pitch apart touch near the ends of their major axes, and those few points
+    /// give a positive score. 0 disables the test.
+    pub min_coverage: f64,
 }
 
 impl Default for RegistrationOptions {
@@ -51,6 +58,7 @@ impl Default for RegistrationOptions {
             knn: 8,
             gate: 5.0,
             min_score: 0.0,
+            min_coverage: 0.0,
         }
     }
 }
@@ -79,6 +87,13 @@ impl RegistrationOptions {
                 reason: "the kNN search needs K >= 1",
             });
         }
+        if !(0.0..=1.0).contains(&self.min_coverage) {
+            return Err(DetectError::InvalidParameter {
+                what: "min_coverage",
+                value: self.min_coverage,
+                reason: "must be a fraction in [0, 1]",
+            });
+        }
         if !self.min_score.is_finite() {
             return Err(DetectError::InvalidParameter {
                 what: "min_score",
@@ -102,6 +117,9 @@ impl RegistrationOptions {
 pub struct Registration {
     /// The score matrix `C(k, l)` of eq. (4.10), observed segments × predicted segments.
     pub score: DMatrix<f64>,
+    /// The coverage of each pair (see [`RegistrationOptions::min_coverage`]): the larger of the
+    /// explained fractions of the observed and of the predicted segment.
+    pub coverage: DMatrix<f64>,
     /// The one-to-one registration `θ` of eq. (4.9): rows are observed, columns predicted
     /// segments; `assignment.cost` is `−Σ C(k, l)` over the registered pairs.
     pub assignment: Assignment,
@@ -187,23 +205,56 @@ pub fn register_segments(
     predicted: &SegmentPoints,
     options: &RegistrationOptions,
 ) -> Result<Registration> {
+    register_segments_gated(observed, predicted, options, None)
+}
+
+/// [`register_segments`] with the coverage test ([`RegistrationOptions::min_coverage`]) applied
+/// only to the predicted segments flagged in `coverage_test` (one flag per predicted segment;
+/// `None`: all). The tracker flags the segments whose prediction is tight (projected from a
+/// well-estimated 3D rim): for a loose prediction (image motion of a young track) a true
+/// registration may be displaced by more than the coverage radius of 2σ.
+///
+/// Errors: as [`register_segments`], and [`DetectError::WrongLength`] when `coverage_test`
+/// does not have one flag per predicted segment.
+pub fn register_segments_gated(
+    observed: &SegmentPoints,
+    predicted: &SegmentPoints,
+    options: &RegistrationOptions,
+    coverage_test: Option<&[bool]>,
+) -> Result<Registration> {
     options.validate()?;
+    if let Some(f) = coverage_test
+        && f.len() != predicted.count
+    {
+        return Err(DetectError::WrongLength {
+            what: "coverage_test flags",
+            got: f.len(),
+            expected: predicted.count,
+        });
+    }
     observed.validate("observed points")?;
     predicted.validate("predicted points")?;
     let (kc, lc) = (observed.count, predicted.count);
     let mut score = DMatrix::zeros(kc, lc);
+    let mut coverage = DMatrix::zeros(kc, lc);
     if !observed.points.is_empty() && !predicted.points.is_empty() {
-        accumulate_scores(observed, predicted, options, &mut score)?;
+        accumulate_scores(observed, predicted, options, &mut score, &mut coverage)?;
     }
-    let cost = score.map(|c| {
-        if c > options.min_score {
+    let cost = DMatrix::from_fn(kc, lc, |k, l| {
+        let c = score[(k, l)];
+        let tested = coverage_test.is_none_or(|f| f[l]);
+        if c > options.min_score && (!tested || coverage[(k, l)] >= options.min_coverage) {
             -c
         } else {
             f64::INFINITY
         }
     });
     let assignment = solve_assignment_with_unassigned(&cost, &vec![0.0; kc], &vec![0.0; lc])?;
-    Ok(Registration { score, assignment })
+    Ok(Registration {
+        score,
+        coverage,
+        assignment,
+    })
 }
 
 /// The kNN / E-step / score loop of Algorithm 5.
@@ -212,6 +263,7 @@ fn accumulate_scores(
     predicted: &SegmentPoints,
     options: &RegistrationOptions,
     score: &mut DMatrix<f64>,
+    coverage: &mut DMatrix<f64>,
 ) -> Result<()> {
     let tree: ImmutableKdTree<f64, 2> =
         ImmutableKdTree::new_from_slice(&observed.points).map_err(|e| DetectError::Degenerate {
@@ -226,6 +278,15 @@ fn accumulate_scores(
     for &l in &predicted.segment {
         seg_size[l] += 1;
     }
+    let mut obs_size = vec![0usize; observed.count];
+    for &k in &observed.segment {
+        obs_size[k] += 1;
+    }
+    let r_cov2 = 4.0 * options.sigma * options.sigma;
+    // Per pair: soft count of explained observed points, count of covered predicted points.
+    let mut explained = DMatrix::<f64>::zeros(observed.count, predicted.count);
+    let mut covered = DMatrix::<f64>::zeros(observed.count, predicted.count);
+    let mut near_segments: Vec<usize> = Vec::new();
     // Predicted points grouped by segment (stable order).
     let mut order: Vec<usize> = (0..predicted.points.len()).collect();
     order.sort_by_key(|&j| predicted.segment[j]);
@@ -246,6 +307,7 @@ fn accumulate_scores(
                 .nearest_n::<SquaredEuclidean<f64>>(knn)
                 .within(r2)
                 .execute();
+            near_segments.clear();
             for r in found {
                 let g = (-r.distance / two_s2).exp();
                 let i = r.item as usize;
@@ -254,6 +316,11 @@ fn accumulate_scores(
                 }
                 sum_g[i] += g;
                 pairs.push((r.item, g, r.distance));
+                let k = observed.segment[i];
+                if r.distance <= r_cov2 && !near_segments.contains(&k) {
+                    near_segments.push(k);
+                    covered[(k, l)] += 1.0;
+                }
             }
             end += 1;
         }
@@ -267,15 +334,27 @@ fn accumulate_scores(
             }
         }
         for &i in &touched {
-            sum_g[i as usize] = 0.0;
+            let i = i as usize;
+            let s = sum_g[i];
+            if s + outlier > 0.0 {
+                explained[(observed.segment[i], l)] += s / (s + outlier);
+            }
+            sum_g[i] = 0.0;
         }
         touched.clear();
         start = end;
     }
+    for l in 0..predicted.count {
+        for k in 0..observed.count {
+            let fo = explained[(k, l)] / obs_size[k].max(1) as f64;
+            let fp = covered[(k, l)] / seg_size[l].max(1) as f64;
+            coverage[(k, l)] = fo.max(fp);
+        }
+    }
     Ok(())
 }
 
-/// The greedy nearest-centre associator (the baseline of §4.3, reference [90]): repeatedly
+/// The greedy nearest-centre associator (the baseline of §4.3, reference \[90\]): repeatedly
 /// registers the closest remaining (observed centre, predicted centre) pair, if closer than
 /// `gate` pixels. `predicted` entries that are `None` (no prediction) are never registered.
 ///

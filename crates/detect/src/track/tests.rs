@@ -483,3 +483,135 @@ fn invalid_edges_are_rejected_and_leave_the_tracker_unchanged() {
     tracker.update(&no_points, None).unwrap();
     assert_eq!(tracker.tracks().iter().filter(|t| t.visible).count(), 3);
 }
+
+/// A camera 0.45 m in front of a column of 8 level wafers (10 mm pitch), looking along +x and
+/// moving up 6 mm per frame; frame `f`'s upper-rim edges (front arcs) of the wafers in view.
+#[allow(clippy::type_complexity)]
+fn column_scene() -> (
+    Matrix3<f64>,
+    impl Fn(usize) -> Isometry3<f64>,
+    impl Fn(usize) -> Vec<WaferEdge>,
+) {
+    let k = Matrix3::new(1000.0, 0.0, 639.5, 0.0, 1000.0, 359.5, 0.0, 0.0, 1.0);
+    let pose = |f: usize| {
+        let r = UnitQuaternion::from_matrix(&Matrix3::new(
+            0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0,
+        ));
+        let t = Translation3::new(-0.45, 0.0, 0.08 + 0.006 * f as f64);
+        Isometry3::from_parts(t, r) * Isometry3::rotation(Vector3::new(-0.25, 0.0, 0.0))
+    };
+    let frame = move |f: usize| -> Vec<WaferEdge> {
+        let t_cw = pose(f).inverse();
+        (0..8)
+            .filter_map(|w| {
+                let c = Vector3::new(0.0, 0.0, 0.01 * w as f64);
+                let e = project_circle_world(&k, &t_cw, &c, &Vector3::z(), 0.15).ok()?;
+                (e.cy > 0.0 && e.cy < 720.0).then(|| edge(e, 0.3, 2.8, 150, RimKind::Upper, w))
+            })
+            .collect()
+    };
+    (k, pose, frame)
+}
+
+/// Re-acquisition by projected 3D position after a gap longer than `max_missed`: a track with
+/// a well-estimated multi-view circle is kept for `max_missed_3d` frames; with that limit
+/// lowered to `max_missed` the tracks are retired and the wafers come back under new ids.
+#[test]
+fn well_estimated_tracks_survive_a_long_gap() {
+    let (k, pose, frame) = column_scene();
+    let run = |max_missed_3d: usize| {
+        let mut tracker = Tracker::new(TrackerOptions {
+            intrinsics: Some(k),
+            normal_prior: Some(Vector3::z()),
+            image_size: Some((1280.0, 720.0)),
+            max_missed: 3,
+            max_missed_3d,
+            ..TrackerOptions::default()
+        })
+        .unwrap();
+        let mut ids = Vec::new();
+        for f in 0..20 {
+            let edges = if (8..14).contains(&f) {
+                Vec::new()
+            } else {
+                frame(f)
+            };
+            tracker.update(&edges, Some(&pose(f))).unwrap();
+            let by_wafer: std::collections::HashMap<usize, u64> = edges
+                .iter()
+                .zip(tracker.edge_tracks())
+                .map(|(e, t)| (e.wafer_id, t.unwrap()))
+                .collect();
+            ids.push(by_wafer);
+        }
+        let common: Vec<usize> = ids[7]
+            .keys()
+            .filter(|w| ids[14].contains_key(w))
+            .copied()
+            .collect();
+        assert!(
+            common.len() >= 3,
+            "wafers seen before and after: {common:?}"
+        );
+        common.iter().filter(|w| ids[7][w] == ids[14][w]).count() == common.len()
+    };
+    assert!(run(300), "identities lost across the gap");
+    assert!(
+        !run(3),
+        "the wafers kept their ids although their tracks were retired"
+    );
+}
+
+/// The coverage test of the registration: a neighbouring wafer's rim one pitch (20 px) away
+/// touches the prediction near the ends of the major axis and scores C > 0; with
+/// `min_coverage` it is not registered, while the true rim (2 px away) still is.
+#[test]
+fn coverage_test_rejects_a_neighbour_touching_the_prediction() {
+    let pred = Ellipse::new(640.0, 300.0, 300.0, 60.0, 0.0).unwrap();
+    let neighbour = Ellipse::new(640.0, 320.0, 300.0, 60.0, 0.0).unwrap();
+    let own = Ellipse::new(640.0, 302.0, 300.0, 60.0, 0.0).unwrap();
+    let pts = |e: &Ellipse| -> Vec<[f64; 2]> {
+        e.sample(60, 0.0, std::f64::consts::PI)
+            .unwrap()
+            .into_iter()
+            .map(|p| [p.x, p.y])
+            .collect()
+    };
+    let mut predicted = SegmentPoints::default();
+    predicted.push_segment(pts(&pred));
+    for (obs, min_coverage, expect) in [
+        (&neighbour, 0.0, true),
+        (&neighbour, 0.5, false),
+        (&own, 0.5, true),
+    ] {
+        let mut observed = SegmentPoints::default();
+        observed.push_segment(pts(obs));
+        let o = RegistrationOptions {
+            min_coverage,
+            ..RegistrationOptions::default()
+        };
+        let r = register_segments(&observed, &predicted, &o).unwrap();
+        assert!(r.score[(0, 0)] > 0.0);
+        assert_eq!(
+            r.assignment.row_to_col[0].is_some(),
+            expect,
+            "cy {} min_coverage {min_coverage}: coverage {}",
+            obs.cy,
+            r.coverage[(0, 0)]
+        );
+    }
+    let bad = RegistrationOptions {
+        min_coverage: 1.5,
+        ..RegistrationOptions::default()
+    };
+    assert!(register_segments(&SegmentPoints::default(), &predicted, &bad).is_err());
+    assert!(
+        register_segments_gated(
+            &SegmentPoints::default(),
+            &predicted,
+            &RegistrationOptions::default(),
+            Some(&[])
+        )
+        .is_err()
+    );
+}

@@ -134,6 +134,60 @@ pub fn random_pose<R: Rng>(
     pose_at_pixel(camera, target, [u, v], cov, tx, ty, roll)
 }
 
+/// The ROS monocular-calibration checklist that the seed's novices followed (004_815695db12a6b16c.txt
+/// ch. 5.4): target on the left, right, top and bottom of the view, close (filling the view),
+/// far (about 1/5 of the view), tilted left, right, top and bottom. Each entry is
+/// `(u, v, coverage, tilt_x, tilt_y)` with `(u, v)` as fractions of the image size.
+const NOVICE_CHECKLIST: [(f64, f64, f64, f64, f64); 10] = [
+    (0.25, 0.5, 0.4, 0.0, 0.0),
+    (0.75, 0.5, 0.4, 0.0, 0.0),
+    (0.5, 0.25, 0.4, 0.0, 0.0),
+    (0.5, 0.75, 0.4, 0.0, 0.0),
+    (0.5, 0.5, 0.75, 0.0, 0.0),
+    (0.5, 0.5, 0.2, 0.0, 0.0),
+    (0.5, 0.5, 0.45, 0.0, 0.5),
+    (0.5, 0.5, 0.45, 0.0, -0.5),
+    (0.5, 0.5, 0.45, 0.5, 0.0),
+    (0.5, 0.5, 0.45, -0.5, 0.0),
+];
+
+/// `count` target poses of a simulated novice following the written instructions of
+/// 004_815695db12a6b16c.txt ch. 5.4 (the ROS checklist): the checklist
+/// entries in a seeded random order (repeated when `count` exceeds it), each achieved loosely —
+/// position ±8 % of the image, size ±20 %, every attitude ±0.15 rad off, rolled up to ±0.2 rad
+/// — the views spread naturally over the image, not chosen adversarially.
+pub fn novice_poses(
+    camera: &Camera,
+    target: &[[f64; 2]],
+    count: usize,
+    seed: u64,
+) -> Result<Vec<Isometry3<f64>>> {
+    let (w, h) = (f64::from(camera.width()), f64::from(camera.height()));
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+    let mut order: Vec<usize> = Vec::with_capacity(count);
+    while order.len() < count {
+        let mut round: Vec<usize> = (0..NOVICE_CHECKLIST.len()).collect();
+        for i in (1..round.len()).rev() {
+            round.swap(i, rng.random_range(0..=i));
+        }
+        order.extend(round);
+    }
+    order
+        .into_iter()
+        .take(count)
+        .map(|k| {
+            let (u, v, cov, tx, ty) = NOVICE_CHECKLIST[k];
+            let u = (u + rng.random_range(-0.08..0.08)).clamp(0.05, 0.95) * w - 0.5;
+            let v = (v + rng.random_range(-0.08..0.08)).clamp(0.05, 0.95) * h - 0.5;
+            let cov = cov * rng.random_range(0.8..1.2);
+            let tx = tx + rng.random_range(-0.15..0.15);
+            let ty = ty + rng.random_range(-0.15..0.15);
+            let roll = rng.random_range(-0.2..0.2);
+            pose_at_pixel(camera, target, [u, v], cov, tx, ty, roll)
+        })
+        .collect()
+}
+
 /// The target points visible from `pose`: projected through `camera`, inside the image, within
 /// the lens's invertible range (the pixel unprojects to the point's ray), with the line of sight
 /// more than 5° off the target plane (not edge-on). Returns `(indices, pixels)`.

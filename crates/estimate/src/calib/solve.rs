@@ -280,6 +280,48 @@ fn rms_of(errs: &[[f64; 2]]) -> f64 {
     (errs.iter().map(|e| e[0] * e[0] + e[1] * e[1]).sum::<f64>() / errs.len() as f64).sqrt()
 }
 
+/// A solved stage: the problem, its summary, the intrinsics and the target poses.
+type Stage = (Built, lsq::Summary, Vec<f64>, Vec<Isometry3<f64>>);
+
+/// The fallback of [`calibrate`]'s stage B: starting from `start` (the homography
+/// initialisation), solves with the parameter groups of [`free_groups`] for two and then three
+/// or more views (restricted to `free_g`), each stage starting from the previous one.
+fn staged_release(
+    opts: &CalibOptions,
+    sigma: f64,
+    views: &[View],
+    start: (Vec<f64>, Vec<Isometry3<f64>>),
+    free_g: &[bool],
+) -> Result<Stage> {
+    let (mut params, mut poses) = start;
+    let mut last = None;
+    for stage in 2..=3 {
+        let free: Vec<bool> = free_groups(opts.model, stage)
+            .iter()
+            .zip(free_g)
+            .map(|(a, b)| *a && *b)
+            .collect();
+        let mut b = build(
+            opts,
+            sigma,
+            views,
+            &params,
+            &poses,
+            &free,
+            RobustLoss::Trivial,
+        )?;
+        let summary = b.problem.solve(&solver_options(opts.max_iterations))?;
+        (params, poses) = read_back(&b, opts.model)?;
+        last = Some((b, summary));
+    }
+    let (b, summary) = last.ok_or(EstimateError::InvalidParameter {
+        name: "views",
+        value: views.len() as f64,
+        reason: "no release stage ran",
+    })?;
+    Ok((b, summary, params, poses))
+}
+
 /// Calibrates a camera from views of a planar target (004_815695db12a6b16c.txt ch. 5.1–5.2):
 ///
 /// 1. initialisation: the restricted model from plane-to-ray homographies ([`initialise`]), or
@@ -339,6 +381,7 @@ pub fn calibrate(views: &[View], opts: &CalibOptions) -> Result<Calibration> {
     } else {
         vec![true; groups.len()]
     };
+    let init_state = (params.clone(), poses.clone());
     // Stage A: focal lengths and poses only (skipped on a warm start).
     if opts.initial_params.is_none() {
         let mut only_f = vec![false; groups.len()];
@@ -367,6 +410,28 @@ pub fn calibrate(views: &[View], opts: &CalibOptions) -> Result<Calibration> {
     )?;
     let mut summary = b.problem.solve(&solver_options(opts.max_iterations))?;
     (params, poses) = read_back(&b, model)?;
+    // The focal-only fit of a strongly distorted lens can wander far (three views of a
+    // k1 = −0.3 lens: fx 794, fy 3075 from 457), and releasing everything from there ends in a
+    // far local minimum (fy → 10⁴, χ²/dof ≈ 270). If the fit is implausible for the detector
+    // noise (χ²/dof above 25, i.e. RMS above 5 σ_z), retry from the homography initialisation
+    // releasing the groups in the order of the bootstrapping schedule (ch. 5.2: the two-view
+    // set, then all) and keep the lower cost.
+    let nobs: usize = views.iter().map(|v| 2 * v.len()).sum();
+    let nfree: usize = groups
+        .iter()
+        .zip(&free_g)
+        .filter(|(_, f)| **f)
+        .map(|(g, _)| g.len())
+        .sum::<usize>()
+        + 6 * views.len();
+    let chi2_dof = 2.0 * summary.final_cost / nobs.saturating_sub(nfree).max(1) as f64;
+    if chi2_dof > 25.0
+        && opts.initial_params.is_none()
+        && let Ok((pb, ps, pp, pq)) = staged_release(opts, sigma, views, init_state, &free_g)
+        && ps.final_cost < summary.final_cost
+    {
+        (b, summary, params, poses) = (pb, ps, pp, pq);
+    }
     // Outliers: flag against the current fit over all points, re-solve on the inliers, and
     // repeat until the flagged set is stable (a gross outlier biases the first fit, so points
     // near it may be flagged once and come back).

@@ -7,8 +7,13 @@ use autoteach_geometry::lie::se3_plus;
 use nalgebra::{DMatrix, Isometry3, Vector6};
 use std::sync::Arc;
 
-use super::ere::{covariance_sqrt, max_ere, sample_cameras, standard_draws, test_grid};
-use super::guide::{candidate_poses, random_poses, synthesize_view_seeded};
+use super::ere::{
+    GRID_MARGIN, covariance_sqrt, max_ere, sample_cameras, standard_draws, test_grid,
+    test_grid_with_margin,
+};
+use super::guide::{
+    candidate_poses, novice_poses, random_poses, synthesize_view_seeded, visible_points,
+};
 use super::init::{homography, initialise, pose_from_homography};
 use super::residual::{ReprojectionResidual, param_groups, pose_from_params, pose_to_params};
 use super::solve::{CalibOptions, calibrate, select_model};
@@ -219,6 +224,121 @@ fn max_ere_matches_the_closed_form_for_principal_point_noise() {
         "{} vs {expect}",
         m.value
     );
+    // One error mode moves every test point alike: the expected maximum equals the Max ERE.
+    assert!(
+        (m.expected_max - m.value).abs() < 1e-12 * m.value,
+        "{} vs {}",
+        m.expected_max,
+        m.value
+    );
+}
+
+#[test]
+fn expected_max_is_the_mean_of_per_sample_maxima_and_bounds_the_max_ere() {
+    // Independent truth: brute force over the samples and grid with the camera's own projection.
+    let cam = kb_camera();
+    let mut cov = DMatrix::zeros(8, 8);
+    for (i, v) in [4.0, 4.0, 1.0, 1.0, 1e-4, 1e-5, 1e-6, 1e-7]
+        .iter()
+        .enumerate()
+    {
+        cov[(i, i)] = *v;
+    }
+    let l = covariance_sqrt(&cov).unwrap();
+    let draws = standard_draws(300, 8, 4);
+    let samples = sample_cameras(&cam, &l, &draws).unwrap();
+    let grid = test_grid(640, 480, 5);
+    let m = max_ere(&cam, &samples, &grid).unwrap();
+    let mut per_pixel = vec![0.0; grid.len()];
+    let mut per_sample = 0.0;
+    for s in &samples {
+        let mut worst = 0.0f64;
+        for (k, px) in grid.iter().enumerate() {
+            let ray = cam
+                .unproject(&nalgebra::Vector2::new(px[0], px[1]))
+                .unwrap();
+            let d = (s.project(&ray).unwrap() - cam.project(&ray).unwrap()).norm();
+            per_pixel[k] += d / samples.len() as f64;
+            worst = worst.max(d);
+        }
+        per_sample += worst / samples.len() as f64;
+    }
+    let max_mean = per_pixel.iter().cloned().fold(0.0, f64::max);
+    assert!((m.value - max_mean).abs() < 1e-9 * max_mean);
+    assert!((m.expected_max - per_sample).abs() < 1e-9 * per_sample);
+    // Several modes peaking at different corners: strictly more than the max of the means.
+    assert!(
+        m.expected_max > 1.05 * m.value,
+        "{} vs {}",
+        m.expected_max,
+        m.value
+    );
+}
+
+#[test]
+fn test_grid_spans_the_image_inside_the_margin() {
+    let g = test_grid(640, 480, 5);
+    assert_eq!(g.len(), 25);
+    let m = GRID_MARGIN;
+    assert!((g[0][0] - m * 639.0).abs() < 1e-12 && (g[0][1] - m * 479.0).abs() < 1e-12);
+    assert!((g[24][0] - (1.0 - m) * 639.0).abs() < 1e-12);
+    assert!((g[24][1] - (1.0 - m) * 479.0).abs() < 1e-12);
+    assert!((g[12][0] - 319.5).abs() < 1e-12 && (g[12][1] - 239.5).abs() < 1e-12);
+    // Uniform spacing, and the edge variant reaches the border pixels.
+    let dx: Vec<f64> = g[..5].windows(2).map(|w| w[1][0] - w[0][0]).collect();
+    assert!(dx.iter().all(|d| (d - dx[0]).abs() < 1e-9));
+    let e = test_grid_with_margin(640, 480, 3, 0.0);
+    assert_eq!(e[0], [0.0, 0.0]);
+    assert_eq!(e[8], [639.0, 479.0]);
+    assert_eq!(test_grid(640, 480, 1), vec![[319.5, 239.5]]);
+}
+
+#[test]
+fn novice_views_follow_the_checklist_and_are_seeded() {
+    let cam = bc_camera();
+    let t = target();
+    let a = novice_poses(&cam, &t, 20, 7).unwrap();
+    let b = novice_poses(&cam, &t, 20, 7).unwrap();
+    assert_eq!(a.len(), 20);
+    assert!(
+        a.iter()
+            .zip(&b)
+            .all(|(p, q)| (p.to_homogeneous() - q.to_homogeneous()).norm() == 0.0)
+    );
+    let c = novice_poses(&cam, &t, 20, 8).unwrap();
+    assert!(
+        a.iter()
+            .zip(&c)
+            .any(|(p, q)| (p.to_homogeneous() - q.to_homogeneous()).norm() > 1e-6)
+    );
+    // Each round of ten covers the left and right halves, close and far views and tilts.
+    let centre_u: Vec<f64> = a[..10]
+        .iter()
+        .map(|p| {
+            let c = p * nalgebra::Point3::new(0.135, 0.09, 0.0);
+            cam.project(&c.coords).unwrap().x
+        })
+        .collect();
+    assert!(centre_u.iter().any(|&u| u < 260.0) && centre_u.iter().any(|&u| u > 380.0));
+    let dist: Vec<f64> = a[..10]
+        .iter()
+        .map(|p| p.translation.vector.norm())
+        .collect();
+    let (lo, hi) = dist
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(l, h), &d| (l.min(d), h.max(d)));
+    assert!(hi > 2.5 * lo, "close/far range {lo}..{hi}");
+    let tilted = a[..10]
+        .iter()
+        .filter(|p| super::init::view_tilt(p).to_degrees() > 20.0)
+        .count();
+    assert!(tilted >= 3, "{tilted} tilted views");
+    // Most are whole-target views (a novice with a chessboard needs all corners).
+    let whole = a
+        .iter()
+        .filter(|p| visible_points(&cam, p, &t).0.len() == t.len())
+        .count();
+    assert!(whole >= 10, "{whole} whole-target views");
 }
 
 #[test]

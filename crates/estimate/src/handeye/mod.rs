@@ -17,6 +17,7 @@
 
 pub mod chain;
 pub mod factors;
+pub mod motion;
 pub mod ukf_model;
 pub mod wafer;
 
@@ -24,12 +25,14 @@ pub use chain::{CameraChain, ChainEval, JOINT_NAMES, N_JOINTS};
 pub use factors::{
     EdgeJacobians, conic_edge_residuals, nearest_model_angles, point_reprojection_residuals,
 };
+pub use motion::{FreeCameraEdgeResidual, RobotMotionResidual};
 pub use ukf_model::{
     AutoTeachUkfModel, UKF_MEASURED_JOINTS, UKF_OFFSET_JOINTS, UkfNoise, UkfRun, run_autoteach_ukf,
 };
 pub use wafer::{Rim, WAFER_DIM, WaferGeometry, rim_pose, wafer_from_center_normal, wafer_normal};
 pub mod slam;
 pub use slam::{
-    EdgeFactor, EdgeObservation, PriorSigmas, SlamMot, SlamMotConfig, SlamMotSolution,
-    SlamMotState, Uncertainty, WindowRecord, edge_residuals, theoretical_resolution,
+    EdgeFactor, EdgeObservation, FreeCamera, LINK_NAMES, PriorSigmas, SlamMot, SlamMotConfig,
+    SlamMotSolution, SlamMotState, Uncertainty, WindowRecord, edge_residuals,
+    theoretical_resolution,
 };

@@ -3,7 +3,7 @@
 //! projection factor of every tracked edge point (eq. (5.13)), sliding-window and batch solves
 //! and marginal covariances of every estimate.
 
-use autoteach_geometry::lie::{hat, se3_minus, so3_right_jacobian_inv};
+use autoteach_geometry::lie::{hat, se3_adjoint, se3_minus, so3_right_jacobian_inv};
 use autoteach_geometry::robot::{Joints, RobotParams, WaferRobot};
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Vector2, Vector3, Vector5};
 
@@ -11,9 +11,11 @@ use super::chain::{CameraChain, N_JOINTS};
 use super::factors::{
     EdgeJacobians, conic_edge_residuals, nearest_model_angles, point_reprojection_residuals,
 };
+use super::motion::{FreeCameraEdgeResidual, RobotMotionResidual};
 use super::wafer::{Rim, WaferGeometry};
 use crate::lsq::{
-    BlockId, Loss, Manifold, Problem, Residual, SolverOptions, se3_from_params, se3_to_params,
+    BlockId, Loss, Manifold, Problem, RelativePoseResidual, Residual, SolverOptions,
+    se3_from_params, se3_to_params,
 };
 use crate::{EstimateError, Result};
 
@@ -76,7 +78,40 @@ pub struct SlamMotConfig {
     /// in absolute form, so that the covariances account for the encoder noise that moves
     /// every edge point of a frame together.
     pub encoder_sigma: Option<[f64; 4]>,
+    /// Also estimate a correction `ΔT` of the camera mount: `T_wc = T_wb·T_be(q)·T_ec·ΔT`
+    /// (the optional calibration variable `T_ec` of §5.3; off by default). Reported as
+    /// unobservable when the session does not constrain it.
+    pub estimate_mount: bool,
+    /// Link lengths whose additive corrections are estimated: 0 = `l1`, 1 = `l2`, 2 = `l4`
+    /// (blade 2, which carries the camera); the kinematic parameters `γ` of eq. (5.10).
+    pub estimate_links: Vec<usize>,
+    /// Free-camera mode: every frame's camera pose is a variable, tied to the robot only
+    /// through the relative robot motion factor of eqs. (5.10)–(5.12) between consecutive
+    /// frames (and optionally visual-odometry increments). `None`: poses through the chain.
+    pub free_camera: Option<FreeCamera>,
 }
+
+/// Settings of the free-camera mode (000_3b1454b2b2194811.txt eqs. (5.6), (5.10)–(5.12)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FreeCamera {
+    /// Robot motion precision `[σ_ω (3, rad); σ_ρ (3, m)]` between consecutive frames.
+    pub motion_sigma: [f64; 6],
+    /// Visual-odometry increments `T_wc(t)⁻¹·T_wc(t+1)` (one per consecutive frame pair, or
+    /// empty for none), each a relative-pose factor between the two camera poses.
+    pub odometry: Vec<Isometry3<f64>>,
+    /// Visual-odometry precision `[σ_ω (3); σ_ρ (3)]` per increment.
+    pub odometry_sigma: [f64; 6],
+    /// Gaussian prior on the calibration around its nominal value (`T_wb`, offsets) with
+    /// these standard deviations (the robot's datasheet precision). Relative motions alone
+    /// leave the base height along the vertical joint axes free and constrain the offsets of
+    /// θ2/θ4 only through second-order (configuration-dependent) effects, with a far basin at
+    /// `δ4 + π` and a displaced base; the prior keeps the solve in the physical one. `None`:
+    /// no prior (the covariance then reports what the data alone constrain).
+    pub calibration_prior: Option<(Isometry3<f64>, Joints, PriorSigmas)>,
+}
+
+/// Link lengths that may be calibrated, in [`SlamMotConfig::estimate_links`] order.
+pub const LINK_NAMES: [&str; 3] = ["l1", "l2", "l4"];
 
 /// Joints whose per-frame encoder noise is modelled (the others do not move the camera).
 const NOISE_JOINTS: [usize; 4] = [0, 1, 3, 4];
@@ -97,6 +132,9 @@ impl SlamMotConfig {
             factor: EdgeFactor::Conic,
             max_iterations: 50,
             encoder_sigma: None,
+            estimate_mount: false,
+            estimate_links: Vec::new(),
+            free_camera: None,
         }
     }
 
@@ -138,6 +176,41 @@ impl SlamMotConfig {
                 reason: "no such wafer",
             });
         }
+        if let Some(&l) = self.estimate_links.iter().find(|&&l| l >= LINK_NAMES.len()) {
+            return Err(EstimateError::InvalidParameter {
+                name: "estimate_links",
+                value: l as f64,
+                reason: "link indices are 0 (l1), 1 (l2), 2 (l4)",
+            });
+        }
+        if let Some(fc) = &self.free_camera {
+            if self.estimate_mount || !self.estimate_links.is_empty() {
+                return Err(EstimateError::InvalidParameter {
+                    name: "free_camera",
+                    value: 1.0,
+                    reason: "the camera mount and link lengths are calibrated through the chain, not in free-camera mode",
+                });
+            }
+            if self.encoder_sigma.is_some() || self.factor != EdgeFactor::Conic {
+                return Err(EstimateError::InvalidParameter {
+                    name: "free_camera",
+                    value: 1.0,
+                    reason: "free-camera mode uses the conic factor without per-frame encoder noise",
+                });
+            }
+            if let Some(v) = fc
+                .motion_sigma
+                .iter()
+                .chain(fc.odometry_sigma.iter())
+                .find(|v| !(v.is_finite() && **v > 0.0))
+            {
+                return Err(EstimateError::InvalidParameter {
+                    name: "free-camera sigma",
+                    value: *v,
+                    reason: "must be finite and positive",
+                });
+            }
+        }
         if let EdgeFactor::NearestPoint { n_model, .. } = self.factor
             && n_model < 3
         {
@@ -160,6 +233,32 @@ pub struct SlamMotState {
     pub offsets: Joints,
     /// Wafers `[cx, cy, cz, rx, ry]`, indexed like the observations.
     pub wafers: Vec<Vector5<f64>>,
+    /// Camera mount correction `ΔT` (identity unless [`SlamMotConfig::estimate_mount`]).
+    pub mount: Isometry3<f64>,
+    /// Link length corrections `Δl1, Δl2, Δl4` (m), added to the robot parameters.
+    pub links: [f64; 3],
+}
+
+impl SlamMotState {
+    /// A state with an identity mount correction and no link corrections.
+    pub fn new(base: Isometry3<f64>, offsets: Joints, wafers: Vec<Vector5<f64>>) -> Self {
+        Self {
+            base,
+            offsets,
+            wafers,
+            mount: Isometry3::identity(),
+            links: [0.0; 3],
+        }
+    }
+
+    /// The robot parameters with the link corrections applied.
+    pub fn robot_params(&self, nominal: &RobotParams) -> RobotParams {
+        let mut p = *nominal;
+        p.l1 += self.links[0];
+        p.l2 += self.links[1];
+        p.l4 += self.links[2];
+        p
+    }
 }
 
 /// One estimate with its standard deviation (`None` when the data do not constrain it).
@@ -167,8 +266,8 @@ pub struct SlamMotState {
 pub struct Uncertainty {
     /// Joint covariance of the estimated quantities in tangent coordinates, ordered: base
     /// `[ω; ρ]` (6), estimated offsets (in `estimate_offsets` order), then every observed
-    /// non-reference wafer (5 each, in `wafer_order`). `None` if the information matrix is
-    /// singular.
+    /// non-reference wafer (5 each, in `wafer_order`), then the mount correction (6) and the
+    /// link corrections when estimated. `None` if the information matrix is singular.
     pub covariance: Option<DMatrix<f64>>,
     /// Wafers in the order of the covariance.
     pub wafer_order: Vec<usize>,
@@ -193,6 +292,9 @@ pub struct SlamMotSolution {
     pub rms_px: f64,
     /// Number of scalar edge residuals.
     pub n_residuals: usize,
+    /// Camera pose `T_wc` of every frame: through the calibrated chain, or the free poses
+    /// (free-camera mode; frames without a pose variable get the chain pose).
+    pub camera_poses: Vec<Isometry3<f64>>,
 }
 
 /// Per-window record of the sliding-window run (Fig. 5.11).
@@ -207,7 +309,8 @@ pub struct WindowRecord {
 }
 
 /// The conic edge factor of eq. (5.13) with camera poses through eq. (5.9): blocks
-/// `[base (Se3), offset_j (Euclidean 1) …, wafer (Euclidean 5)]`.
+/// `[base (Se3), offset_j (Euclidean 1) …, wafer (Euclidean 5), joint noise n_t (Euclidean 4)?,
+/// mount correction ΔT (Se3)?, link corrections (Euclidean k)?]`.
 struct EdgeResidual {
     k: Matrix3<f64>,
     params: RobotParams,
@@ -220,30 +323,81 @@ struct EdgeResidual {
     sigma: f64,
     /// `Some(angles)`: the point-reprojection baseline with these associations.
     angles: Option<Vec<f64>>,
-    /// Whether the last block is the frame's joint noise `n_t` (Euclidean 4).
+    /// Whether the block after the wafer is the frame's joint noise `n_t` (Euclidean 4).
     joint_noise: bool,
+    /// Mount correction when it is not a block.
+    fixed_mount: Isometry3<f64>,
+    /// Whether the mount correction is a block.
+    mount_block: bool,
+    /// Link corrections when they are not blocks (all three).
+    fixed_links: [f64; 3],
+    /// Links whose corrections form the last block.
+    link_idx: Vec<usize>,
 }
 
 impl EdgeResidual {
+    /// Block positions of the wafer, the joint noise, the mount and the links.
+    fn layout(&self) -> (usize, Option<usize>, Option<usize>, Option<usize>) {
+        let iw = 1 + self.offset_joints.len();
+        let mut next = iw + 1;
+        let noise = self.joint_noise.then(|| {
+            next += 1;
+            next - 1
+        });
+        let mount = self.mount_block.then(|| {
+            next += 1;
+            next - 1
+        });
+        let links = (!self.link_idx.is_empty()).then_some(next);
+        (iw, noise, mount, links)
+    }
+
     fn chain(&self, params: &[&[f64]]) -> CameraChain {
+        let (_, inoise, _, ilinks) = self.layout();
         let mut offsets = self.fixed_offsets;
         for (i, &j) in self.offset_joints.iter().enumerate() {
             offsets[j] = params[1 + i][0];
         }
-        if self.joint_noise {
-            let n = params[2 + self.offset_joints.len()];
+        if let Some(i) = inoise {
+            let n = params[i];
             for (k, &j) in NOISE_JOINTS.iter().enumerate() {
                 offsets[j] += n[k];
             }
         }
+        let mut links = self.fixed_links;
+        if let Some(i) = ilinks {
+            for (k, &l) in self.link_idx.iter().enumerate() {
+                links[l] = params[i][k];
+            }
+        }
+        let mut rp = self.params;
+        rp.l1 += links[0];
+        rp.l2 += links[1];
+        rp.l4 += links[2];
         CameraChain {
             robot: WaferRobot {
-                params: self.params,
+                params: rp,
                 base: se3_from_params(params[0]),
             },
             offsets,
         }
     }
+}
+
+/// Body-frame twist `[0; R_bcᵀ u]` of the camera per unit length of link `l` (0 = l1, 1 = l2,
+/// 2 = l4): lengthening a link moves everything after it along the link's direction `u`
+/// (angles `θ1`, `θ1+θ2`, `θ1+θ2+θ4` of the true joints, eq. (2.4)).
+fn link_twist(chain: &CameraChain, q_enc: &Joints, link: usize) -> DVector<f64> {
+    let q = chain.true_joints(q_enc);
+    let angle = match link {
+        0 => q[0],
+        1 => q[0] + q[1],
+        _ => q[0] + q[1] + q[3],
+    };
+    let u = Vector3::new(angle.cos(), angle.sin(), 0.0);
+    let r_bc = chain.robot.camera_pose_in_base(&q).rotation;
+    let rho = r_bc.inverse() * u;
+    DVector::from_column_slice(&[0.0, 0.0, 0.0, rho.x, rho.y, rho.z])
 }
 
 impl Residual for EdgeResidual {
@@ -257,10 +411,12 @@ impl Residual for EdgeResidual {
         residual: &mut [f64],
         jacobians: Option<&mut [DMatrix<f64>]>,
     ) -> Result<()> {
+        let (iw, inoise, imount, ilinks) = self.layout();
         let chain = self.chain(params);
         let ev = chain.evaluate(&self.q_enc);
-        let wp = params[1 + self.offset_joints.len()];
-        let w = Vector5::from_column_slice(wp);
+        let mount = imount.map_or(self.fixed_mount, |i| se3_from_params(params[i]));
+        let t_wc = ev.t_wc * mount;
+        let w = Vector5::from_column_slice(params[iw]);
         let n = self.dim();
         let mut ej = jacobians.as_ref().map(|_| EdgeJacobians {
             camera: DMatrix::zeros(n, 6),
@@ -270,7 +426,7 @@ impl Residual for EdgeResidual {
         match &self.angles {
             None => conic_edge_residuals(
                 &self.k,
-                &ev.t_wc,
+                &t_wc,
                 &w,
                 self.rim,
                 r,
@@ -282,7 +438,7 @@ impl Residual for EdgeResidual {
             )?,
             Some(a) => point_reprojection_residuals(
                 &self.k,
-                &ev.t_wc,
+                &t_wc,
                 &w,
                 self.rim,
                 r,
@@ -295,22 +451,28 @@ impl Residual for EdgeResidual {
             )?,
         }
         if let (Some(jac), Some(ej)) = (jacobians, ej) {
-            jac[0]
-                .copy_from(&(&ej.camera * DMatrix::from_column_slice(6, 6, ev.d_base.as_slice())));
+            // T_wc·ΔT ⊕ ε from T_wc ⊕ η: ε = Ad(ΔT⁻¹)·η.
+            let ad = se3_adjoint(&mount.inverse());
+            let cam = &ej.camera * DMatrix::from_column_slice(6, 6, ad.as_slice());
+            jac[0].copy_from(&(&cam * DMatrix::from_column_slice(6, 6, ev.d_base.as_slice())));
             for (i, &j) in self.offset_joints.iter().enumerate() {
                 let col = ev.d_offsets.column(j);
-                let dcol = &ej.camera * DVector::from_column_slice(col.as_slice());
+                let dcol = &cam * DVector::from_column_slice(col.as_slice());
                 jac[1 + i].set_column(0, &dcol);
             }
-            jac[1 + self.offset_joints.len()].copy_from(&ej.wafer);
-            if self.joint_noise {
-                let jn = &mut jac[2 + self.offset_joints.len()];
+            jac[iw].copy_from(&ej.wafer);
+            if let Some(i) = inoise {
                 for (k, &j) in NOISE_JOINTS.iter().enumerate() {
                     let col = ev.d_offsets.column(j);
-                    jn.set_column(
-                        k,
-                        &(&ej.camera * DVector::from_column_slice(col.as_slice())),
-                    );
+                    jac[i].set_column(k, &(&cam * DVector::from_column_slice(col.as_slice())));
+                }
+            }
+            if let Some(i) = imount {
+                jac[i].copy_from(&ej.camera);
+            }
+            if let Some(i) = ilinks {
+                for (k, &l) in self.link_idx.iter().enumerate() {
+                    jac[i].set_column(k, &(&cam * link_twist(&chain, &self.q_enc, l)));
                 }
             }
         }
@@ -420,6 +582,20 @@ struct Blocks {
     base: BlockId,
     offsets: Vec<BlockId>,
     wafers: Vec<Option<BlockId>>,
+    mount: Option<BlockId>,
+    links: Option<BlockId>,
+    cameras: Vec<Option<BlockId>>,
+}
+
+impl Blocks {
+    /// The calibration blocks in covariance order: base, offsets, mount, links.
+    fn calibration(&self) -> Vec<BlockId> {
+        let mut v = vec![self.base];
+        v.extend(&self.offsets);
+        v.extend(self.mount);
+        v.extend(self.links);
+        v
+    }
 }
 
 /// The SLAM-MOT estimator over a session: encoder readings per frame and edge observations.
@@ -501,11 +677,16 @@ impl SlamMot {
     /// Camera poses `T_wc` of every frame for a state (eq. (5.9)).
     pub fn camera_poses(&self, state: &SlamMotState) -> Vec<Isometry3<f64>> {
         let robot = WaferRobot {
-            params: self.config.robot_params,
+            params: state.robot_params(&self.config.robot_params),
             base: state.base,
         };
         let qs: Vec<Joints> = self.encoders.iter().map(|q| q - state.offsets).collect();
-        robot.camera_poses(&qs)
+        let poses = robot.camera_poses(&qs);
+        if state.mount == Isometry3::identity() {
+            poses
+        } else {
+            poses.into_iter().map(|t| t * state.mount).collect()
+        }
     }
 
     /// Initial height of every wafer by a 1-D search along the world z axis (wafers stacked
@@ -589,6 +770,64 @@ impl SlamMot {
             .iter()
             .map(|&j| p.add_block(&[state.offsets[j]], Manifold::Euclidean(1)))
             .collect::<Result<_>>()?;
+        let mount = if self.config.estimate_mount {
+            Some(p.add_block(&se3_to_params(&state.mount), Manifold::Se3)?)
+        } else {
+            None
+        };
+        let links = if self.config.estimate_links.is_empty() {
+            None
+        } else {
+            let v: Vec<f64> = self
+                .config
+                .estimate_links
+                .iter()
+                .map(|&l| state.links[l])
+                .collect();
+            Some(p.add_block(&v, Manifold::Euclidean(v.len()))?)
+        };
+        let mut cameras: Vec<Option<BlockId>> = vec![None; self.encoders.len()];
+        if let Some(fc) = &self.config.free_camera {
+            let poses = self.camera_poses(state);
+            for f in frames.clone() {
+                cameras[f] = Some(p.add_block(&se3_to_params(&poses[f]), Manifold::Se3)?);
+            }
+            let cov = DMatrix::from_diagonal(&DVector::from_iterator(
+                6,
+                fc.odometry_sigma.iter().map(|v| v * v),
+            ));
+            for f in frames.start..frames.end.saturating_sub(1) {
+                let (Some(a), Some(b)) = (cameras[f], cameras[f + 1]) else {
+                    continue;
+                };
+                let motion = RobotMotionResidual::new(
+                    self.config.robot_params,
+                    self.encoders[f],
+                    self.encoders[f + 1],
+                    state.offsets,
+                    self.config.estimate_offsets.clone(),
+                    fc.motion_sigma,
+                )?;
+                let mut blocks = vec![a, b, base];
+                blocks.extend(&offsets);
+                p.add_residual(motion, &blocks, Loss::Trivial)?;
+                if let Some(z) = fc.odometry.get(f) {
+                    p.add_residual(RelativePoseResidual::new(z, &cov)?, &[a, b], Loss::Trivial)?;
+                }
+            }
+            if let Some((nominal_base, nominal_offsets, sig)) = &fc.calibration_prior {
+                let mut c = DMatrix::zeros(6, 6);
+                for i in 0..3 {
+                    c[(i, i)] = sig.base_rotation.powi(2);
+                    c[(3 + i, 3 + i)] = sig.base_translation.powi(2);
+                }
+                p.add_prior(base, &se3_to_params(nominal_base), &c)?;
+                for (i, &j) in self.config.estimate_offsets.iter().enumerate() {
+                    let c1 = DMatrix::from_element(1, 1, sig.offset.powi(2));
+                    p.add_prior(offsets[i], &[nominal_offsets[j]], &c1)?;
+                }
+            }
+        }
         let mut wafers: Vec<Option<BlockId>> = vec![None; self.n_wafers];
         let mut noise: Vec<Option<BlockId>> = vec![None; self.encoders.len()];
         let loss = self.config.huber.map_or(Loss::Trivial, Loss::Huber);
@@ -609,6 +848,18 @@ impl SlamMot {
                     b
                 }
             };
+            if let Some(cb) = cameras[obs.frame] {
+                let res = FreeCameraEdgeResidual {
+                    k: self.config.k,
+                    geometry: self.config.geometry,
+                    rim: obs.rim,
+                    points: obs.points.clone(),
+                    sigma: self.config.pixel_sigma,
+                };
+                n_res += res.dim();
+                p.add_residual(res, &[cb, wb], loss)?;
+                continue;
+            }
             let nb = match (self.config.encoder_sigma, noise[obs.frame]) {
                 (None, _) => None,
                 (Some(_), Some(b)) => Some(b),
@@ -635,12 +886,18 @@ impl SlamMot {
                 sigma: self.config.pixel_sigma,
                 angles: angles.and_then(|a| a[o].clone()),
                 joint_noise: nb.is_some(),
+                fixed_mount: state.mount,
+                mount_block: mount.is_some(),
+                fixed_links: state.links,
+                link_idx: self.config.estimate_links.clone(),
             };
             n_res += res.dim();
             let mut blocks = vec![base];
             blocks.extend(&offsets);
             blocks.push(wb);
             blocks.extend(nb);
+            blocks.extend(mount);
+            blocks.extend(links);
             p.add_residual(res, &blocks, loss)?;
         }
         let yaw = {
@@ -661,6 +918,9 @@ impl SlamMot {
                 base,
                 offsets,
                 wafers,
+                mount,
+                links,
+                cameras,
             },
             n_res,
         ))
@@ -677,7 +937,26 @@ impl SlamMot {
                 s.wafers[k] = Vector5::from_column_slice(p.values(*w));
             }
         }
+        if let Some(m) = b.mount {
+            s.mount = se3_from_params(p.values(m));
+        }
+        if let Some(l) = b.links {
+            for (k, &li) in self.config.estimate_links.iter().enumerate() {
+                s.links[li] = p.values(l)[k];
+            }
+        }
         s
+    }
+
+    /// Per-frame camera poses: the free pose variables where they exist, else the chain.
+    fn frame_poses(&self, p: &Problem, b: &Blocks, state: &SlamMotState) -> Vec<Isometry3<f64>> {
+        let mut poses = self.camera_poses(state);
+        for (f, c) in b.cameras.iter().enumerate() {
+            if let Some(c) = c {
+                poses[f] = se3_from_params(p.values(*c));
+            }
+        }
+        poses
     }
 
     fn uncertainty(&self, p: &Problem, b: &Blocks) -> Uncertainty {
@@ -692,6 +971,8 @@ impl SlamMot {
                 order.push(k);
             }
         }
+        blocks.extend(b.mount);
+        blocks.extend(b.links);
         match p.marginal_covariance(&blocks) {
             Ok(c) => Uncertainty {
                 covariance: Some(c),
@@ -723,6 +1004,23 @@ impl SlamMot {
         for (k, w) in b.wafers.iter().enumerate() {
             if let Some(w) = w {
                 names.push((w.0, format!("wafer {k}")));
+            }
+        }
+        if let Some(m) = b.mount {
+            names.push((m.0, "camera mount T_ec".into()));
+        }
+        if let Some(l) = b.links {
+            let which: Vec<&str> = self
+                .config
+                .estimate_links
+                .iter()
+                .map(|&i| LINK_NAMES[i])
+                .collect();
+            names.push((l.0, format!("link lengths ({})", which.join(", "))));
+        }
+        for (f, c) in b.cameras.iter().enumerate() {
+            if let Some(c) = c {
+                names.push((c.0, format!("camera pose of frame {f}")));
             }
         }
         let mut out = directions.to_string();
@@ -795,7 +1093,8 @@ impl SlamMot {
             reason: "no solve ran",
         })?;
         let uncertainty = self.uncertainty(&p, &b);
-        let rms_px = self.rms(&state, n_model)?;
+        let camera_poses = self.frame_poses(&p, &b, &state);
+        let rms_px = self.rms_with_poses(&camera_poses, &state, n_model)?;
         Ok(SlamMotSolution {
             state,
             uncertainty,
@@ -804,13 +1103,30 @@ impl SlamMot {
             iterations,
             rms_px,
             n_residuals: n_res,
+            camera_poses,
         })
     }
 
     /// RMS edge error in pixels of a state (conic distance, or point distance for the
     /// baseline).
     pub fn rms(&self, state: &SlamMotState, n_model: usize) -> Result<f64> {
-        let poses = self.camera_poses(state);
+        self.rms_with_poses(&self.camera_poses(state), state, n_model)
+    }
+
+    /// [`Self::rms`] with given per-frame camera poses (free-camera mode).
+    pub fn rms_with_poses(
+        &self,
+        poses: &[Isometry3<f64>],
+        state: &SlamMotState,
+        n_model: usize,
+    ) -> Result<f64> {
+        if poses.len() != self.encoders.len() {
+            return Err(EstimateError::DimensionMismatch {
+                what: "camera poses".into(),
+                expected: vec![self.encoders.len()],
+                got: vec![poses.len()],
+            });
+        }
         let (mut s, mut n) = (0.0, 0usize);
         for o in &self.observations {
             let w = &state.wafers[o.wafer];
@@ -916,13 +1232,28 @@ impl SlamMot {
         let mut state = initial.clone();
         // Prior: blocks → (mean, manifold); covariance over their tangents.
         let n_off = self.config.estimate_offsets.len();
-        let mut prior_cov = DMatrix::<f64>::zeros(6 + n_off, 6 + n_off);
+        let n_mount = if self.config.estimate_mount { 6 } else { 0 };
+        let n_links = self.config.estimate_links.len();
+        let n_cal = 6 + n_off + n_mount + n_links;
+        let mut prior_cov = DMatrix::<f64>::zeros(n_cal, n_cal);
         for i in 0..3 {
             prior_cov[(i, i)] = prior_sigmas.base_rotation.powi(2);
             prior_cov[(3 + i, 3 + i)] = prior_sigmas.base_translation.powi(2);
         }
         for i in 0..n_off {
             prior_cov[(6 + i, 6 + i)] = prior_sigmas.offset.powi(2);
+        }
+        for i in 0..n_mount {
+            let s = if i < 3 {
+                prior_sigmas.base_rotation
+            } else {
+                prior_sigmas.base_translation
+            };
+            prior_cov[(6 + n_off + i, 6 + n_off + i)] = s * s;
+        }
+        for i in 0..n_links {
+            let k = 6 + n_off + n_mount + i;
+            prior_cov[(k, k)] = prior_sigmas.base_translation.powi(2);
         }
         let mut prior_wafers: Vec<usize> = Vec::new();
         let mut out = Vec::new();
@@ -940,13 +1271,26 @@ impl SlamMot {
                 }
             }
             // Joint prior over base, offsets and previously seen wafers.
-            let mut blocks = vec![b.base];
-            blocks.extend(&b.offsets);
+            let mut blocks = b.calibration();
             let mut means: Vec<Vec<f64>> = vec![se3_to_params(&state.base).to_vec()];
             let mut manifolds = vec![Manifold::Se3];
             for &j in &self.config.estimate_offsets {
                 means.push(vec![state.offsets[j]]);
                 manifolds.push(Manifold::Euclidean(1));
+            }
+            if b.mount.is_some() {
+                means.push(se3_to_params(&state.mount).to_vec());
+                manifolds.push(Manifold::Se3);
+            }
+            if b.links.is_some() {
+                means.push(
+                    self.config
+                        .estimate_links
+                        .iter()
+                        .map(|&l| state.links[l])
+                        .collect(),
+                );
+                manifolds.push(Manifold::Euclidean(n_links));
             }
             for &k in &prior_wafers {
                 if let Some(blk) = wafer_blocks[k] {
@@ -984,11 +1328,13 @@ impl SlamMot {
                 base: b.base,
                 offsets: b.offsets.clone(),
                 wafers: wafer_blocks.clone(),
+                mount: b.mount,
+                links: b.links,
+                cameras: b.cameras.clone(),
             };
             state = self.read_state(&p, &full, &state);
             // Posterior → next prior (all wafers seen so far, the reference excluded: fixed).
-            let mut post_blocks = vec![b.base];
-            post_blocks.extend(&b.offsets);
+            let mut post_blocks = b.calibration();
             let mut seen: Vec<usize> = Vec::new();
             for (k, w) in wafer_blocks.iter().enumerate() {
                 if let Some(w) = w
@@ -1260,11 +1606,7 @@ pub(crate) mod tests {
         config.pixel_sigma = noise_px.max(0.05);
         Scene {
             config,
-            truth: SlamMotState {
-                base,
-                offsets,
-                wafers,
-            },
+            truth: SlamMotState::new(base, offsets, wafers),
             encoders,
             observations,
         }
@@ -1344,6 +1686,10 @@ pub(crate) mod tests {
             sigma: 0.5,
             angles: None,
             joint_noise: false,
+            fixed_mount: Isometry3::identity(),
+            mount_block: false,
+            fixed_links: [0.0; 3],
+            link_idx: Vec::new(),
         };
         let base = se3_to_params(&sc.truth.base).to_vec();
         let offs = [vec![0.001], vec![0.002], vec![-0.003]];
@@ -1389,6 +1735,214 @@ pub(crate) mod tests {
                 close((r1[i] - r0[i]) / h, jac[1 + j][(i, 0)], "offset");
             }
         }
+    }
+
+    #[test]
+    fn mount_and_link_jacobians_match_finite_differences() {
+        use autoteach_geometry::lie::se3_plus;
+        let sc = scene(6, 4, 0.3);
+        let obs = &sc.observations[5];
+        let cfg = &sc.config;
+        let res = EdgeResidual {
+            k: cfg.k,
+            params: cfg.robot_params,
+            geometry: cfg.geometry,
+            q_enc: sc.encoders[obs.frame],
+            fixed_offsets: Joints::zeros(),
+            offset_joints: vec![1],
+            rim: obs.rim,
+            points: obs.points.clone(),
+            sigma: 0.5,
+            angles: None,
+            joint_noise: true,
+            fixed_mount: Isometry3::identity(),
+            mount_block: true,
+            fixed_links: [0.0; 3],
+            link_idx: vec![0, 1, 2],
+        };
+        let mount = Isometry3::from_parts(
+            Translation3::new(0.002, -0.001, 0.003),
+            UnitQuaternion::from_euler_angles(0.01, -0.02, 0.005),
+        );
+        let vals: Vec<Vec<f64>> = vec![
+            se3_to_params(&sc.truth.base).to_vec(),
+            vec![0.002],
+            sc.truth.wafers[obs.wafer].as_slice().to_vec(),
+            vec![1e-4, -2e-4, 5e-5, 1e-5],
+            se3_to_params(&mount).to_vec(),
+            vec![0.001, -0.002, 0.0015],
+        ];
+        let n = res.dim();
+        let eval = |v: &[Vec<f64>], jac: Option<&mut [DMatrix<f64>]>| {
+            let p: Vec<&[f64]> = v.iter().map(|x| x.as_slice()).collect();
+            let mut r = vec![0.0; n];
+            res.evaluate(&p, &mut r, jac).unwrap();
+            r
+        };
+        let dims = [6usize, 1, 5, 4, 6, 3];
+        let mut jac: Vec<DMatrix<f64>> = dims.iter().map(|&d| DMatrix::zeros(n, d)).collect();
+        eval(&vals, Some(&mut jac));
+        let h = 1e-7;
+        for (blk, &dim) in dims.iter().enumerate() {
+            for c in 0..dim {
+                let (mut up, mut dn) = (vals.clone(), vals.clone());
+                if blk == 0 || blk == 4 {
+                    let mut d = nalgebra::Vector6::zeros();
+                    d[c] = h;
+                    let x = se3_from_params(&vals[blk]);
+                    up[blk] = se3_to_params(&se3_plus(&x, &d)).to_vec();
+                    dn[blk] = se3_to_params(&se3_plus(&x, &(-d))).to_vec();
+                } else {
+                    up[blk][c] += h;
+                    dn[blk][c] -= h;
+                }
+                let (r1, r2) = (eval(&up, None), eval(&dn, None));
+                for (i, (a, b)) in r1.iter().zip(&r2).enumerate() {
+                    let fd = (a - b) / (2.0 * h);
+                    let an = jac[blk][(i, c)];
+                    assert!(
+                        (fd - an).abs() < 1e-3 * (1.0 + an.abs()),
+                        "block {blk} col {c} row {i}: {fd} vs {an}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn mount_with_a_free_base_is_reported_unobservable() {
+        // All joint axes are vertical: a mount correction and the base pose trade off, so the
+        // session cannot constrain T_ec together with T_wb.
+        let sc = scene(2, 20, 0.3);
+        let mut cfg = sc.config.clone();
+        cfg.estimate_mount = true;
+        let slam = SlamMot::new(
+            cfg,
+            sc.encoders.clone(),
+            sc.observations.clone(),
+            sc.truth.wafers.len(),
+        )
+        .unwrap();
+        let sol = slam.solve_batch(&perturbed(&sc.truth)).unwrap();
+        assert!(sol.uncertainty.covariance.is_none());
+        let msg = sol.uncertainty.unobservable.unwrap();
+        assert!(
+            msg.contains("camera mount") || msg.contains("base pose"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn link_lengths_are_recovered_within_three_sigma() {
+        // The elbow and blade-2 lengths change the camera path as the joints move: observable.
+        let sc = scene(4, 40, 0.3);
+        let mut cfg = sc.config.clone();
+        cfg.estimate_links = vec![1, 2];
+        let truth_links = [0.0, 0.0015, -0.001];
+        let mut scene_cfg = sc.config.clone();
+        scene_cfg.robot_params.l2 -= truth_links[1];
+        scene_cfg.robot_params.l4 -= truth_links[2];
+        cfg.robot_params = scene_cfg.robot_params;
+        let slam = SlamMot::new(
+            cfg,
+            sc.encoders.clone(),
+            sc.observations.clone(),
+            sc.truth.wafers.len(),
+        )
+        .unwrap();
+        let sol = slam.solve_batch(&perturbed(&sc.truth)).unwrap();
+        let cov = sol.uncertainty.covariance.clone().expect("observable");
+        let n = cov.nrows();
+        for (k, l) in [1usize, 2].iter().enumerate() {
+            let err = sol.state.links[*l] - truth_links[*l];
+            let sd = cov[(n - 2 + k, n - 2 + k)].sqrt();
+            assert!(err.abs() < 4.0 * sd && sd < 1e-3, "link {l}: {err} vs {sd}");
+        }
+    }
+
+    #[test]
+    fn free_camera_mode_recovers_offsets_and_wafers_with_the_motion_factor() {
+        let sc = scene(1, 40, 0.3);
+        let mut cfg = sc.config.clone();
+        cfg.free_camera = Some(FreeCamera {
+            motion_sigma: [2e-5, 2e-5, 2e-5, 2e-5, 2e-5, 2e-5],
+            odometry: Vec::new(),
+            odometry_sigma: [1.0; 6],
+            calibration_prior: Some((
+                perturbed(&sc.truth).base,
+                Joints::zeros(),
+                PriorSigmas::default(),
+            )),
+        });
+        let slam = SlamMot::new(
+            cfg,
+            sc.encoders.clone(),
+            sc.observations.clone(),
+            sc.truth.wafers.len(),
+        )
+        .unwrap();
+        let sol = slam.solve_batch(&perturbed(&sc.truth)).unwrap();
+        // The elbow offset is fixed by the relative motions; every estimate lies within 3σ of
+        // the truth (the θ4 offset is only weakly constrained by relative motion: its σ stays
+        // close to the prior's, and that is what the covariance reports).
+        let cov = sol
+            .uncertainty
+            .covariance
+            .clone()
+            .expect("the prior makes it observable");
+        for (i, &j) in sc.config.estimate_offsets.iter().enumerate() {
+            let err = sol.state.offsets[j] - sc.truth.offsets[j];
+            let sd = cov[(6 + i, 6 + i)].sqrt();
+            assert!(err.abs() < 3.0 * sd, "offset {j}: {err} vs {sd}");
+        }
+        let err2 = sol.state.offsets[1] - sc.truth.offsets[1];
+        assert!(err2.abs() < 5e-4, "elbow offset {err2}");
+        for (w_est, w_true) in sol.state.wafers.iter().zip(&sc.truth.wafers) {
+            assert!(
+                (w_est - w_true).fixed_rows::<3>(0).norm() < 5e-4,
+                "{w_est} vs {w_true}"
+            );
+        }
+        // The free poses follow the true camera path.
+        let robot = WaferRobot {
+            params: sc.config.robot_params,
+            base: sc.truth.base,
+        };
+        for (f, q) in sc.encoders.iter().enumerate() {
+            let truth = robot.camera_pose(&(q - sc.truth.offsets));
+            let d = se3_minus(&sol.camera_poses[f], &truth);
+            assert!(d.norm() < 2e-3, "frame {f}: {d}");
+        }
+        // Sliding windows of 5 frames use the same factors.
+        let hist = slam
+            .solve_sliding_window(&perturbed(&sc.truth), 5, &PriorSigmas::default())
+            .unwrap();
+        assert_eq!(hist.len(), 8);
+        let last = &hist[hist.len() - 1].state;
+        // The windows gain information on the elbow offset (σ below half the 2° prior; short
+        // windows of relative motions carry little of it) and
+        // their estimate lies within 3σ of the truth.
+        let sd = hist[hist.len() - 1].std[7];
+        let err = last.offsets[1] - sc.truth.offsets[1];
+        assert!(sd < 0.5 * PriorSigmas::default().offset, "window σ {sd}");
+        assert!(
+            err.abs() < 3.0 * sd,
+            "window elbow offset error {err} vs σ {sd}"
+        );
+    }
+
+    #[test]
+    fn free_camera_rejects_chain_only_options() {
+        let sc = scene(1, 4, 0.3);
+        let mut cfg = sc.config.clone();
+        cfg.free_camera = Some(FreeCamera {
+            motion_sigma: [1e-4; 6],
+            odometry: Vec::new(),
+            odometry_sigma: [1.0; 6],
+            calibration_prior: None,
+        });
+        cfg.estimate_mount = true;
+        assert!(SlamMot::new(cfg, sc.encoders.clone(), sc.observations.clone(), 5).is_err());
     }
 
     #[test]

@@ -45,6 +45,7 @@ mod manifold;
 mod numeric;
 mod problem;
 mod residuals;
+mod schur;
 mod solver;
 pub mod synthetic;
 #[cfg(test)]

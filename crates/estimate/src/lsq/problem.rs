@@ -54,7 +54,7 @@ pub(crate) struct ResidualBlock {
 
 /// A nonlinear least-squares problem on manifolds: minimise ½ Σᵢ ρᵢ(‖rᵢ(x)‖²) over the free
 /// parameter blocks (seed 004_815695db12a6b16c.txt eq. (5.1); solved by
-/// [`Problem::solve`], see [`super::solver`]).
+/// [`Problem::solve`], see the `solver` module).
 #[derive(Default)]
 pub struct Problem {
     pub(crate) values: Vec<f64>,

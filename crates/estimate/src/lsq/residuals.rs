@@ -93,7 +93,7 @@ fn check_finite(what: &str, v: &[f64]) -> Result<()> {
 /// perspective division (seed 004_815695db12a6b16c.txt eq. (5.1), pinhole case).
 ///
 /// Jacobians, with X_c = R X + t and right perturbation T·Exp([ω; ρ]):
-/// ∂X_c/∂ω = −R [X]×, ∂X_c/∂ρ = R, ∂X_c/∂X = R; ∂π/∂X_c = [[fx/z, s/z, −(fx x + s y)/z²],
+/// ∂X_c/∂ω = −R \[X\]×, ∂X_c/∂ρ = R, ∂X_c/∂X = R; ∂π/∂X_c = [[fx/z, s/z, −(fx x + s y)/z²],
 /// [0, fy/z, −fy y/z²]]. A point at depth z ≤ 1e-12 is an error (during a solve, the trial
 /// step is rejected).
 #[derive(Debug, Clone)]
@@ -249,8 +249,8 @@ impl Residual for RelativePoseResidual {
 /// Zero for every point on the projected rim (no point-to-point correspondence).
 ///
 /// Jacobians: q = H⁻¹p, ∂r = −2w qᵀC₀ H⁻¹ (∂H) q with ∂H = K [∂R e₁, ∂R e₂, ∂t], where for
-/// the object ∂R = R_E [eᵢ]×, ∂t = R_E eᵢ (ω, ρ), and for the camera
-/// ∂R = R_cw [eᵢ]× R_wo, ∂t = R_cw (eᵢ × t_wo) (ω) and ∂t = R_cw eᵢ (ρ).
+/// the object ∂R = R_E \[eᵢ\]×, ∂t = R_E eᵢ (ω, ρ), and for the camera
+/// ∂R = R_cw \[eᵢ\]× R_wo, ∂t = R_cw (eᵢ × t_wo) (ω) and ∂t = R_cw eᵢ (ρ).
 #[derive(Debug, Clone)]
 pub struct PointToConicResidual {
     k: Matrix3<f64>,

@@ -15,6 +15,7 @@ use rayon::prelude::*;
 use super::linear::{Cholesky, Pattern};
 use super::manifold::Manifold;
 use super::problem::Problem;
+use super::schur::{DENSE_CAMERA_LIMIT, SchurSystem};
 use crate::{EstimateError, Result};
 
 /// The nonlinear iteration.
@@ -41,12 +42,15 @@ pub enum LinearSolver {
     DenseCholesky,
     /// Sparse Cholesky (faer) with an approximate-minimum-degree fill-reducing ordering.
     SparseCholesky,
-    /// Sparse Cholesky with the eliminated blocks ordered first: eliminating them forms the
-    /// Schur complement S = H_cc − H_cp H_pp⁻¹ H_pc of the remaining blocks inside the
-    /// factorisation (H_pp is block diagonal, so no fill among them), then S is factored with
-    /// the AMD order of the remaining blocks. Blocks are eliminated when marked with
-    /// [`Problem::set_eliminate`]`(b, Some(true))`, or automatically: free `Euclidean(3)`
-    /// blocks (points) none of whose residuals touches another eliminated block.
+    /// Schur complement: the eliminated (point-like) blocks are removed first and only the
+    /// reduced camera system S = H_cc − H_cp H_pp⁻¹ H_pc is factored. When no residual touches
+    /// two eliminated blocks (H_pp block diagonal: bundle adjustment), S is built explicitly
+    /// (`schur.rs`: per-point elimination in parallel, dense Cholesky of S up to 2000 camera
+    /// unknowns, faer sparse Cholesky beyond, LM damping on both H_pp and H_cc); otherwise the
+    /// whole system goes to the sparse factor with the eliminated blocks ordered first. Blocks
+    /// are eliminated when marked with [`Problem::set_eliminate`]`(b, Some(true))`, or
+    /// automatically: free `Euclidean(3)` blocks (points) none of whose residuals touches
+    /// another eliminated block.
     SparseSchur,
 }
 
@@ -184,6 +188,13 @@ pub struct Summary {
     pub time_assemble_s: f64,
     /// Time (s) factorising and solving the normal equations.
     pub time_linear_s: f64,
+    /// Part of `time_linear_s` spent eliminating the point blocks (explicit reduced camera
+    /// system: per-point factorisation, forming S and its right-hand side, back-substituting
+    /// the points); 0 for the other solvers.
+    pub time_schur_reduce_s: f64,
+    /// Part of `time_linear_s` spent factorising and solving the reduced camera system
+    /// (explicit Schur path); 0 for the other solvers.
+    pub time_schur_factor_s: f64,
 }
 
 /// Evaluation buffers of one residual block.
@@ -194,8 +205,9 @@ pub(crate) struct EvalBuf {
     pub rho: f64,
 }
 
-/// The block structure of the free unknowns, fixed for one solve.
-pub(crate) struct Structure {
+/// The free blocks of a problem and the elimination candidates (no normal-matrix pattern).
+#[derive(Clone)]
+pub(crate) struct Layout {
     /// Per block: its index among the free blocks.
     pub free_index: Vec<Option<usize>>,
     /// Free index → block.
@@ -206,16 +218,14 @@ pub(crate) struct Structure {
     pub dims: Vec<usize>,
     /// Scalar dimension.
     pub n: usize,
-    /// Pattern of JᵀJ.
-    pub pattern: Pattern,
-    /// Per residual: `(local k_a, local k_b, slot)` for every pair of free blocks, the row
-    /// block `a` having the larger free index.
-    pub res_pairs: Vec<Vec<(usize, usize, usize)>>,
     /// Per free block: eliminated first (Schur).
     pub eliminated: Vec<bool>,
 }
 
-impl Structure {
+impl Layout {
+    /// Free blocks in insertion order; elimination candidates are the blocks marked with
+    /// `Problem::set_eliminate(b, Some(true))` and, unless marked otherwise, the free
+    /// `Euclidean(3)` blocks (points) none of whose residuals touches another candidate.
     pub fn new(p: &Problem) -> Self {
         let mut free_index = vec![None; p.blocks.len()];
         let mut free_blocks = Vec::new();
@@ -231,6 +241,98 @@ impl Structure {
                 n += b.manifold.tangent_dim();
             }
         }
+        let nf = free_blocks.len();
+        let mut cand: Vec<bool> = free_blocks
+            .iter()
+            .map(|&b| {
+                let blk = &p.blocks[b];
+                blk.eliminate
+                    .unwrap_or(blk.manifold == Manifold::Euclidean(3))
+            })
+            .collect();
+        let explicit: Vec<bool> = free_blocks
+            .iter()
+            .map(|&b| p.blocks[b].eliminate == Some(true))
+            .collect();
+        let mut conflict = vec![false; nf];
+        for r in &p.residuals {
+            let is_cand = |b: &super::problem::BlockId| free_index[b.0].filter(|&f| cand[f]);
+            if r.blocks.iter().filter_map(is_cand).nth(1).is_some() {
+                r.blocks
+                    .iter()
+                    .filter_map(is_cand)
+                    .for_each(|f| conflict[f] = true);
+            }
+        }
+        for f in 0..nf {
+            if conflict[f] && !explicit[f] {
+                cand[f] = false;
+            }
+        }
+        Self {
+            free_index,
+            free_blocks,
+            col_offset,
+            dims,
+            n,
+            eliminated: cand,
+        }
+    }
+
+    /// Scalar unknowns of the eliminated blocks.
+    pub fn eliminated_dim(&self) -> usize {
+        self.eliminated
+            .iter()
+            .zip(&self.dims)
+            .filter(|(e, _)| **e)
+            .map(|(_, d)| d)
+            .sum()
+    }
+
+    /// The solver `Auto` resolves to (others unchanged).
+    pub fn resolve(&self, choice: LinearSolver, dense_threshold: usize) -> LinearSolver {
+        match choice {
+            LinearSolver::Auto => {
+                if self.n <= dense_threshold {
+                    LinearSolver::DenseCholesky
+                } else if 2 * self.eliminated_dim() >= self.n {
+                    LinearSolver::SparseSchur
+                } else {
+                    LinearSolver::SparseCholesky
+                }
+            }
+            c => c,
+        }
+    }
+}
+
+/// The block structure of the free unknowns with the pattern of JᵀJ, fixed for one solve
+/// (dereferences to its [`Layout`]).
+pub(crate) struct Structure {
+    /// Free blocks and elimination candidates.
+    pub layout: Layout,
+    /// Pattern of JᵀJ.
+    pub pattern: Pattern,
+    /// Per residual: `(local k_a, local k_b, slot)` for every pair of free blocks, the row
+    /// block `a` having the larger free index.
+    pub res_pairs: Vec<Vec<(usize, usize, usize)>>,
+}
+
+impl std::ops::Deref for Structure {
+    type Target = Layout;
+    fn deref(&self) -> &Layout {
+        &self.layout
+    }
+}
+
+impl Structure {
+    pub fn new(p: &Problem) -> Self {
+        Self::from_layout(p, Layout::new(p))
+    }
+
+    /// Adds the pattern of JᵀJ to a layout.
+    pub fn from_layout(p: &Problem, layout: Layout) -> Self {
+        let free_index = &layout.free_index;
         let mut pairs = Vec::new();
         for r in &p.residuals {
             let fr: Vec<usize> = r.blocks.iter().filter_map(|b| free_index[b.0]).collect();
@@ -240,7 +342,7 @@ impl Structure {
                 }
             }
         }
-        let pattern = Pattern::new(&dims, pairs);
+        let pattern = Pattern::new(&layout.dims, pairs);
         let res_pairs = p
             .residuals
             .iter()
@@ -260,46 +362,10 @@ impl Structure {
                 out
             })
             .collect();
-        // Elimination candidates: marked, or free Euclidean(3) not marked otherwise.
-        let nf = free_blocks.len();
-        let mut cand: Vec<bool> = free_blocks
-            .iter()
-            .map(|&b| {
-                let blk = &p.blocks[b];
-                blk.eliminate
-                    .unwrap_or(blk.manifold == Manifold::Euclidean(3))
-            })
-            .collect();
-        let explicit: Vec<bool> = free_blocks
-            .iter()
-            .map(|&b| p.blocks[b].eliminate == Some(true))
-            .collect();
-        let mut conflict = vec![false; nf];
-        for r in &p.residuals {
-            let c: Vec<usize> = r
-                .blocks
-                .iter()
-                .filter_map(|b| free_index[b.0])
-                .filter(|&f| cand[f])
-                .collect();
-            if c.len() > 1 {
-                c.iter().for_each(|&f| conflict[f] = true);
-            }
-        }
-        for f in 0..nf {
-            if conflict[f] && !explicit[f] {
-                cand[f] = false;
-            }
-        }
         Self {
-            free_index,
-            free_blocks,
-            col_offset,
-            dims,
-            n,
+            layout,
             pattern,
             res_pairs,
-            eliminated: cand,
         }
     }
 
@@ -343,30 +409,7 @@ impl Structure {
     }
 
     /// The factorisation for the chosen solver.
-    pub fn make_solver(
-        &self,
-        choice: LinearSolver,
-        dense_threshold: usize,
-    ) -> Result<(LinearSolver, Cholesky)> {
-        let resolved = match choice {
-            LinearSolver::Auto => {
-                let elim: usize = self
-                    .eliminated
-                    .iter()
-                    .zip(&self.dims)
-                    .filter(|(e, _)| **e)
-                    .map(|(_, d)| d)
-                    .sum();
-                if self.n <= dense_threshold {
-                    LinearSolver::DenseCholesky
-                } else if 2 * elim >= self.n {
-                    LinearSolver::SparseSchur
-                } else {
-                    LinearSolver::SparseCholesky
-                }
-            }
-            c => c,
-        };
+    pub fn make_solver(&self, resolved: LinearSolver) -> Result<Cholesky> {
         let ch = match resolved {
             LinearSolver::DenseCholesky => Cholesky::new(&self.pattern, true, None)?,
             LinearSolver::SparseSchur => {
@@ -375,7 +418,81 @@ impl Structure {
             }
             _ => Cholesky::new(&self.pattern, false, None)?,
         };
-        Ok((resolved, ch))
+        Ok(ch)
+    }
+}
+
+/// The normal-equation machinery of one solve.
+enum Normal {
+    /// JᵀJ in its block pattern, factored by dense or sparse Cholesky (for `SparseSchur`
+    /// with coupled eliminated blocks: the sparse factor with those blocks ordered first).
+    Full {
+        st: Box<Structure>,
+        chol: Box<Cholesky>,
+        h: Vec<f64>,
+        hd: Vec<f64>,
+    },
+    /// The explicit reduced camera system (`SparseSchur` with independent point blocks).
+    Schur(Box<SchurSystem>),
+}
+
+impl Normal {
+    fn new(p: &Problem, layout: Layout, resolved: LinearSolver) -> Result<Self> {
+        if resolved == LinearSolver::SparseSchur && SchurSystem::applicable(p, &layout) {
+            let sys = SchurSystem::new(p, &layout, DENSE_CAMERA_LIMIT)?;
+            return Ok(Normal::Schur(Box::new(sys)));
+        }
+        let st = Structure::from_layout(p, layout);
+        let chol = st.make_solver(resolved)?;
+        let h = vec![0.0; st.pattern.nnz()];
+        Ok(Normal::Full {
+            hd: h.clone(),
+            h,
+            chol: Box::new(chol),
+            st: Box::new(st),
+        })
+    }
+
+    /// Gradient g = Jᵀr and diag(JᵀJ) (and whatever the step needs) from evaluated buffers.
+    fn assemble(&mut self, p: &Problem, bufs: &[EvalBuf], g: &mut [f64], hdiag: &mut [f64]) {
+        match self {
+            Normal::Full { st, h, .. } => {
+                p.assemble(st, bufs, h, g);
+                for (d, &pos) in hdiag.iter_mut().zip(&st.pattern.diag_pos) {
+                    *d = h[pos];
+                }
+            }
+            Normal::Schur(sys) => sys.assemble(bufs, g, hdiag),
+        }
+    }
+
+    /// Solves (JᵀJ + μ·diag(damp)) δ = −g; `Ok(Err(col))` when the matrix is not
+    /// numerically positive definite.
+    fn step(
+        &mut self,
+        bufs: &[EvalBuf],
+        mu: f64,
+        damp: &[f64],
+        g: &[f64],
+        delta: &mut [f64],
+    ) -> Result<std::result::Result<(), Option<usize>>> {
+        match self {
+            Normal::Full { st, chol, h, hd } => {
+                hd.copy_from_slice(h);
+                for (c, &pos) in st.pattern.diag_pos.iter().enumerate() {
+                    hd[pos] += mu * damp[c];
+                }
+                if let Err(col) = chol.factor(&st.pattern, hd) {
+                    return Ok(Err(col));
+                }
+                for (d, gi) in delta.iter_mut().zip(g) {
+                    *d = -gi;
+                }
+                chol.solve_in_place(delta, st.n, 1)?;
+                Ok(Ok(()))
+            }
+            Normal::Schur(sys) => sys.solve(bufs, mu, damp, delta),
+        }
     }
 }
 
@@ -393,31 +510,41 @@ impl Problem {
         jac: bool,
     ) -> Result<f64> {
         let blocks = &self.blocks;
-        let results: Vec<Result<()>> = self
+        // The first failing residual (lowest index) wins, independently of the scheduling.
+        let failure = self
             .residuals
             .par_iter()
             .zip(bufs.par_iter_mut())
             .enumerate()
             .with_min_len(64)
-            .map(|(i, (res, buf))| {
-                let params: Vec<&[f64]> = res
-                    .blocks
-                    .iter()
-                    .map(|b| {
-                        let blk = &blocks[b.0];
-                        &values[blk.offset..blk.offset + blk.manifold.ambient_dim()]
-                    })
-                    .collect();
+            .map(|(i, (res, buf))| -> Result<()> {
+                let slice = |b: &super::problem::BlockId| -> &[f64] {
+                    let blk = &blocks[b.0];
+                    &values[blk.offset..blk.offset + blk.manifold.ambient_dim()]
+                };
+                // Parameter slices on the stack for up to 8 blocks (no allocation).
+                let mut small: [&[f64]; 8] = [&[]; 8];
+                let heap: Vec<&[f64]>;
+                let params: &[&[f64]] = if res.blocks.len() <= small.len() {
+                    for (s, b) in small.iter_mut().zip(&res.blocks) {
+                        *s = slice(b);
+                    }
+                    &small[..res.blocks.len()]
+                } else {
+                    heap = res.blocks.iter().map(slice).collect();
+                    &heap
+                };
                 let out = if jac {
                     buf.jac.iter_mut().for_each(|j| j.fill(0.0));
                     res.residual
-                        .evaluate(&params, &mut buf.r, Some(&mut buf.jac))
+                        .evaluate(params, &mut buf.r, Some(&mut buf.jac))
                 } else {
-                    res.residual.evaluate(&params, &mut buf.r, None)
+                    res.residual.evaluate(params, &mut buf.r, None)
                 };
                 out?;
-                if let Some((index, &value)) =
-                    buf.r.iter().enumerate().find(|(_, v)| !v.is_finite())
+                if buf.r.iter().any(|v| !v.is_finite())
+                    && let Some((index, &value)) =
+                        buf.r.iter().enumerate().find(|(_, v)| !v.is_finite())
                 {
                     return Err(EstimateError::NonFiniteResidual {
                         residual: i,
@@ -431,8 +558,9 @@ impl Problem {
                 buf.rho = rho;
                 if jac {
                     for (k, j) in buf.jac.iter_mut().enumerate() {
-                        if let Some((index, &value)) =
-                            j.iter().enumerate().find(|(_, v)| !v.is_finite())
+                        if !j.as_slice().iter().all(|v| v.is_finite())
+                            && let Some((index, &value)) =
+                                j.iter().enumerate().find(|(_, v)| !v.is_finite())
                         {
                             return Err(EstimateError::NonFiniteResidual {
                                 residual: i,
@@ -453,9 +581,9 @@ impl Problem {
                 }
                 Ok(())
             })
-            .collect();
-        for r in results {
-            r?;
+            .find_map_first(|r| r.err());
+        if let Some(e) = failure {
+            return Err(e);
         }
         Ok(0.5 * bufs.iter().map(|b| b.rho).sum::<f64>())
     }
@@ -500,7 +628,7 @@ impl Problem {
     }
 
     /// `out = values ⊕ δ` for the free blocks (fixed blocks copied).
-    pub(crate) fn retract(&self, st: &Structure, values: &[f64], delta: &[f64], out: &mut [f64]) {
+    pub(crate) fn retract(&self, st: &Layout, values: &[f64], delta: &[f64], out: &mut [f64]) {
         out.copy_from_slice(values);
         for (f, &b) in st.free_blocks.iter().enumerate() {
             let blk = &self.blocks[b];
@@ -520,7 +648,7 @@ impl Problem {
     pub fn solve(&mut self, options: &SolverOptions) -> Result<Summary> {
         let t0 = Instant::now();
         options.validate()?;
-        let st = Structure::new(self);
+        let layout = Layout::new(self);
         let mut bufs = self.make_buffers();
         let num_residuals: usize = bufs.iter().map(|b| b.r.len()).sum();
         let mut values = self.values.clone();
@@ -528,7 +656,7 @@ impl Problem {
         let te = Instant::now();
         let initial_cost = self.evaluate_all(&values, &mut bufs, true)?;
         let mut time_eval = te.elapsed().as_secs_f64();
-        let n = st.n;
+        let n = layout.n;
         let mut summary = Summary {
             iterations: 0,
             successful_steps: 0,
@@ -546,6 +674,8 @@ impl Problem {
             time_evaluate_s: 0.0,
             time_assemble_s: 0.0,
             time_linear_s: 0.0,
+            time_schur_reduce_s: 0.0,
+            time_schur_factor_s: 0.0,
         };
         if n == 0 || self.residuals.is_empty() {
             summary.message = "no free parameters or no residuals".into();
@@ -553,29 +683,40 @@ impl Problem {
             return Ok(summary);
         }
         let ts = Instant::now();
-        let (resolved, mut chol) =
-            st.make_solver(options.linear_solver, options.dense_threshold)?;
+        let resolved = layout.resolve(options.linear_solver, options.dense_threshold);
+        if resolved == LinearSolver::SparseSchur {
+            summary.num_eliminated_blocks = layout.eliminated.iter().filter(|e| **e).count();
+        }
+        let mut normal = Normal::new(self, layout.clone(), resolved)?;
+        let layout = &layout;
         summary.time_setup_s = t_setup + ts.elapsed().as_secs_f64();
         let mut time_asm = 0.0;
         let mut time_lin = 0.0;
         summary.linear_solver = resolved;
-        if resolved == LinearSolver::SparseSchur {
-            summary.num_eliminated_blocks = st.eliminated.iter().filter(|e| **e).count();
-        }
         let lm = options.method == Method::LevenbergMarquardt;
-        let mut h = vec![0.0; st.pattern.nnz()];
-        let mut hd = h.clone();
         let mut g = vec![0.0; n];
+        let mut hdiag = vec![0.0; n];
+        // LM scaling D = diag(JᵀJ) clamped to [1e-6, 1e32] (zero for Gauss–Newton).
+        let mut ddd = vec![0.0; n];
         let mut delta = vec![0.0; n];
         let mut cand = values.clone();
         let ta = Instant::now();
-        self.assemble(&st, &bufs, &mut h, &mut g);
+        normal.assemble(self, &bufs, &mut g, &mut hdiag);
         time_asm += ta.elapsed().as_secs_f64();
+        let scaling = |hdiag: &[f64], ddd: &mut [f64]| {
+            if lm {
+                for (d, h) in ddd.iter_mut().zip(hdiag) {
+                    *d = h.clamp(1e-6, 1e32);
+                }
+            }
+        };
+        scaling(&hdiag, &mut ddd);
         let mut cost = initial_cost;
-        let mut mu = options.initial_damping;
+        let mut mu = if lm { options.initial_damping } else { 0.0 };
         let mut nu = 2.0;
         let free_ambient = |v: &[f64]| -> f64 {
-            st.free_blocks
+            layout
+                .free_blocks
                 .iter()
                 .map(|&b| {
                     let blk = &self.blocks[b];
@@ -603,18 +744,10 @@ impl Problem {
                 );
             }
             summary.iterations += 1;
-            hd.copy_from_slice(&h);
-            let mut ddd = vec![0.0; n];
-            if lm {
-                for (c, &p) in st.pattern.diag_pos.iter().enumerate() {
-                    ddd[c] = h[p].clamp(1e-6, 1e32);
-                    hd[p] += mu * ddd[c];
-                }
-            }
             let tl = Instant::now();
-            let factored = chol.factor(&st.pattern, &hd);
+            let solved = normal.step(&bufs, mu, &ddd, &g, &mut delta)?;
             time_lin += tl.elapsed().as_secs_f64();
-            if let Err(col) = factored {
+            if let Err(col) = solved {
                 if lm {
                     mu *= nu;
                     nu *= 2.0;
@@ -627,7 +760,7 @@ impl Problem {
                     continue;
                 }
                 let where_ = col
-                    .map(|c| self.describe_column(&st, c))
+                    .map(|c| self.describe_column(layout, c))
                     .unwrap_or_else(|| "unknown column".into());
                 break (
                     Termination::LinearSolverFailure,
@@ -636,12 +769,6 @@ impl Problem {
                     ),
                 );
             }
-            for (d, gi) in delta.iter_mut().zip(&g) {
-                *d = -gi;
-            }
-            let tl = Instant::now();
-            chol.solve_in_place(&mut delta, n, 1)?;
-            time_lin += tl.elapsed().as_secs_f64();
             let step = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
             let xn = free_ambient(&values);
             if step <= options.parameter_tolerance * (xn + options.parameter_tolerance) {
@@ -650,7 +777,7 @@ impl Problem {
                     format!("‖δ‖ = {step:.3e} ≤ parameter_tolerance·(‖x‖ + tol)"),
                 );
             }
-            self.retract(&st, &values, &delta, &mut cand);
+            self.retract(layout, &values, &delta, &mut cand);
             let te = Instant::now();
             let new_cost = self
                 .evaluate_all(&cand, &mut bufs, false)
@@ -658,7 +785,7 @@ impl Problem {
             time_eval += te.elapsed().as_secs_f64();
             let gd: f64 = g.iter().zip(&delta).map(|(a, b)| a * b).sum();
             let dd: f64 = ddd.iter().zip(&delta).map(|(a, b)| a * b * b).sum();
-            let predicted = 0.5 * (-gd + mu * dd * f64::from(u8::from(lm)));
+            let predicted = 0.5 * (-gd + mu * dd);
             let actual = cost - new_cost;
             let rho = if predicted > 0.0 {
                 actual / predicted
@@ -707,7 +834,8 @@ impl Problem {
                 }
             };
             let ta = Instant::now();
-            self.assemble(&st, &bufs, &mut h, &mut g);
+            normal.assemble(self, &bufs, &mut g, &mut hdiag);
+            scaling(&hdiag, &mut ddd);
             time_asm += ta.elapsed().as_secs_f64();
             if lm {
                 let t = 2.0 * rho - 1.0;
@@ -725,8 +853,8 @@ impl Problem {
                 );
             }
         };
-        // The cost of the values kept (the last evaluation may have been a rejected trial).
-        summary.final_cost = self.evaluate_all(&values, &mut bufs, false).unwrap_or(cost);
+        // `cost` is the cost at the values kept (a rejected trial never replaces them).
+        summary.final_cost = cost;
         self.values = values;
         summary.termination = termination;
         summary.message = message;
@@ -734,12 +862,16 @@ impl Problem {
         summary.time_evaluate_s = time_eval;
         summary.time_assemble_s = time_asm;
         summary.time_linear_s = time_lin;
+        if let Normal::Schur(sys) = &normal {
+            summary.time_schur_reduce_s = sys.time_reduce_s;
+            summary.time_schur_factor_s = sys.time_factor_s;
+        }
         summary.time_s = t0.elapsed().as_secs_f64();
         Ok(summary)
     }
 
     /// "block b (tangent component c)" for a scalar column of the free unknowns.
-    pub(crate) fn describe_column(&self, st: &Structure, col: usize) -> String {
+    pub(crate) fn describe_column(&self, st: &Layout, col: usize) -> String {
         match st.col_offset.iter().rposition(|&o| o <= col) {
             Some(f) => format!(
                 "block {} ({:?}) tangent component {}",

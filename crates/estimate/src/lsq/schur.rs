@@ -1,0 +1,1036 @@
+//! The explicit reduced camera system (Schur complement) for problems with many point-like
+//! blocks: the damped normal equations
+//!
+//! ```text
+//! [ H_cc + μD_c   H_cp        ] [δ_c]   [−g_c]
+//! [ H_pc          H_pp + μD_p ] [δ_p] = [−g_p]
+//! ```
+//!
+//! are reduced to S δ_c = −g_c + H_cp (H_pp + μD_p)⁻¹ g_p with
+//! S = H_cc + μD_c − H_cp (H_pp + μD_p)⁻¹ H_pc, then δ_p = (H_pp + μD_p)⁻¹ (−g_p − H_pc δ_c)
+//! (Triggs et al., "Bundle adjustment — a modern synthesis", Sec. 6.1, eq. (19)–(20); the
+//! normal equations of the LM step, seed 004_815695db12a6b16c.txt eq. (5.4)–(5.5), applied to
+//! the camera/landmark factor graph of seed 000_3b1454b2b2194811.txt ch. 5.3).
+//!
+//! Point-like blocks are the eliminated free blocks (free `Euclidean(3)` blocks by default, or
+//! blocks marked with `Problem::set_eliminate`) when no residual touches two of them, so H_pp
+//! is block diagonal: each block is factored on its own (H_pp,i + μD_i = L_i L_iᵀ) and enters
+//! S through Y_ai = H_ai L_i⁻ᵀ as S_ab −= Y_ai Y_biᵀ. The eliminations run in parallel (rayon)
+//! over points; S is accumulated in parallel over its column blocks (each task owns the
+//! columns of one camera block, so the sums are deterministic). S is dense (faer's blocked
+//! Cholesky) up to [`DENSE_CAMERA_LIMIT`] camera unknowns, sparse (faer, AMD ordering, symbolic
+//! analysis once) beyond. All work buffers are allocated once per solve.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{LltRegularization, cholesky_in_place};
+use faer::linalg::cholesky::llt::solve::solve_in_place_with_conj;
+use faer::{Conj, MatMut, MatRef, Par};
+use rayon::prelude::*;
+
+use super::linear::{Cholesky, Pattern};
+use super::problem::Problem;
+use super::solver::{EvalBuf, Layout};
+use crate::{EstimateError, Result};
+
+/// Up to this many camera (non-eliminated) unknowns the reduced camera matrix S is dense.
+pub(crate) const DENSE_CAMERA_LIMIT: usize = 2000;
+
+/// A point-like (eliminated) block and its per-point work storage.
+struct PointBlock {
+    /// Column of its first tangent component in the full ordering.
+    col: usize,
+    /// Tangent dimension d_p.
+    dim: usize,
+    /// Residuals touching it: `(residual, local index of the point in the residual)`.
+    res: Vec<(usize, usize)>,
+    /// For each entry of `res`, the range in `res_cams` of its free camera blocks.
+    res_cam_ptr: Vec<usize>,
+    /// `(local index in the residual, pair index)` of the free camera blocks of each residual.
+    res_cams: Vec<(usize, usize)>,
+    /// Camera blocks coupled to the point (ascending camera index), one per pair.
+    cams: Vec<usize>,
+    /// Offset of each pair's d_a × d_p block in `hcp` and `y`.
+    pair_off: Vec<usize>,
+    /// H_pp (d_p × d_p, column-major), undamped.
+    hpp: Vec<f64>,
+    /// g_p = J_pᵀ r.
+    gp: Vec<f64>,
+    /// H_ap = J_aᵀ J_p per pair (d_a × d_p column-major).
+    hcp: Vec<f64>,
+    /// Whether each entry of `res` touches exactly one free camera block (its camera terms
+    /// J_aᵀ J_a and J_aᵀ r are then accumulated per pair below, in point order).
+    res_single: Vec<bool>,
+    /// Offset of each pair's d_a × d_a block in `haa` and of its d_a vector in `ga`.
+    pair_sq_off: Vec<usize>,
+    /// Per pair: Σ J_aᵀ J_a over the single-camera residuals of the point (column-major).
+    haa: Vec<f64>,
+    /// Per pair: Σ J_aᵀ r over the same residuals (offset `pair_off[pair] / d_p`).
+    ga: Vec<f64>,
+    /// Cholesky factor L of H_pp + μD_p (lower, column-major).
+    l: Vec<f64>,
+    /// Y_a = H_ap L⁻ᵀ per pair (d_a × d_p column-major).
+    y: Vec<f64>,
+    /// z = L⁻¹ g_p.
+    z: Vec<f64>,
+    /// Step δ_p.
+    dx: Vec<f64>,
+    /// Scratch row (d_p).
+    row: Vec<f64>,
+}
+
+/// A camera (kept) block.
+struct CamBlock {
+    /// Column of its first tangent component in the full ordering.
+    col: usize,
+    /// Offset in the reduced system.
+    off: usize,
+    /// Tangent dimension.
+    dim: usize,
+    /// Residuals touching it other than the single-camera residuals of a point (those are
+    /// summed per point–camera pair): `(residual, local index)`.
+    res: Vec<(usize, usize)>,
+    /// Points coupled to it: `(point, pair index in that point)`.
+    pts: Vec<(usize, usize)>,
+    /// H_bb without the point terms' cross couplings: the diagonal block of JᵀJ (d × d).
+    hbb: Vec<f64>,
+    /// g_b = J_bᵀ r.
+    g: Vec<f64>,
+}
+
+/// Storage and factorisation of S.
+enum Reduced {
+    /// Dense n_c × n_c column-major (lower triangle used).
+    Dense { mem: MemBuffer },
+    /// Sparse lower CSC with the block pattern of S; `col_slots[b]` lists `(a, slot)` of the
+    /// column block b, ascending in a.
+    Sparse {
+        pattern: Box<Pattern>,
+        chol: Box<Cholesky>,
+        col_slots: Vec<Vec<(usize, usize)>>,
+    },
+}
+
+/// The reduced camera system of one solve (structure fixed, values refilled).
+pub(crate) struct SchurSystem {
+    points: Vec<PointBlock>,
+    cams: Vec<CamBlock>,
+    /// Per residual: range in `res_cam` of its free camera blocks.
+    res_cam_ptr: Vec<usize>,
+    /// `(local index, camera index)` of each residual's free camera blocks.
+    res_cam: Vec<(usize, usize)>,
+    /// Number of camera unknowns.
+    nc: usize,
+    /// g_c (full-ordering gradient restricted to cameras, reduced ordering).
+    gc: Vec<f64>,
+    /// S values (dense n_c² or sparse nnz).
+    s: Vec<f64>,
+    /// Start of each camera column block in `s`, plus the end.
+    s_bounds: Vec<usize>,
+    /// Right-hand side / solution of the reduced system.
+    rhs: Vec<f64>,
+    reduced: Reduced,
+    /// Accumulated time (s) eliminating points and forming S and its right-hand side, and
+    /// back-substituting the points.
+    pub time_reduce_s: f64,
+    /// Accumulated time (s) factorising S and solving for the cameras.
+    pub time_factor_s: f64,
+}
+
+/// Splits `s` into consecutive pieces starting at `bounds[i]` (bounds[0] = 0, last = len).
+fn split_pieces<'a>(mut s: &'a mut [f64], bounds: &[usize]) -> Vec<&'a mut [f64]> {
+    let mut out = Vec::with_capacity(bounds.len().saturating_sub(1));
+    for w in bounds.windows(2) {
+        let (head, tail) = s.split_at_mut(w[1] - w[0]);
+        out.push(head);
+        s = tail;
+    }
+    out
+}
+
+/// In-place Cholesky of a small d × d column-major matrix (lower triangle); `Err(k)` at the
+/// first non-positive (or NaN) pivot k.
+fn small_cholesky(a: &mut [f64], d: usize) -> std::result::Result<(), usize> {
+    for j in 0..d {
+        let mut s = a[j * d + j];
+        for k in 0..j {
+            s -= a[k * d + j] * a[k * d + j];
+        }
+        if s.is_nan() || s <= 0.0 {
+            return Err(j);
+        }
+        let s = s.sqrt();
+        a[j * d + j] = s;
+        for i in j + 1..d {
+            let mut v = a[j * d + i];
+            for k in 0..j {
+                v -= a[k * d + i] * a[k * d + j];
+            }
+            a[j * d + i] = v / s;
+        }
+    }
+    Ok(())
+}
+
+/// Solves L x = b in place (L lower, d × d column-major).
+fn forward(l: &[f64], d: usize, x: &mut [f64]) {
+    for i in 0..d {
+        let mut v = x[i];
+        for k in 0..i {
+            v -= l[k * d + i] * x[k];
+        }
+        x[i] = v / l[i * d + i];
+    }
+}
+
+/// Solves Lᵀ x = b in place.
+fn backward(l: &[f64], d: usize, x: &mut [f64]) {
+    for i in (0..d).rev() {
+        let mut v = x[i];
+        for k in i + 1..d {
+            v -= l[i * d + k] * x[k];
+        }
+        x[i] = v / l[i * d + i];
+    }
+}
+
+/// Σ aᵢ bᵢ.
+#[inline(always)]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Where the block (a, b) of S lives inside the slice of column block b: entry (i, j) is at
+/// `pos(j) + i` (on a sparse diagonal block only i ≥ j is stored).
+#[derive(Clone, Copy)]
+enum Loc<'a> {
+    /// Dense column-major n_c × n_c: `pos(j) = j·n_c + off_a`.
+    Dense { nc: usize, oa: usize },
+    /// Sparse CSC: `pos(j) = slot_base[j] − base − shift·j`.
+    Sparse {
+        sb: &'a [usize],
+        base: usize,
+        diag: bool,
+    },
+}
+
+impl Loc<'_> {
+    #[inline(always)]
+    fn pos(&self, j: usize) -> usize {
+        match *self {
+            Loc::Dense { nc, oa } => j * nc + oa,
+            Loc::Sparse { sb, base, diag } => sb[j] - base - if diag { j } else { 0 },
+        }
+    }
+
+    /// Whether only i ≥ j may be written for a diagonal block.
+    fn lower_only(&self) -> bool {
+        matches!(self, Loc::Sparse { diag: true, .. })
+    }
+}
+
+/// `dst[pos(j) + i] −= Σ_k ya[i, k] yb[j, k]` for the block (a, b) of S (`ya`: da × dp,
+/// `yb`: db × dp, column-major); on a diagonal block only i ≥ j.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn sub_yyt(
+    dst: &mut [f64],
+    loc: Loc<'_>,
+    diag: bool,
+    ya: &[f64],
+    da: usize,
+    yb: &[f64],
+    db: usize,
+    dp: usize,
+) {
+    let diag = diag && loc.lower_only();
+    if da == 6
+        && db == 6
+        && dp == 3
+        && !diag
+        && let (Some(a), Some(bm)) = (ya.first_chunk::<18>(), yb.first_chunk::<18>())
+    {
+        // The SE(3) camera / 3-D point case on fixed-size arrays (unrolled, vectorised
+        // along i, no bounds checks in the inner loop).
+        for j in 0..6 {
+            let p = loc.pos(j);
+            if let Some((c, _)) = dst
+                .get_mut(p..)
+                .and_then(|d| d.split_first_chunk_mut::<6>())
+            {
+                let (b0, b1, b2) = (bm[j], bm[6 + j], bm[12 + j]);
+                for i in 0..6 {
+                    c[i] -= a[i] * b0 + a[6 + i] * b1 + a[12 + i] * b2;
+                }
+            }
+        }
+        return;
+    }
+    for j in 0..db {
+        let p = loc.pos(j);
+        let i0 = if diag { j } else { 0 };
+        for i in i0..da {
+            let mut acc = 0.0;
+            for k in 0..dp {
+                acc += ya[k * da + i] * yb[k * db + j];
+            }
+            dst[p + i] -= acc;
+        }
+    }
+}
+
+/// `dst[pos(j) + i] += Σ_r ja[r, i] jb[r, j]` (J_aᵀ J_b, `ja`: m × da, `jb`: m × db).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn add_jtj(
+    dst: &mut [f64],
+    loc: Loc<'_>,
+    diag: bool,
+    ja: &[f64],
+    da: usize,
+    jb: &[f64],
+    db: usize,
+    m: usize,
+) {
+    let diag = diag && loc.lower_only();
+    for j in 0..db {
+        let p = loc.pos(j);
+        let cb = &jb[j * m..(j + 1) * m];
+        let i0 = if diag { j } else { 0 };
+        for i in i0..da {
+            let ca = &ja[i * m..(i + 1) * m];
+            dst[p + i] += ca.iter().zip(cb).map(|(x, y)| x * y).sum::<f64>();
+        }
+    }
+}
+
+/// What the accumulation of one column block of S reads.
+struct ColumnCtx<'a> {
+    cams: &'a [CamBlock],
+    points: &'a [PointBlock],
+    res_cam_ptr: &'a [usize],
+    res_cam: &'a [(usize, usize)],
+    reduced: &'a Reduced,
+    nc: usize,
+    bufs: &'a [EvalBuf],
+    mu: f64,
+    damp: &'a [f64],
+}
+
+/// The accumulation of column block `b` of S into its slice `sl`:
+/// S_ab = Σ_r J_aᵀ J_b (+ μD_b on the diagonal) − Σ_p Y_ap Y_bpᵀ for every a ≥ b.
+struct ColumnTask<'a, 's> {
+    ctx: &'a ColumnCtx<'a>,
+    sl: &'s mut [f64],
+    b: usize,
+    cb: &'a CamBlock,
+}
+
+impl pulp::WithSimd for ColumnTask<'_, '_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let ColumnTask { ctx, sl, b, cb } = self;
+        let (cams, points, nc) = (ctx.cams, ctx.points, ctx.nc);
+        sl.fill(0.0);
+        let base = match ctx.reduced {
+            Reduced::Dense { .. } => cb.off * nc,
+            Reduced::Sparse { pattern, .. } => pattern.col_ptr[cb.off],
+        };
+        let locate = |a: usize| -> Loc<'_> {
+            match ctx.reduced {
+                Reduced::Dense { .. } => Loc::Dense {
+                    nc,
+                    oa: cams[a].off,
+                },
+                Reduced::Sparse {
+                    pattern, col_slots, ..
+                } => {
+                    let slots = &col_slots[b];
+                    let s = slots
+                        .binary_search_by_key(&a, |x| x.0)
+                        .map(|i| slots[i].1)
+                        .unwrap_or(0);
+                    Loc::Sparse {
+                        sb: &pattern.slot_base[s],
+                        base,
+                        diag: a == b,
+                    }
+                }
+            }
+        };
+        let db = cb.dim;
+        // Diagonal block: H_bb (lower triangle) + μD_b.
+        let loc = locate(b);
+        for j in 0..db {
+            let p = loc.pos(j);
+            for i in j..db {
+                sl[p + i] = cb.hbb[j * db + i];
+            }
+            sl[p + j] += ctx.mu * ctx.damp[cb.col + j];
+        }
+        // Camera–camera couplings of residuals touching several cameras.
+        for &(ri, kb) in &cb.res {
+            let buf = &ctx.bufs[ri];
+            let m = buf.r.len();
+            let jb = buf.jac[kb].as_slice();
+            for &(ka, a) in &ctx.res_cam[ctx.res_cam_ptr[ri]..ctx.res_cam_ptr[ri + 1]] {
+                if a <= b {
+                    continue;
+                }
+                add_jtj(
+                    sl,
+                    locate(a),
+                    a == b,
+                    buf.jac[ka].as_slice(),
+                    cams[a].dim,
+                    jb,
+                    db,
+                    m,
+                );
+            }
+        }
+        for &(pi, ib) in &cb.pts {
+            let pb = &points[pi];
+            let dp = pb.dim;
+            let yb = &pb.y[pb.pair_off[ib]..pb.pair_off[ib] + db * dp];
+            for ia in ib..pb.cams.len() {
+                let a = pb.cams[ia];
+                let da = cams[a].dim;
+                let ya = &pb.y[pb.pair_off[ia]..pb.pair_off[ia] + da * dp];
+                sub_yyt(sl, locate(a), a == b, ya, da, yb, db, dp);
+            }
+        }
+    }
+}
+
+impl SchurSystem {
+    /// Whether the layout admits the explicit reduced system: some blocks eliminated, and no
+    /// residual touching two eliminated blocks.
+    pub fn applicable(p: &Problem, layout: &Layout) -> bool {
+        if !layout.eliminated.iter().any(|e| *e) || layout.eliminated.iter().all(|e| *e) {
+            return false;
+        }
+        p.residuals.iter().all(|r| {
+            r.blocks
+                .iter()
+                .filter(|b| layout.free_index[b.0].is_some_and(|f| layout.eliminated[f]))
+                .count()
+                <= 1
+        })
+    }
+
+    /// Builds the structure (camera/point classification, pairs, S pattern, buffers).
+    pub fn new(p: &Problem, layout: &Layout, dense_limit: usize) -> Result<Self> {
+        let nf = layout.free_blocks.len();
+        let mut cam_of = vec![usize::MAX; nf];
+        let mut pt_of = vec![usize::MAX; nf];
+        let mut cams = Vec::new();
+        let mut points = Vec::new();
+        let mut nc = 0;
+        for f in 0..nf {
+            let dim = layout.dims[f];
+            let col = layout.col_offset[f];
+            if layout.eliminated[f] {
+                pt_of[f] = points.len();
+                points.push(PointBlock {
+                    col,
+                    dim,
+                    res: Vec::new(),
+                    res_cam_ptr: vec![0],
+                    res_cams: Vec::new(),
+                    cams: Vec::new(),
+                    pair_off: Vec::new(),
+                    hpp: vec![0.0; dim * dim],
+                    gp: vec![0.0; dim],
+                    hcp: Vec::new(),
+                    res_single: Vec::new(),
+                    pair_sq_off: Vec::new(),
+                    haa: Vec::new(),
+                    ga: Vec::new(),
+                    l: vec![0.0; dim * dim],
+                    y: Vec::new(),
+                    z: vec![0.0; dim],
+                    dx: vec![0.0; dim],
+                    row: vec![0.0; dim],
+                });
+            } else {
+                cam_of[f] = cams.len();
+                cams.push(CamBlock {
+                    col,
+                    off: nc,
+                    dim,
+                    res: Vec::new(),
+                    pts: Vec::new(),
+                    hbb: vec![0.0; dim * dim],
+                    g: vec![0.0; dim],
+                });
+                nc += dim;
+            }
+        }
+        let mut res_cam_ptr = Vec::with_capacity(p.residuals.len() + 1);
+        let mut res_cam = Vec::new();
+        res_cam_ptr.push(0);
+        let mut res_point = Vec::with_capacity(p.residuals.len());
+        for (ri, r) in p.residuals.iter().enumerate() {
+            let mut point = None;
+            for (k, b) in r.blocks.iter().enumerate() {
+                let Some(f) = layout.free_index[b.0] else {
+                    continue;
+                };
+                if pt_of[f] != usize::MAX {
+                    point = Some((pt_of[f], k));
+                } else {
+                    res_cam.push((k, cam_of[f]));
+                }
+            }
+            let rc = &res_cam[res_cam_ptr[ri]..];
+            // Single-camera residuals of a point are summed per point–camera pair instead.
+            if point.is_none() || rc.len() > 1 {
+                for &(k, c) in rc {
+                    cams[c].res.push((ri, k));
+                }
+            }
+            res_cam_ptr.push(res_cam.len());
+            res_point.push(point);
+        }
+        // Pairs per point.
+        for (ri, rp) in res_point.iter().enumerate() {
+            if let Some((pt, k)) = *rp {
+                let pb = &mut points[pt];
+                pb.res.push((ri, k));
+                for &(_, c) in &res_cam[res_cam_ptr[ri]..res_cam_ptr[ri + 1]] {
+                    pb.cams.push(c);
+                }
+            }
+        }
+        for (pi, pb) in points.iter_mut().enumerate() {
+            pb.cams.sort_unstable();
+            pb.cams.dedup();
+            let mut off = 0;
+            for &c in &pb.cams {
+                pb.pair_off.push(off);
+                off += cams[c].dim * pb.dim;
+            }
+            pb.hcp = vec![0.0; off];
+            pb.y = vec![0.0; off];
+            let mut sq = 0;
+            for &c in &pb.cams {
+                pb.pair_sq_off.push(sq);
+                sq += cams[c].dim * cams[c].dim;
+            }
+            pb.haa = vec![0.0; sq];
+            pb.ga = vec![0.0; off / pb.dim.max(1)];
+            for &(ri, _) in &pb.res {
+                pb.res_single
+                    .push(res_cam_ptr[ri + 1] - res_cam_ptr[ri] == 1);
+                for &(k, c) in &res_cam[res_cam_ptr[ri]..res_cam_ptr[ri + 1]] {
+                    // `cams` is sorted and contains c.
+                    let pair = pb.cams.binary_search(&c).unwrap_or(0);
+                    pb.res_cams.push((k, pair));
+                }
+                pb.res_cam_ptr.push(pb.res_cams.len());
+            }
+            for (i, &c) in pb.cams.iter().enumerate() {
+                cams[c].pts.push((pi, i));
+            }
+        }
+        let reduced = if nc <= dense_limit {
+            let req = faer::linalg::cholesky::llt::factor::cholesky_in_place_scratch::<f64>(
+                nc,
+                Par::Seq,
+                Default::default(),
+            );
+            let mem = MemBuffer::try_new(req)
+                .map_err(|e| EstimateError::LinearSolver(format!("workspace allocation: {e:?}")))?;
+            Reduced::Dense { mem }
+        } else {
+            let dims: Vec<usize> = cams.iter().map(|c| c.dim).collect();
+            let mut pairs = Vec::new();
+            for w in res_cam_ptr.windows(2) {
+                let rc = &res_cam[w[0]..w[1]];
+                for (i, &(_, a)) in rc.iter().enumerate() {
+                    for &(_, b) in &rc[..i] {
+                        pairs.push((a, b));
+                    }
+                }
+            }
+            for pb in &points {
+                for (i, &a) in pb.cams.iter().enumerate() {
+                    for &b in &pb.cams[..i] {
+                        pairs.push((a, b));
+                    }
+                }
+            }
+            let pattern = Pattern::new(&dims, pairs);
+            let chol = Cholesky::new(&pattern, false, None)?;
+            let mut col_slots = vec![Vec::new(); cams.len()];
+            for (&(a, b), &slot) in &pattern.slots {
+                col_slots[b].push((a, slot));
+            }
+            col_slots.iter_mut().for_each(|v| v.sort_unstable());
+            Reduced::Sparse {
+                pattern: Box::new(pattern),
+                chol: Box::new(chol),
+                col_slots,
+            }
+        };
+        let s_bounds: Vec<usize> = match &reduced {
+            Reduced::Dense { .. } => cams
+                .iter()
+                .map(|c| c.off * nc)
+                .chain(std::iter::once(nc * nc))
+                .collect(),
+            Reduced::Sparse { pattern, .. } => cams
+                .iter()
+                .map(|c| pattern.col_ptr[c.off])
+                .chain(std::iter::once(pattern.nnz()))
+                .collect(),
+        };
+        let s_len = s_bounds.last().copied().unwrap_or(0);
+        Ok(Self {
+            points,
+            cams,
+            res_cam_ptr,
+            res_cam,
+            nc,
+            gc: vec![0.0; nc],
+            s: vec![0.0; s_len],
+            s_bounds,
+            rhs: vec![0.0; nc],
+            reduced,
+            time_reduce_s: 0.0,
+            time_factor_s: 0.0,
+        })
+    }
+
+    /// Whether S is dense.
+    #[cfg(test)]
+    pub fn is_dense(&self) -> bool {
+        matches!(self.reduced, Reduced::Dense { .. })
+    }
+
+    /// From evaluated (loss-weighted) residuals and Jacobians: H_pp, g_p and H_ap per point,
+    /// g_c per camera, and the full-ordering gradient `g` and diagonal of JᵀJ `hdiag`.
+    pub fn assemble(&mut self, bufs: &[EvalBuf], g: &mut [f64], hdiag: &mut [f64]) {
+        let cams = &self.cams;
+        // Per point, in residual order: H_pp, g_p, H_ap and the pair's J_aᵀJ_a, J_aᵀr.
+        self.points.par_iter_mut().for_each(|pb| {
+            let d = pb.dim;
+            pb.hpp.fill(0.0);
+            pb.gp.fill(0.0);
+            pb.hcp.fill(0.0);
+            pb.haa.fill(0.0);
+            pb.ga.fill(0.0);
+            for (o, &(ri, kp)) in pb.res.iter().enumerate() {
+                let buf = &bufs[ri];
+                let m = buf.r.len();
+                let jp = buf.jac[kp].as_slice();
+                for j in 0..d {
+                    let cj = &jp[j * m..(j + 1) * m];
+                    pb.gp[j] += dot(cj, &buf.r);
+                    for i in j..d {
+                        pb.hpp[j * d + i] += dot(&jp[i * m..(i + 1) * m], cj);
+                    }
+                }
+                let single = pb.res_single[o];
+                for &(k, pair) in &pb.res_cams[pb.res_cam_ptr[o]..pb.res_cam_ptr[o + 1]] {
+                    let ja = buf.jac[k].as_slice();
+                    let da = cams[pb.cams[pair]].dim;
+                    let h = &mut pb.hcp[pb.pair_off[pair]..pb.pair_off[pair] + da * d];
+                    for j in 0..d {
+                        let cj = &jp[j * m..(j + 1) * m];
+                        for i in 0..da {
+                            h[j * da + i] += dot(&ja[i * m..(i + 1) * m], cj);
+                        }
+                    }
+                    if single {
+                        let go = pb.pair_off[pair] / d.max(1);
+                        let so = pb.pair_sq_off[pair];
+                        for j in 0..da {
+                            let cj = &ja[j * m..(j + 1) * m];
+                            pb.ga[go + j] += dot(cj, &buf.r);
+                            for i in j..da {
+                                pb.haa[so + j * da + i] += dot(&ja[i * m..(i + 1) * m], cj);
+                            }
+                        }
+                    }
+                }
+            }
+            for j in 0..d {
+                for i in 0..j {
+                    pb.hpp[j * d + i] = pb.hpp[i * d + j];
+                }
+            }
+        });
+        // Per camera: H_bb (lower triangle) and g_b from its pairs and its other residuals.
+        let points = &self.points;
+        self.cams.par_iter_mut().for_each(|cb| {
+            let d = cb.dim;
+            cb.hbb.fill(0.0);
+            cb.g.fill(0.0);
+            for &(pi, ib) in &cb.pts {
+                let pb = &points[pi];
+                let go = pb.pair_off[ib] / pb.dim.max(1);
+                let so = pb.pair_sq_off[ib];
+                for (x, y) in cb.g.iter_mut().zip(&pb.ga[go..go + d]) {
+                    *x += y;
+                }
+                for (x, y) in cb.hbb.iter_mut().zip(&pb.haa[so..so + d * d]) {
+                    *x += y;
+                }
+            }
+            for &(ri, k) in &cb.res {
+                let buf = &bufs[ri];
+                let m = buf.r.len();
+                let jb = buf.jac[k].as_slice();
+                for j in 0..d {
+                    let cj = &jb[j * m..(j + 1) * m];
+                    cb.g[j] += dot(cj, &buf.r);
+                    for i in j..d {
+                        cb.hbb[j * d + i] += dot(&jb[i * m..(i + 1) * m], cj);
+                    }
+                }
+            }
+        });
+        for pb in &self.points {
+            for j in 0..pb.dim {
+                g[pb.col + j] = pb.gp[j];
+                hdiag[pb.col + j] = pb.hpp[j * pb.dim + j];
+            }
+        }
+        for cb in &self.cams {
+            for j in 0..cb.dim {
+                g[cb.col + j] = cb.g[j];
+                hdiag[cb.col + j] = cb.hbb[j * cb.dim + j];
+                self.gc[cb.off + j] = cb.g[j];
+            }
+        }
+    }
+
+    /// Solves the damped normal equations (H + μ·diag(`damp`)) δ = −g (full ordering; `damp`
+    /// is all zeros for Gauss–Newton) by elimination of the points, Cholesky of S and
+    /// back-substitution. `Ok(Err(col))` when a pivot is not positive (`col`: the offending
+    /// column of the full ordering, when known).
+    pub fn solve(
+        &mut self,
+        bufs: &[EvalBuf],
+        mu: f64,
+        damp: &[f64],
+        delta: &mut [f64],
+    ) -> Result<std::result::Result<(), Option<usize>>> {
+        // 1. Per point: L L ᵀ = H_pp + μD_p, z = L⁻¹ g_p, Y_a = H_ap L⁻ᵀ.
+        let t0 = std::time::Instant::now();
+        let cams = &self.cams;
+        let failed = self
+            .points
+            .par_iter_mut()
+            .map(|pb| {
+                let d = pb.dim;
+                pb.l.copy_from_slice(&pb.hpp);
+                for j in 0..d {
+                    pb.l[j * d + j] += mu * damp[pb.col + j];
+                }
+                if let Err(k) = small_cholesky(&mut pb.l, d) {
+                    return Some(pb.col + k);
+                }
+                pb.z.copy_from_slice(&pb.gp);
+                forward(&pb.l, d, &mut pb.z);
+                // Row i of Y solves L yᵢᵀ = hᵢᵀ (row i of H_ap).
+                for (pair, &c) in pb.cams.iter().enumerate() {
+                    let da = cams[c].dim;
+                    let off = pb.pair_off[pair];
+                    for i in 0..da {
+                        for (k, v) in pb.row.iter_mut().enumerate() {
+                            *v = pb.hcp[off + k * da + i];
+                        }
+                        forward(&pb.l, d, &mut pb.row);
+                        for (k, v) in pb.row.iter().enumerate() {
+                            pb.y[off + k * da + i] = *v;
+                        }
+                    }
+                }
+                None
+            })
+            .reduce(|| None, |a, b| a.or(b));
+        if let Some(col) = failed {
+            self.time_reduce_s += t0.elapsed().as_secs_f64();
+            return Ok(Err(Some(col)));
+        }
+        // 2. S column block by column block.
+        let nc = self.nc;
+        let points = &self.points;
+        let (res_cam_ptr, res_cam) = (&self.res_cam_ptr, &self.res_cam);
+        let reduced = &self.reduced;
+        let ctx = ColumnCtx {
+            cams,
+            points,
+            res_cam_ptr,
+            res_cam,
+            reduced,
+            nc,
+            bufs,
+            mu,
+            damp,
+        };
+        let pieces = split_pieces(&mut self.s, &self.s_bounds);
+        pieces
+            .into_par_iter()
+            .zip(cams.par_iter().enumerate())
+            .for_each(|(sl, (b, cb))| {
+                // Compiled for the best instruction set available (AVX2 when present).
+                pulp::Arch::new().dispatch(ColumnTask {
+                    ctx: &ctx,
+                    sl,
+                    b,
+                    cb,
+                })
+            });
+        // 3. Reduced right-hand side −g_c + Σ_p Y_ap z_p.
+        for cb in cams {
+            for j in 0..cb.dim {
+                self.rhs[cb.off + j] = -self.gc[cb.off + j];
+            }
+            for &(pi, ia) in &cb.pts {
+                let pb = &points[pi];
+                let da = cb.dim;
+                let ya = &pb.y[pb.pair_off[ia]..pb.pair_off[ia] + da * pb.dim];
+                for i in 0..da {
+                    let mut acc = 0.0;
+                    for k in 0..pb.dim {
+                        acc += ya[k * da + i] * pb.z[k];
+                    }
+                    self.rhs[cb.off + i] += acc;
+                }
+            }
+        }
+        // 4. Cholesky of S and the camera step.
+        let t1 = std::time::Instant::now();
+        self.time_reduce_s += (t1 - t0).as_secs_f64();
+        let cam_col = |c: usize| -> Option<usize> {
+            cams.iter()
+                .rposition(|cb| cb.off <= c)
+                .map(|i| cams[i].col + (c - cams[i].off))
+        };
+        match &mut self.reduced {
+            Reduced::Dense { mem } => {
+                let mut a = MatMut::from_column_major_slice_mut(&mut self.s, nc, nc);
+                let res = cholesky_in_place(
+                    a.as_mut(),
+                    LltRegularization::default(),
+                    Par::Seq,
+                    MemStack::new(mem),
+                    Default::default(),
+                );
+                if let Err(faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot {
+                    index,
+                }) = res
+                {
+                    self.time_factor_s += t1.elapsed().as_secs_f64();
+                    return Ok(Err(cam_col(index)));
+                }
+                let l = MatRef::from_column_major_slice(&self.s, nc, nc);
+                solve_in_place_with_conj(
+                    l,
+                    Conj::No,
+                    MatMut::from_column_major_slice_mut(&mut self.rhs, nc, 1),
+                    Par::Seq,
+                    MemStack::new(mem),
+                );
+            }
+            Reduced::Sparse { pattern, chol, .. } => {
+                if let Err(c) = chol.factor(pattern, &self.s) {
+                    self.time_factor_s += t1.elapsed().as_secs_f64();
+                    return Ok(Err(c.and_then(cam_col)));
+                }
+                chol.solve_in_place(&mut self.rhs, nc, 1)?;
+            }
+        }
+        // 5. Back-substitution δ_p = L⁻ᵀ (−z − Σ_a Y_aᵀ δ_a).
+        let t2 = std::time::Instant::now();
+        self.time_factor_s += (t2 - t1).as_secs_f64();
+        let rhs = &self.rhs;
+        self.points.par_iter_mut().for_each(|pb| {
+            let d = pb.dim;
+            for k in 0..d {
+                pb.dx[k] = -pb.z[k];
+            }
+            for (pair, &c) in pb.cams.iter().enumerate() {
+                let cb = &cams[c];
+                let da = cb.dim;
+                let ya = &pb.y[pb.pair_off[pair]..pb.pair_off[pair] + da * d];
+                for k in 0..d {
+                    let col = &ya[k * da..(k + 1) * da];
+                    pb.dx[k] -= col
+                        .iter()
+                        .zip(&rhs[cb.off..cb.off + da])
+                        .map(|(a, b)| a * b)
+                        .sum::<f64>();
+                }
+            }
+            backward(&pb.l, d, &mut pb.dx);
+        });
+        for cb in cams {
+            delta[cb.col..cb.col + cb.dim].copy_from_slice(&rhs[cb.off..cb.off + cb.dim]);
+        }
+        for pb in &self.points {
+            delta[pb.col..pb.col + pb.dim].copy_from_slice(&pb.dx);
+        }
+        self.time_reduce_s += t2.elapsed().as_secs_f64();
+        Ok(Ok(()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{DMatrix, Isometry3, Vector3};
+
+    use super::*;
+    use crate::lsq::linear::Cholesky;
+    use crate::lsq::solver::Structure;
+    use crate::lsq::synthetic::bundle_scene;
+    use crate::lsq::{Loss, Manifold, RelativePoseResidual};
+
+    /// The full normal equations (JᵀJ + μD) δ = −g solved densely by the block-pattern
+    /// assembly of the generic path, independent of the reduced system.
+    fn full_step(p: &Problem, bufs: &[EvalBuf], mu: f64) -> (Vec<f64>, Vec<f64>) {
+        let st = Structure::new(p);
+        let mut h = vec![0.0; st.pattern.nnz()];
+        let mut g = vec![0.0; st.n];
+        p.assemble(&st, bufs, &mut h, &mut g);
+        let damp: Vec<f64> = st
+            .pattern
+            .diag_pos
+            .iter()
+            .map(|&q| h[q].clamp(1e-6, 1e32))
+            .collect();
+        for (c, &q) in st.pattern.diag_pos.iter().enumerate() {
+            h[q] += mu * damp[c];
+        }
+        let mut ch = Cholesky::new(&st.pattern, true, None).unwrap();
+        ch.factor(&st.pattern, &h).unwrap();
+        let mut d: Vec<f64> = g.iter().map(|v| -v).collect();
+        ch.solve_in_place(&mut d, st.n, 1).unwrap();
+        (d, damp)
+    }
+
+    /// A bundle problem plus camera–camera factors (relative poses), a fixed pose, a point
+    /// prior (a residual on a point alone) and an SE(3) prior on a camera.
+    fn mixed_problem() -> Problem {
+        let scene = bundle_scene(7, 60, 4, 1.0, 11);
+        let (mut p, poses, points) = scene.problem(Loss::Huber(2.0), false).unwrap();
+        p.set_fixed(poses[0], true).unwrap();
+        let cov = DMatrix::from_diagonal_element(6, 6, 0.01);
+        for w in poses.windows(2) {
+            let z = Isometry3::translation(0.1, 0.0, 0.0);
+            p.add_residual(
+                RelativePoseResidual::new(&z, &cov).unwrap(),
+                &[w[0], w[1]],
+                Loss::Trivial,
+            )
+            .unwrap();
+        }
+        let x = p.values(points[3]).to_vec();
+        p.add_prior(points[3], &x, &DMatrix::identity(3, 3))
+            .unwrap();
+        let pose_mean = p.values(poses[4]).to_vec();
+        p.add_prior(poses[4], &pose_mean, &DMatrix::identity(6, 6))
+            .unwrap();
+        // A "stereo" residual over two cameras and one point (a point residual coupling
+        // cameras directly): the difference of the point's camera-frame coordinates.
+        for (a, b, x) in [(1, 2, 5), (3, 5, 7), (2, 6, 5)] {
+            let r = crate::lsq::NumericDiff::new(
+                3,
+                vec![Manifold::Se3, Manifold::Se3, Manifold::Euclidean(3)],
+                |q: &[&[f64]], out: &mut [f64]| {
+                    let xw = nalgebra::Point3::new(q[2][0], q[2][1], q[2][2]);
+                    let d = crate::lsq::se3_from_params(q[0]) * xw
+                        - crate::lsq::se3_from_params(q[1]) * xw;
+                    out.copy_from_slice(d.as_slice());
+                    Ok(())
+                },
+            );
+            p.add_residual(r, &[poses[a], poses[b], points[x]], Loss::Trivial)
+                .unwrap();
+        }
+        p
+    }
+
+    #[test]
+    fn reduced_camera_system_step_equals_the_full_solve() {
+        let p = mixed_problem();
+        let layout = Layout::new(&p);
+        assert!(SchurSystem::applicable(&p, &layout));
+        let mut bufs = p.make_buffers();
+        let values = p.values.clone();
+        p.evaluate_all(&values, &mut bufs, true).unwrap();
+        for limit in [DENSE_CAMERA_LIMIT, 0] {
+            let mut sys = SchurSystem::new(&p, &layout, limit).unwrap();
+            assert_eq!(sys.is_dense(), limit > 0);
+            let n = layout.n;
+            let (mut g, mut hdiag) = (vec![0.0; n], vec![0.0; n]);
+            sys.assemble(&bufs, &mut g, &mut hdiag);
+            for mu in [1e-4, 0.3, 0.0] {
+                let (want, damp) = full_step(&p, &bufs, mu);
+                // The same diagonal of JᵀJ as the generic assembly.
+                for (a, b) in hdiag.iter().zip(&damp) {
+                    assert!((a.clamp(1e-6, 1e32) - b).abs() <= 1e-9 * b.abs().max(1.0));
+                }
+                let mut delta = vec![f64::NAN; n];
+                sys.solve(&bufs, mu, &damp, &mut delta).unwrap().unwrap();
+                let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                for (i, (a, b)) in delta.iter().zip(&want).enumerate() {
+                    assert!(
+                        (a - b).abs() <= 1e-9 * scale,
+                        "limit {limit} μ {mu} col {i}: {a} vs {b}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn singular_point_block_is_reported_by_column() {
+        // A point seen once (2 equations for 3 unknowns): H_pp is singular, so Gauss–Newton
+        // (μ = 0) must fail at that point's column, and LM damping makes it solvable.
+        let mut p = Problem::new();
+        let k = nalgebra::Matrix3::new(500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0);
+        let cam = p
+            .add_block(
+                &crate::lsq::se3_to_params(&Isometry3::identity()),
+                Manifold::Se3,
+            )
+            .unwrap();
+        let mut pts = Vec::new();
+        for i in 0..4 {
+            let x = Vector3::new(0.3 * i as f64 - 0.5, 0.1 * i as f64, 4.0 + i as f64);
+            pts.push(p.add_block(x.as_slice(), Manifold::Euclidean(3)).unwrap());
+        }
+        for (i, &b) in pts.iter().enumerate() {
+            p.add_residual(
+                crate::lsq::ReprojectionResidual::new(&k, [300.0 + i as f64, 200.0], 1.0).unwrap(),
+                &[cam, b],
+                Loss::Trivial,
+            )
+            .unwrap();
+        }
+        let layout = Layout::new(&p);
+        let mut sys = SchurSystem::new(&p, &layout, DENSE_CAMERA_LIMIT).unwrap();
+        let mut bufs = p.make_buffers();
+        let values = p.values.clone();
+        p.evaluate_all(&values, &mut bufs, true).unwrap();
+        let n = layout.n;
+        let (mut g, mut hdiag) = (vec![0.0; n], vec![0.0; n]);
+        sys.assemble(&bufs, &mut g, &mut hdiag);
+        let damp: Vec<f64> = hdiag.iter().map(|h| h.clamp(1e-6, 1e32)).collect();
+        let mut delta = vec![0.0; n];
+        let col = sys.solve(&bufs, 0.0, &damp, &mut delta).unwrap();
+        let first_point_col = layout.col_offset[1];
+        assert!(
+            matches!(col, Err(Some(c)) if (first_point_col..first_point_col + 3).contains(&c)),
+            "{col:?}"
+        );
+        assert!(sys.solve(&bufs, 1e-3, &damp, &mut delta).unwrap().is_ok());
+        assert!(delta.iter().all(|v| v.is_finite()));
+    }
+}
