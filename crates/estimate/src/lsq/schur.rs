@@ -303,6 +303,76 @@ fn add_jtj(
     }
 }
 
+/// The common bundle-adjustment case on fixed-size arrays: a 2-D residual (a pixel), a 3-D
+/// point and 6-D (SE(3)) camera blocks. Accumulates exactly the terms of the generic loop in
+/// [`SchurSystem::assemble`] (H_pp, g_p, H_ap and, for single-camera residuals, J_aᵀJ_a and
+/// J_aᵀr) without slice bounds checks. Returns `false`, having changed nothing, when a block
+/// does not have those sizes (the caller then runs the generic loop).
+#[inline(always)]
+fn accumulate_pixel_residual(
+    pb: &mut PointBlock,
+    o: usize,
+    buf: &EvalBuf,
+    kp: usize,
+    cams: &[CamBlock],
+) -> bool {
+    let (Some(r), Some(jp)) = (
+        buf.r.first_chunk::<2>(),
+        buf.jac[kp].as_slice().first_chunk::<6>(),
+    ) else {
+        return false;
+    };
+    let pairs = &pb.res_cams[pb.res_cam_ptr[o]..pb.res_cam_ptr[o + 1]];
+    if pairs
+        .iter()
+        .any(|&(k, pair)| cams[pb.cams[pair]].dim != 6 || buf.jac[k].len() != 12)
+    {
+        return false;
+    }
+    // Column c of a 2 × n column-major Jacobian is (x[2c], x[2c + 1]).
+    for j in 0..3 {
+        pb.gp[j] += jp[2 * j] * r[0] + jp[2 * j + 1] * r[1];
+        for i in j..3 {
+            pb.hpp[j * 3 + i] += jp[2 * i] * jp[2 * j] + jp[2 * i + 1] * jp[2 * j + 1];
+        }
+    }
+    let single = pb.res_single[o];
+    for &(k, pair) in pairs {
+        let Some(ja) = buf.jac[k].as_slice().first_chunk::<12>() else {
+            continue;
+        };
+        let off = pb.pair_off[pair];
+        if let Some(h) = pb
+            .hcp
+            .get_mut(off..)
+            .and_then(|x| x.first_chunk_mut::<18>())
+        {
+            for j in 0..3 {
+                for i in 0..6 {
+                    h[j * 6 + i] += ja[2 * i] * jp[2 * j] + ja[2 * i + 1] * jp[2 * j + 1];
+                }
+            }
+        }
+        if single {
+            let go = off / 3;
+            let so = pb.pair_sq_off[pair];
+            if let Some(ga) = pb.ga.get_mut(go..).and_then(|x| x.first_chunk_mut::<6>()) {
+                for j in 0..6 {
+                    ga[j] += ja[2 * j] * r[0] + ja[2 * j + 1] * r[1];
+                }
+            }
+            if let Some(haa) = pb.haa.get_mut(so..).and_then(|x| x.first_chunk_mut::<36>()) {
+                for j in 0..6 {
+                    for i in j..6 {
+                        haa[j * 6 + i] += ja[2 * i] * ja[2 * j] + ja[2 * i + 1] * ja[2 * j + 1];
+                    }
+                }
+            }
+        }
+    }
+    true
+}
+
 /// What the accumulation of one column block of S reads.
 struct ColumnCtx<'a> {
     cams: &'a [CamBlock],
@@ -622,10 +692,14 @@ impl SchurSystem {
             pb.hcp.fill(0.0);
             pb.haa.fill(0.0);
             pb.ga.fill(0.0);
-            for (o, &(ri, kp)) in pb.res.iter().enumerate() {
+            for o in 0..pb.res.len() {
+                let (ri, kp) = pb.res[o];
                 let buf = &bufs[ri];
                 let m = buf.r.len();
                 let jp = buf.jac[kp].as_slice();
+                if m == 2 && d == 3 && accumulate_pixel_residual(pb, o, buf, kp, cams) {
+                    continue;
+                }
                 for j in 0..d {
                     let cj = &jp[j * m..(j + 1) * m];
                     pb.gp[j] += dot(cj, &buf.r);
