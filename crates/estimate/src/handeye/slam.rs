@@ -1668,29 +1668,41 @@ pub(crate) mod tests {
         assert!(sol.rms_px < 0.5 && sol.rms_px > 0.15, "rms {}", sol.rms_px);
     }
 
-    #[test]
-    fn edge_residual_jacobians_match_finite_differences() {
-        use autoteach_geometry::lie::se3_plus;
-        let sc = scene(6, 4, 0.3);
-        let obs = &sc.observations[3];
+    /// The edge residual of observation `obs` of scene `sc` (σ 0.5 px, identity mount, zero
+    /// fixed offsets and link corrections); `extended` adds the joint-noise and mount blocks.
+    fn test_edge_residual(
+        sc: &Scene,
+        obs: &EdgeObservation,
+        offset_joints: Vec<usize>,
+        extended: bool,
+        link_idx: Vec<usize>,
+    ) -> EdgeResidual {
         let cfg = &sc.config;
-        let res = EdgeResidual {
+        EdgeResidual {
             k: cfg.k,
             params: cfg.robot_params,
             geometry: cfg.geometry,
             q_enc: sc.encoders[obs.frame],
             fixed_offsets: Joints::zeros(),
-            offset_joints: vec![0, 1, 3],
+            offset_joints,
             rim: obs.rim,
             points: obs.points.clone(),
             sigma: 0.5,
             angles: None,
-            joint_noise: false,
+            joint_noise: extended,
             fixed_mount: Isometry3::identity(),
-            mount_block: false,
+            mount_block: extended,
             fixed_links: [0.0; 3],
-            link_idx: Vec::new(),
-        };
+            link_idx,
+        }
+    }
+
+    #[test]
+    fn edge_residual_jacobians_match_finite_differences() {
+        use autoteach_geometry::lie::se3_plus;
+        let sc = scene(6, 4, 0.3);
+        let obs = &sc.observations[3];
+        let res = test_edge_residual(&sc, obs, vec![0, 1, 3], false, Vec::new());
         let base = se3_to_params(&sc.truth.base).to_vec();
         let offs = [vec![0.001], vec![0.002], vec![-0.003]];
         let w = sc.truth.wafers[obs.wafer].as_slice().to_vec();
@@ -1742,24 +1754,7 @@ pub(crate) mod tests {
         use autoteach_geometry::lie::se3_plus;
         let sc = scene(6, 4, 0.3);
         let obs = &sc.observations[5];
-        let cfg = &sc.config;
-        let res = EdgeResidual {
-            k: cfg.k,
-            params: cfg.robot_params,
-            geometry: cfg.geometry,
-            q_enc: sc.encoders[obs.frame],
-            fixed_offsets: Joints::zeros(),
-            offset_joints: vec![1],
-            rim: obs.rim,
-            points: obs.points.clone(),
-            sigma: 0.5,
-            angles: None,
-            joint_noise: true,
-            fixed_mount: Isometry3::identity(),
-            mount_block: true,
-            fixed_links: [0.0; 3],
-            link_idx: vec![0, 1, 2],
-        };
+        let res = test_edge_residual(&sc, obs, vec![1], true, vec![0, 1, 2]);
         let mount = Isometry3::from_parts(
             Translation3::new(0.002, -0.001, 0.003),
             UnitQuaternion::from_euler_angles(0.01, -0.02, 0.005),
