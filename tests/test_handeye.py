@@ -116,3 +116,18 @@ def test_ukf_rejects_bad_lengths():
         _core.handeye_ukf(p, np.eye(4), np.zeros((5, 5)), np.zeros((3, 6)))
     with pytest.raises(InvalidInputError, match="noise"):
         _core.handeye_ukf(p, np.eye(4), np.zeros((2, 5)), np.zeros((1, 6)), [1.0] * 3)
+
+
+def test_relative_odometry_is_the_relative_camera_motion():
+    # Independent truth: exact increments of a trajectory turn back into T_wc(t)⁻¹·T_wc(t+1).
+    from autoteach.sim import relative_odometry
+
+    s = simulate_session(seed=4, frames=25, render=False)
+    t = s.camera_poses
+    rel = relative_odometry(true_increments(t), t[0][:3, :3])
+    for i in range(len(rel)):
+        np.testing.assert_allclose(rel[i], np.linalg.inv(t[i]) @ t[i + 1], atol=1e-12)
+    with pytest.raises(InvalidInputError, match="start_rotation"):
+        relative_odometry(true_increments(t), np.eye(3) * 2.0)
+    with pytest.raises(InvalidInputError, match=r"\(F-1, 6\)"):
+        relative_odometry(np.zeros((3, 5)), np.eye(3))

@@ -210,6 +210,25 @@ def test_bad_inputs_raise_invalid_input() -> None:
         p.add_prior(b, [0.0, 0.0], np.eye(3))
 
 
+def test_index_arrays_of_any_integer_type_give_the_same_result() -> None:
+    """Lists, int32/uint16 arrays and int64 arrays are the same indices (int64 crosses as one slice)."""
+    K, _, _, obs, pi, xi, init_poses, init_points = _small_scene()
+    ref = bundle_adjust(K, init_poses, init_points, obs, pi, xi, fixed_poses=(0, 1))
+    for conv in (list, lambda a: np.asarray(a, dtype=np.int32), lambda a: np.asarray(a, dtype=np.uint16)):
+        got = bundle_adjust(K, init_poses, init_points, obs, conv(pi), conv(xi), fixed_poses=(0, 1))
+        np.testing.assert_array_equal(got.poses, ref.poses)
+        np.testing.assert_array_equal(got.points, ref.points)
+        assert got.final_cost == ref.final_cost
+    with pytest.raises(InvalidInputError, match=r"point_index\[3\] = -1 is out of range"):
+        bad = np.array(xi, dtype=np.int64)
+        bad[3] = -1
+        bundle_adjust(K, init_poses, init_points, obs, pi, bad)
+    with pytest.raises(InvalidInputError, match="out of range"):
+        huge = np.array(pi, dtype=np.uint64)
+        huge[0] = np.iinfo(np.uint64).max
+        bundle_adjust(K, init_poses, init_points, obs, huge, xi)
+
+
 def test_point_behind_camera_is_an_error_not_a_result() -> None:
     K, _, _, obs, pi, xi, init_poses, init_points = _small_scene()
     pts = init_points.copy()

@@ -124,6 +124,13 @@ def test_static_robot_is_a_clear_error(session):
         autoteach(dataclasses.replace(session, joints_encoder=enc))
 
 
+def test_bad_band_and_odometry_options_are_clear_errors(session):
+    with pytest.raises(InvalidInputError, match="min_band_px"):
+        autoteach(session, min_band_px=float("nan"), use_ukf=False)
+    with pytest.raises(InvalidInputError, match="odometry_sigma"):
+        autoteach(session, camera_mode="free", odometry_sigma=(1e-4,) * 5, use_ukf=False)
+
+
 def test_no_images_with_the_detection_frontend_is_a_clear_error(session):
     with pytest.raises(AutoteachError, match="no images"):
         autoteach(session, frontend="detect")
@@ -134,3 +141,33 @@ def test_deterministic_for_a_seed(session):
     b = autoteach(session, seed=5, window=0, use_ukf=False)
     np.testing.assert_array_equal(a.wafer_params, b.wafer_params)
     np.testing.assert_array_equal(a.base_pose, b.base_pose)
+
+
+def test_free_camera_mode_feeds_the_visual_odometry_into_the_factor_graph():
+    # Eqs. (5.6), (5.11): with an imprecise robot-motion factor (1 mm / 1 mrad per frame) the
+    # camera poses are tied by the edges and, when fed, the odometry's relative-pose factors.
+    # Independent truth: the simulator's camera motion between consecutive frames.
+    from autoteach.sim import true_increments
+
+    s = simulate_session(seed=3, frames=60, render=False)
+
+    def motion_error_mm(r):
+        c, t = r.camera_poses, s.camera_poses
+        e = [np.linalg.inv(c[i]) @ c[i + 1] - np.linalg.inv(t[i]) @ t[i + 1] for i in range(len(c) - 1)]
+        return 1e3 * math.sqrt(np.mean([np.sum(d[:3, 3] ** 2) for d in e]))
+
+    common = dict(seed=3, use_ukf=False, camera_mode="free", motion_sigma=(1e-3,) * 6, odometry_start=s.camera_poses[0])
+    exact = true_increments(s.camera_poses)
+    with_vo = autoteach(s, odometry=exact, odometry_sigma=(1.2e-4,) * 6, **common)
+    without = autoteach(s, odometry=exact, odometry_sigma=(1e3,) * 6, **common)
+    assert with_vo.frontend_stats["odometry_factors"] == s.n_frames - 1
+    assert with_vo.extra_calibration["camera_mode"] == "free"
+    assert motion_error_mm(with_vo) < 0.7 * motion_error_mm(without)
+    # Every estimate inside its reported 3σ (θ4 is then constrained by the calibration prior only).
+    assert all(with_vo.within_3sigma.values()), with_vo.within_3sigma
+    # The default: drifting simulated odometry, factors fed, goals on base, wafers within 3σ.
+    r = autoteach(s, seed=3, use_ukf=False, camera_mode="free")
+    assert r.frontend_stats["odometry_factors"] == s.n_frames - 1
+    assert all(r.within_3sigma.values()), r.within_3sigma
+    with pytest.raises(InvalidInputError, match="odometry must be finite increments"):
+        autoteach(s, seed=3, use_ukf=False, camera_mode="free", odometry=exact[:-1])

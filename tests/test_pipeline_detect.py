@@ -134,3 +134,89 @@ def test_polyline_distance_matches_the_closed_form_for_a_circle():
     pts = np.array([[100.0, 80.0], [160.0, 80.0], [100.0, 133.0], [130.0, 120.0]])
     truth = np.abs(np.hypot(pts[:, 0] - 100, pts[:, 1] - 80) - 50)
     np.testing.assert_allclose(polyline_distance(pts, poly), truth, atol=2e-3)
+
+
+def _look_along_minus_x(distance: float, radius: float) -> np.ndarray:
+    """Camera at ``(radius + distance, 0, 0)`` looking along −x (x right = +y, y down = −z)."""
+    t = np.eye(4)
+    t[:3, :3] = [[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
+    t[0, 3] = radius + distance
+    return t
+
+
+def test_band_width_matches_the_closed_form():
+    # A level wafer seen from its mid-plane: at the front both rims lie at depth D, so the side
+    # band is f·h/D pixels high; where the line of sight is tangent to the rim
+    # (cos φ = R/(R + D)) both rims project to one vertical line and the image normal is
+    # horizontal: the band has no width there.
+    k = np.array([[1000.0, 0.0, 639.5], [0.0, 1000.0, 359.5], [0.0, 0.0, 1.0]])
+    r_w, h, d = 0.15, 0.001, 0.4
+    t_wc = _look_along_minus_x(d, r_w)
+    t_cw = np.linalg.inv(t_wc)
+    upper, lower = np.eye(4), np.eye(4)
+    upper[2, 3], lower[2, 3] = h / 2, -h / 2
+    hom = k @ (t_cw @ upper)[:3, [0, 1, 3]]
+    conic = pipeline.rim_conic(k, t_wc, np.zeros(5), 0, r_w, h)
+    phi_t = np.arccos(r_w / (r_w + d))
+    pts = []
+    for phi in (0.0, phi_t):
+        p = hom @ np.array([r_w * np.cos(phi), r_w * np.sin(phi), 1.0])
+        pts.append(p[:2] / p[2])
+    band = pipeline.band_width(np.array(pts), np.linalg.inv(hom), t_cw @ lower, conic, k, r_w)
+    assert band[0] == pytest.approx(1000.0 * h / d, rel=1e-9)
+    assert abs(band[1]) < 1e-6
+
+
+def test_narrow_band_edge_points_are_the_biased_ones(session, detections):
+    # The physical premise of ``min_band_px``: where the side band is narrow its two blurred
+    # edges merge and the detected rim points stray from the true rim. Independent truth: the
+    # simulator's rim conics (eq. (5.13)) from the true camera and wafer poses.
+    k, cfg = _k(session), session.config
+    wafers = np.stack([wafer_params_of(p) for p in session.wafer_poses])
+    obs = pipeline.gate_detections(
+        detections,
+        session.camera_poses,
+        wafers,
+        np.asarray(session.wafer_slots),
+        k=k,
+        radius=cfg.wafer_radius,
+        thickness=cfg.wafer_thickness,
+        gate_px=1.0,
+    )
+    off, band = [], []
+    for i, (f, w, rim) in enumerate(zip(obs.frames, obs.wafers, obs.rims, strict=True)):
+        p = obs.points[obs.start[i] : obs.start[i + 1]]
+        t_rim, t_other = wafer_pose_rims(wafers[w], rim, cfg.wafer_thickness)
+        t_cw = np.linalg.inv(session.camera_poses[f])
+        hom = k @ (t_cw @ t_rim)[:3, [0, 1, 3]]
+        conic = pipeline.rim_conic(k, session.camera_poses[f], wafers[w], rim, cfg.wafer_radius, cfg.wafer_thickness)
+        off.append(pipeline.conic_distance(p, conic))
+        band.append(pipeline.band_width(p, np.linalg.inv(hom), t_cw @ t_other, conic, k, cfg.wafer_radius))
+    off, band = np.concatenate(off), np.concatenate(band)
+    narrow = band < 2.5
+    assert narrow.sum() > 100 and (~narrow).sum() > 1000
+    assert np.sqrt(np.mean(off[narrow] ** 2)) > 1.3 * np.sqrt(np.mean(off[~narrow] ** 2))
+    # and the gate with the band filter keeps only the wide-band points
+    kept = pipeline.gate_detections(
+        detections,
+        session.camera_poses,
+        wafers,
+        np.asarray(session.wafer_slots),
+        k=k,
+        radius=cfg.wafer_radius,
+        thickness=cfg.wafer_thickness,
+        gate_px=1.0,
+        min_band_px=2.5,
+    )
+    assert kept.stats["points_narrow_band"] > 0
+    assert kept.stats["rims_associated"] == len(obs)
+
+
+def wafer_pose_rims(w: np.ndarray, rim: int, thickness: float) -> tuple[np.ndarray, np.ndarray]:
+    """World frames of a wafer's rim ``rim`` and of its other rim."""
+    out = []
+    for r in (rim, 1 - rim):
+        t = pipeline.wafer_pose(w)
+        t[:3, 3] += t[:3, 2] * ((0.5 if r == 0 else -0.5) * thickness)
+        out.append(t)
+    return out[0], out[1]

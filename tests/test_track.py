@@ -111,6 +111,9 @@ def test_bad_input_raises_and_keeps_state() -> None:
         WaferTracker(sigma=-1.0)
     with pytest.raises(InvalidInputError):
         WaferTracker(associator="nearest")
+    for pitch in (0.0, -0.01, float("nan")):
+        with pytest.raises(InvalidInputError):
+            WaferTracker(slot_pitch=pitch)
     assert tracker.frame == 1
 
 

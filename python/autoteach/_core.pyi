@@ -753,6 +753,7 @@ class TrackWaferTracker:
         projection_max_rms: float = 2.0,
         max_missed_3d: int = 300,
         stack_axis_sigma: float | None = 0.002,
+        slot_pitch: float | None = None,
     ) -> None: ...
     def update(
         self,
@@ -774,8 +775,8 @@ def lsq_bundle_adjust(
     poses: NDArray[np.float64],
     points: NDArray[np.float64],
     observations: NDArray[np.float64],
-    pose_index: list[int],
-    point_index: list[int],
+    pose_index: list[int] | NDArray[np.int64],
+    point_index: list[int] | NDArray[np.int64],
     loss_name: str = "linear",
     f_scale: float = 1.0,
     fixed_poses: list[int] = ...,
@@ -806,8 +807,8 @@ class LsqProblem:
         self,
         k: NDArray[np.float64],
         observations: NDArray[np.float64],
-        pose_blocks: list[int],
-        point_blocks: list[int],
+        pose_blocks: list[int] | NDArray[np.int64],
+        point_blocks: list[int] | NDArray[np.int64],
         sigma: float = 1.0,
         loss_name: str = "linear",
         f_scale: float = 1.0,
@@ -891,13 +892,25 @@ class CalibResult:
     def final_cost(self) -> float: ...
     def information(self) -> F64Array: ...
     def views(self) -> list[tuple[F64Array, F64Array, list[int]]]: ...
-    def max_ere(self, samples: int = 200, grid: int = 5, seed: int = 0) -> tuple[float, tuple[float, float]]: ...
-    def max_ere_stats(self, samples: int = 200, grid: int = 5, seed: int = 0) -> dict[str, object]: ...
+    def max_ere(
+        self, samples: int = 200, grid: int = 5, seed: int = 0, grid_margin: float | None = None
+    ) -> tuple[float, tuple[float, float]]: ...
+    def max_ere_stats(
+        self, samples: int = 200, grid: int = 5, seed: int = 0, grid_margin: float | None = None
+    ) -> dict[str, object]: ...
     def error_map(self, step: int = 1, samples: int = 100, seed: int = 0) -> F64Array: ...
     def suggest_next_view(
-        self, target: F64Array, candidates: F64Array | None = None, samples: int = 100, grid: int = 5, seed: int = 0
+        self,
+        target: F64Array,
+        candidates: F64Array | None = None,
+        samples: int = 100,
+        grid: int = 5,
+        seed: int = 0,
+        grid_margin: float | None = None,
     ) -> dict[str, object]: ...
     def test_errors(self, object_points: list[F64Array], image_points: list[F64Array]) -> list[list[float]]: ...
+
+CALIB_GRID_MARGIN: float
 
 def calib_calibrate(
     object_points: list[F64Array],
@@ -924,6 +937,7 @@ def calib_select_model(
     sigma_z: float | None = None,
 ) -> list[tuple[str, CalibResult | None, float, str | None]]: ...
 def calib_candidate_poses(model: str, params: F64Array, width: int, height: int, target: F64Array) -> F64Array: ...
+def calib_first_view_pose(model: str, params: F64Array, width: int, height: int, target: F64Array) -> F64Array: ...
 def calib_random_poses(
     model: str,
     params: F64Array,

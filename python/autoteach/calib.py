@@ -37,6 +37,10 @@ from autoteach.errors import InvalidInputError
 
 F64Array = NDArray[np.float64]
 
+GRID_MARGIN: float = float(_core.CALIB_GRID_MARGIN)
+"""Default margin (fraction of the image size) between the image border and the outer ring of
+the Max ERE test grid (Algorithm 5.1's ``makeTestGrid``)."""
+
 MODELS = ("pinhole", "brown_conrady", "kannala_brandt")
 _MODEL_ALIASES = {"opencv": "brown_conrady", "bc": "brown_conrady", "fisheye": "kannala_brandt", "kb": "kannala_brandt"}
 PARAM_NAMES = {
@@ -65,6 +69,10 @@ def _size(image_size: Any) -> tuple[int, int]:
     if w <= 0 or h <= 0:
         raise InvalidInputError(f"image_size must be positive, got {(w, h)}")
     return w, h
+
+
+def _margin(grid_margin: float | None) -> float | None:
+    return None if grid_margin is None else as_float(grid_margin, "grid_margin")
 
 
 def _views(points: Any, name: str, cols: int) -> list[F64Array]:
@@ -208,9 +216,9 @@ class Calibration:
 
         Algorithm 5.1 takes the max of per-point expectations; this is the expectation of the
         per-sample maximum. They agree when a single error mode (a narrow lens's focal length)
-        moves every point together and differ by up to ~1.6x when several weakly correlated modes
-        err at different corners (wide lenses) -- the latter is what a test set's 99.5th
-        percentile measures. Reported alongside the Max ERE, which stays the stopping metric.
+        moves every point together and differ when several weakly correlated modes err at
+        different corners (wide lenses). Reported alongside the Max ERE, which stays the stopping
+        metric and the one that tracks the test set's 99.5th percentile.
         """
         if self._expected_max is None:
             self._stats()
@@ -221,9 +229,26 @@ class Calibration:
         self._max_ere = (float(d["max_ere"]), tuple(d["pixel"]))
         self._expected_max = float(d["expected_max"])
 
-    def compute_max_ere(self, samples: int = 200, grid: int = 5, seed: int = 0) -> tuple[float, tuple[float, float]]:
-        """Max ERE and the grid pixel where it occurs, with explicit sampling settings."""
-        return self._core.max_ere(as_int(samples, "samples"), as_int(grid, "grid"), as_int(seed, "seed"))
+    def compute_max_ere(
+        self, samples: int = 200, grid: int = 5, seed: int = 0, *, grid_margin: float | None = None
+    ) -> tuple[float, tuple[float, float]]:
+        """Max ERE and the grid pixel where it occurs, with explicit sampling settings.
+
+        ``grid_margin``: the outer ring of the ``grid x grid`` test grid sits this fraction of the
+        image size inside the border (default :data:`GRID_MARGIN`).
+        """
+        return self._core.max_ere(
+            as_int(samples, "samples"), as_int(grid, "grid"), as_int(seed, "seed"), _margin(grid_margin)
+        )
+
+    def max_ere_stats(
+        self, samples: int = 200, grid: int = 5, seed: int = 0, *, grid_margin: float | None = None
+    ) -> dict[str, Any]:
+        """Max ERE, its pixel and the expected largest error over the grid (see :attr:`expected_max_error`)."""
+        d = self._core.max_ere_stats(
+            as_int(samples, "samples"), as_int(grid, "grid"), as_int(seed, "seed"), _margin(grid_margin)
+        )
+        return {"max_ere": float(d["max_ere"]), "pixel": tuple(d["pixel"]), "expected_max": float(d["expected_max"])}
 
     def error_map(self, step: int = 4, samples: int = 100, seed: int = 0) -> F64Array:
         """Expected reprojection error (pixels) at every ``step``-th pixel: ``(ceil(h/step), ceil(w/step))``."""
@@ -442,6 +467,7 @@ def suggest_next_view(
     samples: int = 100,
     grid: int = 5,
     seed: int = 0,
+    grid_margin: float | None = None,
 ) -> Suggestion:
     """Suggest the next target pose (ch. 5.2-5.3).
 
@@ -456,11 +482,18 @@ def suggest_next_view(
         samples: posterior samples of the Max ERE (common random numbers across candidates).
         grid: the Max ERE test grid is ``grid x grid`` pixels.
         seed: seed of the samples.
+        grid_margin: outer ring of the test grid, fraction of the image size inside the border
+            (default :data:`GRID_MARGIN`).
     """
     tgt = calibration.target() if target is None else as_f64(target, "target")
     cand = None if candidates is None else as_f64(candidates, "candidates").reshape(-1, 4, 4)
     d = calibration._core.suggest_next_view(
-        np.ascontiguousarray(tgt), cand, as_int(samples, "samples"), as_int(grid, "grid"), as_int(seed, "seed")
+        np.ascontiguousarray(tgt),
+        cand,
+        as_int(samples, "samples"),
+        as_int(grid, "grid"),
+        as_int(seed, "seed"),
+        _margin(grid_margin),
     )
     return Suggestion(
         pose=np.asarray(d["pose"]),
@@ -542,11 +575,29 @@ def make_target(cols: int = 10, rows: int = 7, spacing: float = 0.03) -> F64Arra
 
 
 def candidate_poses(model: str, params: ArrayLike, image_size: tuple[int, int], target: ArrayLike) -> F64Array:
-    """~60 candidate target poses (K, 4, 4) through the view frustum of a camera."""
+    """~60 candidate target poses (K, 4, 4) through the view frustum of a camera.
+
+    A 3 x 3 grid of image positions, at each five near poses (80 % of the field of view:
+    fronto-parallel and tilted +-0.7 rad about either target axis) and two far ones (50 %,
+    tilted +-0.5 rad about both axes).
+    """
     w, h = _size(image_size)
     return np.asarray(
         _core.calib_candidate_poses(_model(model), as_f64(params, "params"), w, h, as_f64(target, "target"))
     )
+
+
+def first_view_pose(model: str, params: ArrayLike, image_size: tuple[int, int], target: ArrayLike) -> F64Array:
+    """The first target pose (4, 4) of a guided session, before any calibration can score candidates.
+
+    The target at the image centre, near (80 % of the field of view), tilted 0.5 rad about both
+    target axes so that one view constrains both focal lengths of the bootstrapping's restricted
+    model (ch. 5.2).
+    """
+    w, h = _size(image_size)
+    return np.asarray(
+        _core.calib_first_view_pose(_model(model), as_f64(params, "params"), w, h, as_f64(target, "target"))
+    )[0]
 
 
 def random_poses(
@@ -711,12 +762,14 @@ def simulate_session(
     test_noise: bool = True,
     stop_at_threshold: bool = False,
     callback: Any = None,
+    grid_margin: float | None = None,
 ) -> SessionResult:
     """Simulate a calibration session on a known lens (the loop of ch. 5.2 with a simulated user).
 
     Strategies (:data:`STRATEGIES`):
 
-    - ``"guided"``: the first view is a tilted target at the image centre; afterwards the user
+    - ``"guided"``: the first view is :func:`first_view_pose` (a near target at the image centre
+      tilted about both axes); afterwards the user
       achieves each suggestion of :func:`suggest_next_view` up to ``pose_jitter`` (radians and
       relative distance).
     - ``"random"``: poses drawn like the test set (anywhere in the image, 20-60 % of the field
@@ -729,7 +782,8 @@ def simulate_session(
     ``test_views``-view test set: against the true lens along the true rays (``test_*``: the
     reference protocol of ch. 5.5.3 / Fig. 5.6, the quantity the Max ERE predicts) and with the
     poses re-fit to detections with noise (``refit_*``: ch. 5.5's protocol for real test sets
-    without ground truth; ``test_noise=False`` drops the noise).
+    without ground truth; ``test_noise=False`` drops the noise). ``grid_margin`` sets the Max ERE
+    test grid (recorded and used by the guide; default :data:`GRID_MARGIN`).
     """
     if lens not in LENSES:
         raise InvalidInputError(f"unknown lens {lens!r}: use one of {', '.join(LENSES)}")
@@ -780,16 +834,14 @@ def simulate_session(
     while len(obj) < max_views and attempts < 20 * max_views:
         attempts += 1
         if strategy == "guided" and not obj:
-            first = candidate_poses(spec["model"], spec["params"], spec["image_size"], tgt)
-            # A tilted target in the middle of the image (middle row of the candidate grid).
-            if not observe(first[len(first) // 2]):
+            if not observe(first_view_pose(spec["model"], spec["params"], spec["image_size"], tgt)):
                 continue
         elif strategy != "guided" or calib is None:
             k_pool += 1
             if not observe(pool[(k_pool - 1) % len(pool)]):
                 continue
         else:
-            s = suggest_next_view(calib, target=tgt, seed=seed)
+            s = suggest_next_view(calib, target=tgt, seed=seed, grid_margin=grid_margin)
             if not observe(jitter(s.pose)) and not observe(s.pose):
                 continue
         try:
@@ -805,8 +857,11 @@ def simulate_session(
         except Exception:  # noqa: BLE001 -- a simulated user keeps going while the model is unconstrained
             calib = None
             continue
-        ere = calib.max_ere if all(calib.free) else math.inf
-        emax = calib.expected_max_error if all(calib.free) else math.inf
+        if all(calib.free):
+            st = calib.max_ere_stats(grid_margin=grid_margin)
+            ere, emax = st["max_ere"], st["expected_max"]
+        else:
+            ere = emax = math.inf
         errs = calib.reference_errors(truth, test_obj, test_poses)
         refit = calib.test_errors(test_obj, test_img)
         step = SessionStep(

@@ -672,11 +672,15 @@ def _solver_kwargs(
     }
 
 
-def _index_array(a: ArrayLike, name: str) -> list[int]:
+def _index_array(a: ArrayLike, name: str) -> NDArray[np.int64]:
     arr = np.asarray(a)
     if arr.ndim != 1 or (arr.size and not np.issubdtype(arr.dtype, np.integer)):
         raise InvalidInputError(f"{name} must be a 1-D array of integers, got dtype {arr.dtype}, shape {arr.shape}")
-    return [int(v) for v in arr]
+    if arr.size and arr.dtype.kind == "u" and arr.max() > np.iinfo(np.int64).max:
+        k = int(np.argmax(arr))
+        raise InvalidInputError(f"{name}[{k}] = {arr[k]} is out of range")
+    # A contiguous int64 array crosses into Rust as one slice (no per-element conversion).
+    return np.ascontiguousarray(arr, dtype=np.int64)
 
 
 @dataclass
@@ -754,13 +758,14 @@ def bundle_adjust(
     for name, idx, n in (
         ("pose_index", pi, len(poses_m)),
         ("point_index", xi, len(points_m)),
-        ("fixed_poses", fixed, len(poses_m)),
+        ("fixed_poses", np.asarray(fixed, dtype=np.int64), len(poses_m)),
     ):
         if name != "fixed_poses" and len(idx) != len(obs_m):
             raise InvalidInputError(f"{name} must have one entry per observation ({len(obs_m)}), got {len(idx)}")
-        bad = [k for k, i in enumerate(idx) if not 0 <= i < n]
-        if bad:
-            raise InvalidInputError(f"{name}[{bad[0]}] = {idx[bad[0]]} is out of range (there are {n})")
+        bad = np.flatnonzero((idx < 0) | (idx >= n))
+        if bad.size:
+            k = int(bad[0])
+            raise InvalidInputError(f"{name}[{k}] = {idx[k]} is out of range (there are {n})")
     poses_a, points_a, summary = _core.lsq_bundle_adjust(
         _matrix(K, "K"),
         poses_m,

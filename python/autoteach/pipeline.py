@@ -545,6 +545,34 @@ def _drop_sparse_wafers(obs: Observations, min_frames: int) -> Observations:
     )
 
 
+def band_width(
+    points: np.ndarray, h_inv: np.ndarray, t_co_other: np.ndarray, conic: np.ndarray, k: np.ndarray, radius: float
+) -> np.ndarray:
+    """Predicted image width (pixels) of a wafer's side face at edge points of one of its rims.
+
+    Each point is mapped to the rim plane by ``h_inv`` (the inverse of the rim's homography
+    ``H = K·[r1 r2 t]``, eq. (5.13)), giving its circle angle φ; the other rim's point at φ
+    (``t_co_other``: the other rim's frame in the camera frame) is projected, and the width is
+    the component of the displacement between the two rims' images along the unit normal of
+    the rim's image conic ``conic`` at the point. This is the apparent height of the wafer's
+    side face (its thickness) there: widest at the front of the visible arc, shrinking to zero
+    where the rim's image is tangent to the line of sight.
+    """
+    ph = np.column_stack([points, np.ones(len(points))])
+    x = ph @ h_inv.T
+    phi = np.arctan2(x[:, 1] / x[:, 2], x[:, 0] / x[:, 2])
+    local = np.stack([radius * np.cos(phi), radius * np.sin(phi), np.zeros(len(phi)), np.ones(len(phi))])
+    pc = (t_co_other @ local)[:3]
+    uvw = k @ pc
+    other = (uvw[:2] / np.where(np.abs(uvw[2]) > 1e-12, uvw[2], 1e-12)).T
+    # The rim's own image at φ: H·(r cos φ, r sin φ, 1).
+    own = np.linalg.solve(h_inv, np.stack([radius * np.cos(phi), radius * np.sin(phi), np.ones(len(phi))]))
+    own = (own[:2] / own[2]).T
+    grad = ph @ conic.T
+    n = grad[:, :2] / np.maximum(np.hypot(grad[:, 0], grad[:, 1]), 1e-300)[:, None]
+    return np.abs(((other - own) * n).sum(axis=1))
+
+
 def gate_detections(
     detections: list[list[Any]],
     camera_poses: np.ndarray,
@@ -558,6 +586,7 @@ def gate_detections(
     min_inlier_fraction: float = 0.6,
     points_per_rim: int = 24,
     min_points: int = 12,
+    min_band_px: float = 0.0,
 ) -> Observations:
     """Associate every detected edge with the projected prior, discarding outliers.
 
@@ -570,10 +599,18 @@ def gate_detections(
     tracked), false arcs and mislabelled rims are thereby rejected or re-labelled; each (frame,
     wafer, rim) keeps its best edge. Independent of the tracker's identities. Each edge is scored
     on ``2·points_per_rim`` evenly spaced points (``min_points`` counts on that subsample).
+
+    ``min_band_px > 0`` keeps only the inlier points where the predicted image of the wafer's
+    side face (the bright band between its two rims) is at least that wide, measured along the
+    rim's image normal (:func:`band_width`). Where the band narrows towards the ends of the
+    visible arc its two edges blur into one and the detector's edge points are biased and
+    noisier (measured against the simulator's truth, see ``docs/benchmarks.md``): those
+    points carry a correlated error that the per-point noise model of eq. (5.5) lacks.
     """
     n_w = len(wafers)
     best: dict[tuple[int, int, int], tuple[int, np.ndarray]] = {}
-    n_edges = n_rejected = 0
+    n_edges = n_rejected = n_narrow = 0
+    associated: set[tuple[int, int, int]] = set()
     # Rim frames (world) of every finite wafer, both rims, and 72 samples of each rim circle.
     ids = [(w, rim) for w in range(n_w) if np.all(np.isfinite(wafers[w])) for rim in (0, 1)]
     t_rims = np.zeros((len(ids), 4, 4))
@@ -624,6 +661,16 @@ def gate_detections(
             if w < 0 or n_in < max(min_points, min_inlier_fraction * len(p)):
                 n_rejected += 1
                 continue
+            associated.add((f, w, rim))
+            if min_band_px > 0.0 and q is not None:
+                r = ids.index((w, rim))
+                narrow = band_width(q, hi[r], t_co[r ^ 1], conics[r], k, radius) < min_band_px
+                n_narrow += int(narrow.sum())
+                q = q[~narrow]
+                n_in = len(q)
+                if n_in < min_points:
+                    n_rejected += 1
+                    continue
             key = (f, w, rim)
             if key not in best or n_in > best[key][0]:
                 best[key] = (n_in, q)
@@ -650,6 +697,9 @@ def gate_detections(
         "rims_used": len(frames),
         "frames_used": len(set(frames)),
         "gate_px": gate_px,
+        "min_band_px": min_band_px,
+        "points_narrow_band": n_narrow,
+        "rims_associated": len(associated),
         "stage": "gated",
     }
     return obs
@@ -708,6 +758,53 @@ def _robot_array(params: Any) -> np.ndarray:
     return np.array(list(params.to_dict().values()), dtype=np.float64)
 
 
+def _odometry(
+    session: Any, odometry: np.ndarray | None, sigma: tuple[float, ...] | None, seed: int
+) -> tuple[np.ndarray | None, np.ndarray | None, tuple[float, ...]]:
+    """Visual-odometry increments ``[u_T; u_R]`` (eq. (5.1)), their start rotation and precision.
+
+    Given increments are checked against the session's frame count; their world orientation of
+    frame 0 is unknown (``None``: the caller uses the nominal chain). Without them a simulated
+    session gets drifting simulated odometry (:func:`autoteach.sim.simulate_odometry`), whose
+    world is the simulation's: its first camera orientation is the true one.
+    """
+    from autoteach.sim.odometry import OdometryConfig, simulate_odometry
+
+    n = session.n_frames
+    start = None
+    if odometry is not None:
+        inc = np.asarray(odometry, dtype=np.float64)
+        if inc.shape != (n - 1, 6) or not np.all(np.isfinite(inc)):
+            raise InvalidInputError(
+                f"odometry must be finite increments of shape ({n - 1}, 6) for {n} frames, got {inc.shape}"
+            )
+        default = (math.radians(0.2),) * 3 + (0.030, 0.030, 0.0015)
+    elif session.camera_poses is not None:
+        inc = simulate_odometry(session.camera_poses, seed)
+        start = np.asarray(session.camera_poses[0], dtype=np.float64)[:3, :3]
+        c = OdometryConfig()
+        s_r = math.sqrt(c.rotation_noise**2 + c.rotation_drift**2 * n)
+        s_t = math.sqrt(c.translation_noise**2 + c.translation_drift**2 * n)
+        default = (s_r,) * 3 + (s_t,) * 3
+    else:
+        return None, None, (1.0,) * 6
+    if sigma is None:
+        sigma = default
+    sigma = tuple(float(v) for v in sigma)
+    if len(sigma) != 6 or not all(math.isfinite(v) and v > 0 for v in sigma):
+        raise InvalidInputError(f"odometry_sigma must be 6 positive finite values, got {sigma}")
+    return inc, start, sigma
+
+
+def _nominal_start_rotation(cfg: Any, params: Any, enc: np.ndarray) -> np.ndarray:
+    """Camera orientation of frame 0 through the nominal chain (zero offsets, eq. (5.9))."""
+    from autoteach.geometry import WaferRobot
+    from autoteach.sim.config import DEFAULT_BASE_POSE
+
+    base_w = np.array(cfg.base_pose if cfg is not None else DEFAULT_BASE_POSE, dtype=np.float64)
+    return np.asarray(WaferRobot(params=params, base=base_w).camera_pose(enc[:1]), dtype=np.float64)[0, :3, :3]
+
+
 def autoteach(
     log_or_session: Any,
     *,
@@ -723,6 +820,8 @@ def autoteach(
     wafer_radius: float | None = None,
     wafer_thickness: float | None = None,
     odometry: np.ndarray | None = None,
+    odometry_sigma: tuple[float, ...] | None = None,
+    odometry_start: np.ndarray | None = None,
     use_ukf: bool = True,
     ukf_noise: Any = None,
     baseline: bool = False,
@@ -733,6 +832,7 @@ def autoteach(
     min_wafer_frames: int = 8,
     reset_tilts: bool = True,
     gate_px: tuple[float, ...] = (3.0, 1.5, 1.0),
+    min_band_px: float = 2.5,
     camera_mode: str = "chain",
     motion_sigma: tuple[float, ...] = (2e-5, 2e-5, 2e-5, 2e-5, 2e-5, 2e-5),
     estimate_mount: bool = False,
@@ -763,6 +863,14 @@ def autoteach(
         wafer_thickness: wafer thickness (default: the session's or 1 mm).
         odometry: visual-odometry increments (F−1, 6) ``[u_T; u_R]`` for the UKF; simulated
             sessions without them get drifting simulated odometry.
+        odometry_sigma: precision of the odometry increments ``[σ_ω (3, rad); σ_ρ (3, m)]``
+            for the free-camera mode's relative-pose factors (default: the simulated odometry's
+            white noise plus its drift over the session when the pipeline simulates it, else
+            the per-step process noise of eq. (5.2): 0.2°, 30/30/1.5 mm).
+        odometry_start: orientation (3×3, or the rotation of a 4×4 pose) of the first camera
+            frame in the odometry's world frame, which the free-camera mode needs to express the
+            world-frame translation increments ``u_T`` in the camera frame (default: the nominal
+            chain's at frame 0 for given odometry; the true one for simulated odometry).
         use_ukf: run the UKF stage (needs odometry).
         ukf_noise: ``"seed"`` for the noise levels of eq. (5.2), 16 standard deviations (see
             ``autoteach._core.handeye_ukf``), or ``None``: matched to the simulated odometry when
@@ -781,10 +889,14 @@ def autoteach(
             estimated (too few views to constrain a wafer pose; listed in ``frontend_stats``).
         gate_px: detect front end: after each first estimate every detected edge is associated
             with the projected prior within this gate (pixels), one round per value.
+        min_band_px: detect front end: edge points where the predicted side-face band of the
+            wafer is narrower than this (pixels) are not used (see :func:`gate_detections`;
+            0 keeps them).
         camera_mode: ``"chain"`` (camera poses through the kinematic chain, eq. (5.9)) or
             ``"free"`` (a pose variable per frame tied to the robot by the relative motion
-            factor of eqs. (5.10)–(5.12), and a prior on the calibration around the nominal
-            values).
+            factor of eqs. (5.10)–(5.12) and to the visual odometry by relative-pose factors
+            between the same frames when the session has odometry, and a prior on the
+            calibration around the nominal values).
         motion_sigma: free-camera mode: robot motion precision ``[σ_ω (3, rad); σ_ρ (3, m)]``
             between consecutive frames.
         estimate_mount: also estimate a correction of the camera mount ``T_ec`` (chain mode).
@@ -823,6 +935,8 @@ def autoteach(
         frontend = "detect" if has_images or session.rims is None else "simulated"
     if frontend not in ("simulated", "detect"):
         raise InvalidInputError(f"frontend must be 'auto', 'simulated' or 'detect', got {frontend!r}")
+    if not (math.isfinite(min_band_px) and min_band_px >= 0.0):
+        raise InvalidInputError(f"min_band_px must be finite and >= 0, got {min_band_px!r}")
     if camera_mode not in ("chain", "free"):
         raise InvalidInputError(f"camera_mode must be 'chain' or 'free', got {camera_mode!r}")
     bad_links = [name for name in estimate_links if name not in LINKS]
@@ -900,16 +1014,14 @@ def autoteach(
 
     # --- UKF (§5.2) -----------------------------------------------------------------------
     ukf_out: dict[str, Any] | None = None
+    increments, odo_start, odo_sigma = _odometry(session, odometry, odometry_sigma, seed)
     if use_ukf:
         t0 = time.perf_counter()
-        increments = odometry
         noise = None if ukf_noise == "seed" else ukf_noise
-        if increments is None and session.camera_poses is not None:
-            from autoteach.sim.odometry import OdometryConfig, simulate_odometry
+        if odometry is None and ukf_noise is None and increments is not None:
+            from autoteach.sim.odometry import OdometryConfig
 
-            increments = simulate_odometry(session.camera_poses, seed)
-            if ukf_noise is None:
-                noise = OdometryConfig().ukf_noise()
+            noise = OdometryConfig().ukf_noise()
         if increments is not None:
             base_w = np.array(cfg.base_pose, dtype=np.float64) if cfg is not None else nominal_base
             run = _core.handeye_ukf(robot_arr, base_w, enc, np.ascontiguousarray(increments, dtype=np.float64), noise)
@@ -948,7 +1060,22 @@ def autoteach(
         encoder_sigma = tuple(max(float(noise5[j]), 1e-9) for j in (0, 1, 3, 4))
     extra: dict[str, Any] = {}
     if camera_mode == "free":
-        extra["free_camera"] = ([float(v) for v in motion_sigma], None, [1.0] * 6)
+        # Relative robot motion (5.10)–(5.12) between consecutive frames and, when the session
+        # has visual odometry, its increments as relative-pose factors between the same poses.
+        rel = None
+        if increments is not None:
+            from autoteach.sim.odometry import relative_odometry
+
+            if odometry_start is not None:
+                start = np.asarray(odometry_start, dtype=np.float64)
+                start = start[:3, :3] if start.shape == (4, 4) else start
+            elif odo_start is not None:
+                start = odo_start
+            else:
+                start = _nominal_start_rotation(cfg, params, enc)
+            rel = np.ascontiguousarray(relative_odometry(increments, start))
+        extra["free_camera"] = ([float(v) for v in motion_sigma], rel, [float(v) for v in odo_sigma])
+        frontend_stats["odometry_factors"] = 0 if rel is None else len(rel)
         encoder_sigma = ()
     if estimate_mount:
         extra["estimate_mount"] = True
@@ -1006,6 +1133,7 @@ def autoteach(
                     thickness=thickness,
                     gate_px=gate,
                     points_per_rim=points_per_rim,
+                    min_band_px=min_band_px if gi == len(gate_px) - 1 else 0.0,
                 )
                 if len(cand_obs) == 0:
                     break
@@ -1020,8 +1148,10 @@ def autoteach(
                     np.asarray(first["joint_offsets"], dtype=np.float64),
                     wafers_first,
                 )
-            if len(cand_obs) > 0 and (best is None or len(cand_obs) > best[0]):
-                best = (len(cand_obs), cand_obs, cand_args)
+            # Edges explained (before the band filter, which only thins their points).
+            n_explained = int(cand_obs.stats.get("rims_associated", len(cand_obs)))
+            if len(cand_obs) > 0 and (best is None or n_explained > best[0]):
+                best = (n_explained, cand_obs, cand_args)
         if best is None:
             raise InvalidInputError(
                 f"no detected edge lies within {gate_px} px of the projected wafer estimates: the first "

@@ -176,6 +176,10 @@ class WaferTracker:
             wafer that leaves the image is re-acquired by its projected position.
         stack_axis_sigma: std (m) of a prior that each wafer centre lies on the carrier axis (the
             mean centre and normal of the well-estimated tracks); ``None`` switches it off.
+        slot_pitch: carrier slot pitch (m); with it every free slot next to a track (±pitch along
+            the carrier axis from its 3D estimate) is predicted by eq. (4.1) and competes in the
+            registration, so a wafer appearing next to a track whose own wafer is missed starts a
+            new track instead of being taken by the neighbour. ``None`` (default): off.
 
     Raises:
         InvalidInputError: an option out of range.

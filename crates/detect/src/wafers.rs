@@ -46,6 +46,7 @@ pub struct WaferEdge {
 
 use crate::assembly::{AssemblyParams, Segment, assemble};
 use crate::edges::{Arc, ArcParams, CannyParams, GrayView, LinkParams, Pixel, detect_arcs};
+use crate::ellipse::EllipseFit;
 use crate::{DetectError, Result};
 use nalgebra::{DMatrix, Vector2};
 use rayon::prelude::*;
@@ -105,6 +106,14 @@ pub struct DetectParams {
     /// Refits the less covered rim of a pair with the semi-major axis and orientation of the
     /// better covered one (see [`share_shape`]). Default true.
     pub share_rim_shape: bool,
+    /// With `share_rim_shape`, also holds the refitted rim's centre on the line through the
+    /// other rim's centre along `up` (see [`share_shape`]). Default true.
+    pub share_rim_centre: bool,
+    /// Leave-one-out check of assembled segments of three or more arcs (see
+    /// [`drop_outlier_arcs`]): an arc is dropped when its median distance to the fit of the
+    /// other arcs exceeds `max_arc_deviation` and including it raises the mean residual by more
+    /// than this factor. 0 disables. Default 1.5.
+    pub max_arc_residual_ratio: f64,
     /// Optional size prior.
     pub prior: Option<WaferPrior>,
 }
@@ -125,6 +134,8 @@ impl Default for DetectParams {
             max_arc_deviation: 0.6,
             band_refinement: true,
             share_rim_shape: true,
+            share_rim_centre: true,
+            max_arc_residual_ratio: 1.5,
             prior: None,
         }
     }
@@ -171,6 +182,13 @@ impl DetectParams {
             return Err(DetectError::InvalidParameter {
                 what: "max_arc_deviation",
                 value: self.max_arc_deviation,
+                reason: "must be finite and >= 0",
+            });
+        }
+        if !(self.max_arc_residual_ratio >= 0.0 && self.max_arc_residual_ratio.is_finite()) {
+            return Err(DetectError::InvalidParameter {
+                what: "max_arc_residual_ratio",
+                value: self.max_arc_residual_ratio,
                 reason: "must be finite and >= 0",
             });
         }
@@ -239,6 +257,7 @@ pub fn detect_wafers<T: Pixel>(
     let segments = assemble(&arcs, &params.assembly)?;
     let mut candidates = Vec::new();
     for mut seg in segments {
+        drop_inconsistent_arcs(&mut seg, &arcs, params);
         drop_outlier_arcs(&mut seg, &arcs, params);
         // The assembly's fit of the union is the final estimate (with its covariance).
         let fit = seg.fit.clone();
@@ -365,24 +384,29 @@ pub fn refine_band_edges<T: Pixel>(image: &GrayView<'_, T>, seg: &mut Segment, t
     let sigma = median(&mut sigmas);
     let stride = n.div_ceil(BAND_POINTS);
     let picked: Vec<Vector2<f64>> = seg.points.iter().step_by(stride).copied().collect();
-    let moved: Vec<Vector2<f64>> = picked
+    // Each point: its band-model position and the fit's RMS residual, or its Canny position
+    // (`None`) when the profile is no band.
+    let located: Vec<(Vector2<f64>, Option<f64>)> = picked
         .par_iter()
         .map(|p| {
             let mut buf = Vec::new();
-            let Some(nv) = normal(p) else { return *p };
+            let Some(nv) = normal(p) else {
+                return (*p, None);
+            };
             let Some(d) = band::profile(image, *p, nv, &mut buf) else {
-                return *p;
+                return (*p, None);
             };
             let Some(mut p0) = band::start(&buf) else {
-                return *p;
+                return (*p, None);
             };
             p0[5] = sigma;
             match band::fit(&buf, p0, false) {
-                Some((q, _)) if is_band(&q) => p + d * q[3],
-                _ => *p,
+                Some((q, rms)) if is_band(&q) => (p + d * q[3], Some(rms)),
+                _ => (*p, None),
             }
         })
         .collect();
+    let moved = screen_band_points(&located);
     let Ok(fit) = crate::ellipse::fit_ellipse_geometric(
         &moved,
         Some(e),
@@ -396,6 +420,35 @@ pub fn refine_band_edges<T: Pixel>(image: &GrayView<'_, T>, seg: &mut Segment, t
     }
 }
 
+/// Smallest fraction of a rim's profiles that must be bands for [`screen_band_points`] to drop
+/// the others.
+const MIN_BAND_FRACTION: f64 = 0.6;
+/// A band profile whose RMS residual exceeds this multiple of the rim's median band RMS is
+/// taken for clutter across the profile (see [`screen_band_points`]).
+const MAX_BAND_RMS_RATIO: f64 = 2.5;
+
+/// The points kept for the refit of [`refine_band_edges`] from `(position, band-fit RMS or
+/// None)`. When most profiles of the rim (at least [`MIN_BAND_FRACTION`]) are bands, the rim
+/// *is* a band and a point whose profile is not one, or whose band fit leaves an RMS over
+/// [`MAX_BAND_RMS_RATIO`] × the median (structure across the profile that the model lacks: the
+/// rim crossing the carrier's slot teeth near the ends of the front arc, where the dark level
+/// outside the rim is replaced by a tooth's grey edge), has a position biased by up to ≈ 0.4 px
+/// (the Canny maximum of a band edge is pushed outward, and a wrong far level drags `t₁`): it is
+/// dropped. Otherwise every point is kept (a rim seen as a lone step: its Sobel maximum is
+/// unbiased).
+fn screen_band_points(located: &[(Vector2<f64>, Option<f64>)]) -> Vec<Vector2<f64>> {
+    let mut rms: Vec<f64> = located.iter().filter_map(|(_, r)| *r).collect();
+    if (rms.len() as f64) < MIN_BAND_FRACTION * located.len() as f64 {
+        return located.iter().map(|(p, _)| *p).collect();
+    }
+    let limit = MAX_BAND_RMS_RATIO * median(&mut rms);
+    located
+        .iter()
+        .filter(|(_, r)| r.is_some_and(|r| r <= limit))
+        .map(|(p, _)| *p)
+        .collect()
+}
+
 /// Whether fitted band-model parameters describe a band at the edge point (see
 /// [`refine_band_edges`]).
 fn is_band(q: &[f64; 6]) -> bool {
@@ -406,6 +459,67 @@ fn is_band(q: &[f64; 6]) -> bool {
         && lb - l0 >= 8.0
         && lb - l2 >= 8.0
         && q.iter().all(|x| x.is_finite())
+}
+
+/// A segment without one of its arcs: the remaining arc indices, their points and their fit.
+type LeftOut = (Vec<usize>, Vec<Vector2<f64>>, EllipseFit);
+
+/// Leave-one-out check of a segment of three or more arcs: for each arc, the other arcs are
+/// refitted (orthogonal-distance LM from the segment's ellipse) and the arc's median distance
+/// to that fit taken. A clutter arc a few pixels off a rim (a slot-tooth edge, the other rim's
+/// back silhouette) bends the fit of the union toward itself, so its distance to the union's
+/// fit can stay under [`DetectParams::max_arc_deviation`]; to the fit of the others it cannot.
+/// The arc farthest from its leave-one-out fit is dropped when that distance exceeds
+/// `max_arc_deviation` and the union's mean residual exceeds
+/// [`DetectParams::max_arc_residual_ratio`] × the others' (an arc of the same ellipse hardly
+/// changes the residual, even where the others extrapolate poorly); repeated while three or
+/// more arcs remain.
+fn drop_inconsistent_arcs(seg: &mut Segment, arcs: &[Arc], params: &DetectParams) {
+    let (limit, ratio) = (params.max_arc_deviation, params.max_arc_residual_ratio);
+    if !(limit > 0.0 && ratio > 0.0) {
+        return;
+    }
+    while seg.arcs.len() >= 3 {
+        let e = seg.fit.ellipse;
+        let mut worst: Option<(f64, LeftOut)> = None;
+        for (slot, &k) in seg.arcs.iter().enumerate() {
+            let Some(arc) = arcs.get(k) else { return };
+            let kept: Vec<usize> = seg
+                .arcs
+                .iter()
+                .enumerate()
+                .filter(|&(s, _)| s != slot)
+                .map(|(_, &k)| k)
+                .collect();
+            let points: Vec<Vector2<f64>> = kept
+                .iter()
+                .filter_map(|&k| arcs.get(k))
+                .flat_map(|a| a.points.iter().copied())
+                .collect();
+            let Ok(fit) = crate::ellipse::fit_ellipse_geometric(
+                &points,
+                Some(e),
+                &crate::ellipse::GeometricFitOptions::default(),
+            ) else {
+                continue;
+            };
+            if !(seg.fit.residual_mean > ratio * fit.residual_mean) {
+                continue;
+            }
+            let mut d = fit.ellipse.orthogonal_distances(&arc.points);
+            d.iter_mut().for_each(|x| *x = x.abs());
+            let m = median(&mut d);
+            if m > limit && worst.as_ref().is_none_or(|w| m > w.0) {
+                worst = Some((m, (kept, points, fit)));
+            }
+        }
+        let Some((_, (kept, points, fit))) = worst else {
+            return;
+        };
+        seg.arcs = kept;
+        seg.points = points;
+        seg.fit = fit;
+    }
 }
 
 /// Drops, worst first, the arcs of `seg` whose median orthogonal distance to the segment's
@@ -555,7 +669,7 @@ fn pair_rims(
             trim_close_ends(&mut slots, u, l, params);
             trim_close_ends(&mut slots, l, u, params);
             if params.share_rim_shape {
-                share_shape(&mut slots, u, l, params);
+                share_shape(&mut slots, u, l, up, params);
             }
         }
     }
@@ -604,12 +718,32 @@ fn angular_coverage(e: &Ellipse, points: &[Vector2<f64>]) -> f64 {
 /// the other is refitted with `a` and `θ` fixed to the first one's
 /// ([`crate::ellipse::fit_ellipse_geometric_masked`], `cx`, `cy`, `b` free), keeping the refit
 /// when its mean residual is under the threshold.
-fn share_shape(slots: &mut [Option<Candidate>], i: usize, j: usize, params: &DetectParams) {
+///
+/// With [`DetectParams::share_rim_centre`] the refit's centre is also held on the line through
+/// the reference centre along `up`: the centres of the two circles' images are the images of
+/// two points one thickness apart along the wafer normal, so their offset points to the
+/// vanishing point of the normal, i.e. along the projected normal `up` (for a camera without
+/// roll the deviation is `offset·|cx − u₀|/|v_vp − cy|`, ≲ 0.05 px for the 2 px offset of a
+/// 0.8 mm wafer at 0.5 m); the free parameters are then the offset along `up` and `b`. The fit
+/// runs in a frame rotated so that `up` is `(0, −1)` (an isometry: orthogonal distances are
+/// unchanged) with `cx` held, and the ellipse and its covariance are rotated back.
+///
+/// Covariance: that of the free parameters with the held ones exact, plus the reference rim's
+/// covariance of the held parameters (`a`, `θ`, and the centre's variance across `up`) on their
+/// own rows and columns — a first-order account that leaves out how the free parameters move
+/// with the held ones (so it is a lower bound on the coupling, not on the variances).
+fn share_shape(
+    slots: &mut [Option<Candidate>],
+    i: usize,
+    j: usize,
+    up: Vector2<f64>,
+    params: &DetectParams,
+) {
     let cover = |slots: &[Option<Candidate>], k: usize| {
         slots.get(k).and_then(|c| c.as_ref()).map(|c| {
             (
                 angular_coverage(&c.seg.fit.ellipse, &c.seg.points),
-                c.seg.fit.ellipse,
+                (c.seg.fit.ellipse, c.seg.fit.covariance),
             )
         })
     };
@@ -626,22 +760,94 @@ fn share_shape(slots: &mut [Option<Candidate>], i: usize, j: usize, params: &Det
     let Some(c) = slots.get_mut(target).and_then(|c| c.as_mut()) else {
         return;
     };
-    let start = Ellipse {
-        a: reference.a,
-        theta: reference.theta,
-        ..c.seg.fit.ellipse
+    let (reference, reference_cov) = reference;
+    let fit = if params.share_rim_centre {
+        shared_centre_fit(&c.seg.points, &reference, &c.seg.fit.ellipse, up).map(|mut f| {
+            // The held parameters are the reference's: their variances (cx and cy for the
+            // centre's component across `up`, which the rotation mixes) are added.
+            if let (Some(cov), Some(rc)) = (f.covariance.as_mut(), reference_cov) {
+                let across = Vector2::new(-up.y, up.x);
+                let c2 = rc.fixed_view::<2, 2>(0, 0);
+                let var_across = (across.transpose() * c2 * across)[0].max(0.0);
+                let block = across * across.transpose() * var_across;
+                for r in 0..2 {
+                    for k in 0..2 {
+                        cov[(r, k)] += block[(r, k)];
+                    }
+                }
+                for (r, k) in [(2, 2), (2, 4), (4, 2), (4, 4)] {
+                    cov[(r, k)] += rc[(r, k)];
+                }
+            }
+            f
+        })
+    } else {
+        let start = Ellipse {
+            a: reference.a,
+            theta: reference.theta,
+            ..c.seg.fit.ellipse
+        };
+        crate::ellipse::fit_ellipse_geometric_masked(
+            &c.seg.points,
+            start,
+            [true, true, false, true, false],
+            &crate::ellipse::GeometricFitOptions::default(),
+        )
+        .ok()
+        .map(|mut f| {
+            if let (Some(cov), Some(rc)) = (f.covariance.as_mut(), reference_cov) {
+                for (r, k) in [(2, 2), (2, 4), (4, 2), (4, 4)] {
+                    cov[(r, k)] += rc[(r, k)];
+                }
+            }
+            f
+        })
     };
-    let Ok(fit) = crate::ellipse::fit_ellipse_geometric_masked(
-        &c.seg.points,
-        start,
-        [true, true, false, true, false],
-        &crate::ellipse::GeometricFitOptions::default(),
-    ) else {
-        return;
-    };
-    if fit.residual_mean < params.assembly.residual_threshold {
+    if let Some(fit) = fit
+        && fit.residual_mean < params.assembly.residual_threshold
+    {
         c.seg.fit = fit;
     }
+}
+
+/// The fit of [`share_shape`] with the centre on the line through `reference`'s centre along
+/// the unit direction `up`: `a`, `θ` of `reference`, free `b` and offset along `up`, starting
+/// from `current`'s `b` and offset. `None` if the fit fails.
+fn shared_centre_fit(
+    points: &[Vector2<f64>],
+    reference: &Ellipse,
+    current: &Ellipse,
+    up: Vector2<f64>,
+) -> Option<crate::ellipse::EllipseFit> {
+    // R maps `up` to (0, −1): R = [[c, −s], [s, c]] with c = −up.y, s = −up.x.
+    let (c, s) = (-up.y, -up.x);
+    let rot = |p: &Vector2<f64>| Vector2::new(c * p.x - s * p.y, s * p.x + c * p.y);
+    let unrot = |p: &Vector2<f64>| Vector2::new(c * p.x + s * p.y, -s * p.x + c * p.y);
+    let phi = s.atan2(c);
+    let rotated: Vec<Vector2<f64>> = points.iter().map(rot).collect();
+    let rc = rot(&Vector2::new(reference.cx, reference.cy));
+    let cc = rot(&Vector2::new(current.cx, current.cy));
+    let start = Ellipse::new(rc.x, cc.y, reference.a, current.b, reference.theta + phi).ok()?;
+    let mut fit = crate::ellipse::fit_ellipse_geometric_masked(
+        &rotated,
+        start,
+        [false, true, false, true, false],
+        &crate::ellipse::GeometricFitOptions::default(),
+    )
+    .ok()?;
+    let e = fit.ellipse;
+    let centre = unrot(&Vector2::new(e.cx, e.cy));
+    fit.ellipse = Ellipse::new(centre.x, centre.y, e.a, e.b, e.theta - phi).ok()?;
+    if let Some(cov) = fit.covariance {
+        // d(centre)/d(centre') = Rᵀ; a, b, θ unchanged (θ shifts by a constant).
+        let mut j = Matrix5::<f64>::identity();
+        j[(0, 0)] = c;
+        j[(0, 1)] = s;
+        j[(1, 0)] = -s;
+        j[(1, 1)] = c;
+        fit.covariance = Some(j * cov * j.transpose());
+    }
+    Some(fit)
 }
 
 /// Near the ends of the visible front arc the bright side face between the two rims of a wafer
@@ -1171,6 +1377,130 @@ mod tests {
     }
 
     #[test]
+    fn band_points_are_screened_only_on_band_rims() {
+        let p = |x: f64| Vector2::new(x, 0.0);
+        // 8 of 10 profiles are bands: the two others and the band fit with 3× the median RMS
+        // are dropped.
+        let mut located: Vec<(Vector2<f64>, Option<f64>)> = (0..7)
+            .map(|k| (p(k as f64), Some(2.0 + 0.1 * k as f64)))
+            .collect();
+        located.push((p(7.0), Some(7.0)));
+        located.push((p(8.0), None));
+        located.push((p(9.0), None));
+        let kept = screen_band_points(&located);
+        assert_eq!(kept, (0..7).map(|k| p(k as f64)).collect::<Vec<_>>());
+        // Half of them bands: a step-like rim, every point kept.
+        let half: Vec<_> = (0..10)
+            .map(|k| (p(k as f64), (k % 2 == 0).then_some(1.0)))
+            .collect();
+        assert_eq!(screen_band_points(&half).len(), 10);
+    }
+
+    #[test]
+    fn shared_centre_fit_recovers_the_offset_along_up() {
+        // Reference rim and a second rim offset 2.1 px along a tilted `up` with a 1.6 % larger
+        // minor axis, seen on its front arc only (noise-free): the constrained fit recovers it
+        // exactly; its covariance is the rotated covariance of the fit in the aligned frame.
+        let up = Vector2::new(0.2, -1.0).normalize();
+        let reference = Ellipse::new(640.0, 300.0, 290.0, 33.0, 0.05).unwrap();
+        let offset = up * -2.1;
+        let truth = Ellipse::new(
+            640.0 + offset.x,
+            300.0 + offset.y,
+            290.0,
+            33.0 * 1.016,
+            0.05,
+        )
+        .unwrap();
+        let points: Vec<Vector2<f64>> = (0..200)
+            .map(|k| truth.point_at(0.4 + 2.3 * k as f64 / 199.0))
+            .collect();
+        let start = Ellipse {
+            cx: truth.cx + 0.8,
+            cy: truth.cy - 0.5,
+            b: 32.0,
+            ..truth
+        };
+        let fit = shared_centre_fit(&points, &reference, &start, up).unwrap();
+        let e = fit.ellipse;
+        assert!(
+            (e.cx - truth.cx).abs() < 1e-6 && (e.cy - truth.cy).abs() < 1e-6,
+            "{e:?}"
+        );
+        assert!(
+            (e.b - truth.b).abs() < 1e-6 && (e.a - 290.0).abs() < 1e-9,
+            "{e:?}"
+        );
+        assert!((e.theta - 0.05).abs() < 1e-9);
+        // The centre moves only along `up`: its covariance has no spread across it.
+        let cov = fit.covariance.unwrap();
+        let across = Vector2::new(-up.y, up.x);
+        let c2 = cov.fixed_view::<2, 2>(0, 0);
+        assert!((across.transpose() * c2 * across)[0].abs() < 1e-12 * c2.norm().max(1e-300));
+    }
+
+    #[test]
+    fn leave_one_out_drops_a_clutter_arc_and_keeps_a_true_one() {
+        use crate::edges::Quadrant;
+        let e = Ellipse::new(600.0, 300.0, 280.0, 30.0, 0.0).unwrap();
+        let arc = |pts: Vec<Vector2<f64>>| Arc {
+            normals: vec![Vector2::new(0.0, 1.0); pts.len()],
+            points: pts,
+            contrast: 50.0,
+            quadrant: Quadrant::III,
+            polarity: -1,
+            curvature: 0.01,
+            turn: 1.0,
+        };
+        // Deterministic ±0.05 px wobble.
+        let wobble = |k: usize| 0.05 * (((k * 7919) % 11) as f64 / 5.0 - 1.0);
+        let on = |t0: f64, t1: f64, n: usize, shift: f64| {
+            (0..n)
+                .map(|k| {
+                    let t = t0 + (t1 - t0) * k as f64 / (n - 1) as f64;
+                    e.point_at(t) + Vector2::new(0.0, shift + wobble(k))
+                })
+                .collect::<Vec<_>>()
+        };
+        let h = std::f64::consts::FRAC_PI_2;
+        // Two front arcs; third: a true back arc, or a clutter arc 3 px off the rim.
+        for (third, clutter) in [
+            (on(-h - 0.6, -h + 0.6, 150, 0.0), false),
+            (on(h + 0.9, h + 1.1, 60, -3.0), true),
+        ] {
+            let arcs = vec![
+                arc(on(h + 0.01, h + 1.2, 300, 0.0)),
+                arc(on(h - 1.2, h - 0.01, 300, 0.0)),
+                arc(third),
+            ];
+            let points: Vec<Vector2<f64>> = arcs.iter().flat_map(|a| a.points.clone()).collect();
+            let fit = crate::ellipse::fit_ellipse_geometric(
+                &points,
+                Some(e),
+                &crate::ellipse::GeometricFitOptions::default(),
+            )
+            .unwrap();
+            let mut seg = Segment {
+                arcs: vec![0, 1, 2],
+                points,
+                fit,
+                polarity: -1,
+            };
+            drop_inconsistent_arcs(&mut seg, &arcs, &DetectParams::default());
+            if clutter {
+                assert_eq!(seg.arcs, vec![0, 1]);
+                assert!(
+                    (seg.fit.ellipse.cy - 300.0).abs() < 0.05,
+                    "{:?}",
+                    seg.fit.ellipse
+                );
+            } else {
+                assert_eq!(seg.arcs, vec![0, 1, 2]);
+            }
+        }
+    }
+
+    #[test]
     fn blank_images_give_no_rims_and_bad_params_are_errors() {
         for v in [0u8, 255] {
             let data = vec![v; 320 * 240];
@@ -1196,6 +1526,13 @@ mod tests {
         for dev in [-0.1, f64::NAN, f64::INFINITY] {
             let bad = DetectParams {
                 max_arc_deviation: dev,
+                ..DetectParams::default()
+            };
+            assert!(detect_wafers(&view, &bad).is_err());
+        }
+        for ratio in [-1.0, f64::NAN, f64::INFINITY] {
+            let bad = DetectParams {
+                max_arc_residual_ratio: ratio,
                 ..DetectParams::default()
             };
             assert!(detect_wafers(&view, &bad).is_err());

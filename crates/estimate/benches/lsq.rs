@@ -4,12 +4,52 @@
 //!
 //! `cargo bench -p autoteach-estimate --bench lsq -- --warm-up-time 1 --measurement-time 3`
 
-use autoteach_estimate::lsq::synthetic::{bundle_scene, pose_graph};
+use autoteach_estimate::lsq::synthetic::{BundleScene, bundle_scene, pose_graph};
 use autoteach_estimate::lsq::{LinearSolver, Loss, SolverOptions};
 use criterion::{Criterion, criterion_group, criterion_main};
 
+/// Median stage timings (ms) of `n` solves: `[total, setup, evaluate, assemble, linear,
+/// Schur reduce, Schur factor]`.
+fn stages(scene: &BundleScene, opts: &SolverOptions, n: usize) -> [f64; 7] {
+    let mut stages: Vec<[f64; 7]> = (0..n)
+        .map(|_| {
+            let (mut p, _, _) = scene.problem(Loss::Trivial, true).expect("scene");
+            let s = p.solve(opts).expect("solve");
+            [
+                s.time_s,
+                s.time_setup_s,
+                s.time_evaluate_s,
+                s.time_assemble_s,
+                s.time_linear_s,
+                s.time_schur_reduce_s,
+                s.time_schur_factor_s,
+            ]
+            .map(|t| t * 1e3)
+        })
+        .collect();
+    stages.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    stages[n / 2]
+}
+
 fn bench(c: &mut Criterion) {
     let scene = bundle_scene(50, 500, 20, 1.0, 1);
+    // `LSQ_PROFILE_SOLVES=n`: only n Schur solves of the bundle problem and their median stage
+    // timings (for profilers: `perf record`, `perf stat`), no criterion run.
+    if let Some(n) = std::env::var("LSQ_PROFILE_SOLVES")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+    {
+        let opts = SolverOptions {
+            linear_solver: LinearSolver::SparseSchur,
+            ..Default::default()
+        };
+        let m = stages(&scene, &opts, n.max(1));
+        eprintln!(
+            "lsq_bundle_50x500_schur, median of {n}: solve {:.2} ms = setup {:.2} + evaluate {:.2} + assemble {:.2} + linear {:.2} ms (Schur: reduce {:.2}, factor {:.2})",
+            m[0], m[1], m[2], m[3], m[4], m[5], m[6]
+        );
+        std::process::exit(0);
+    }
     for (name, solver) in [
         ("schur", LinearSolver::SparseSchur),
         ("sparse", LinearSolver::SparseCholesky),
@@ -18,33 +58,11 @@ fn bench(c: &mut Criterion) {
             linear_solver: solver,
             ..Default::default()
         };
-        // Where the time goes (one solve, printed once; median of 5 stage timings).
-        let mut stages: Vec<[f64; 7]> = (0..5)
-            .map(|_| {
-                let (mut p, _, _) = scene.problem(Loss::Trivial, true).expect("scene");
-                let s = p.solve(&opts).expect("solve");
-                [
-                    s.time_s,
-                    s.time_setup_s,
-                    s.time_evaluate_s,
-                    s.time_assemble_s,
-                    s.time_linear_s,
-                    s.time_schur_reduce_s,
-                    s.time_schur_factor_s,
-                ]
-            })
-            .collect();
-        stages.sort_by(|a, b| a[0].total_cmp(&b[0]));
-        let m = stages[2];
+        // Where the time goes (median of 5 stage timings, printed once).
+        let m = stages(&scene, &opts, 5);
         eprintln!(
             "lsq_bundle_50x500_{name}: solve {:.2} ms = setup {:.2} + evaluate {:.2} + assemble {:.2} + linear {:.2} ms (Schur: reduce {:.2}, factor {:.2})",
-            m[0] * 1e3,
-            m[1] * 1e3,
-            m[2] * 1e3,
-            m[3] * 1e3,
-            m[4] * 1e3,
-            m[5] * 1e3,
-            m[6] * 1e3
+            m[0], m[1], m[2], m[3], m[4], m[5], m[6]
         );
         c.bench_function(&format!("lsq_bundle_50x500_{name}"), |b| {
             b.iter_batched(

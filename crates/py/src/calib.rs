@@ -5,8 +5,9 @@ use std::str::FromStr;
 
 use autoteach_estimate::EstimateError;
 use autoteach_estimate::calib::View;
+use autoteach_estimate::calib::ere::{GRID_MARGIN, test_grid_with_margin};
 use autoteach_estimate::calib::guide::{
-    candidate_poses, novice_poses, random_poses, synthesize_view_seeded,
+    candidate_poses, first_view_pose, novice_poses, random_poses, synthesize_view_seeded,
 };
 use autoteach_estimate::calib::solve::{
     CalibOptions, Calibration, RobustLoss, calibrate, select_model,
@@ -30,6 +31,23 @@ fn calib_err(err: EstimateError) -> PyErr {
         EstimateError::TooFewPoints { .. } => errors::invalid_input(err.to_string()),
         other => errors::estimate(other),
     }
+}
+
+/// Test pixels of the Max ERE: a `grid × grid` grid with the outer ring `margin` (fraction of
+/// the image size) inside the border; `None` for the default [`GRID_MARGIN`].
+fn grid_pixels(camera: &Camera, grid: usize, margin: Option<f64>) -> PyResult<Vec<[f64; 2]>> {
+    let m = margin.unwrap_or(GRID_MARGIN);
+    if !(m.is_finite() && (0.0..0.5).contains(&m)) {
+        return Err(errors::invalid_input(format!(
+            "grid_margin must be in [0, 0.5), got {m}"
+        )));
+    }
+    Ok(test_grid_with_margin(
+        camera.width(),
+        camera.height(),
+        grid,
+        m,
+    ))
 }
 
 fn model_arg(name: &str) -> PyResult<CameraModel> {
@@ -298,33 +316,42 @@ impl PyCalibResult {
             .collect()
     }
 
-    /// Max ERE (Algorithm 5.1): `(value, (u, v))`.
-    #[pyo3(signature = (samples=200, grid=5, seed=0))]
+    /// Max ERE (Algorithm 5.1): `(value, (u, v))`; `grid_margin` places the outer ring of the
+    /// test grid (fraction of the image size, default `GRID_MARGIN`).
+    #[pyo3(signature = (samples=200, grid=5, seed=0, grid_margin=None))]
     fn max_ere(
         &self,
         py: Python<'_>,
         samples: usize,
         grid: usize,
         seed: u64,
+        grid_margin: Option<f64>,
     ) -> PyResult<(f64, (f64, f64))> {
+        let pixels = grid_pixels(&self.inner.camera, grid, grid_margin)?;
         let m = convert::detached(py, || {
-            self.inner.max_ere(samples, grid, seed).map_err(calib_err)
+            self.inner
+                .max_ere_at(samples, &pixels, seed)
+                .map_err(calib_err)
         })?;
         Ok((m.value, (m.pixel[0], m.pixel[1])))
     }
 
     /// Max ERE statistics (dict: `max_ere`, `pixel`, `expected_max` = E over the samples of the
     /// largest error over the grid).
-    #[pyo3(signature = (samples=200, grid=5, seed=0))]
+    #[pyo3(signature = (samples=200, grid=5, seed=0, grid_margin=None))]
     fn max_ere_stats<'py>(
         &self,
         py: Python<'py>,
         samples: usize,
         grid: usize,
         seed: u64,
+        grid_margin: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let pixels = grid_pixels(&self.inner.camera, grid, grid_margin)?;
         let m = convert::detached(py, || {
-            self.inner.max_ere(samples, grid, seed).map_err(calib_err)
+            self.inner
+                .max_ere_at(samples, &pixels, seed)
+                .map_err(calib_err)
         })?;
         let d = PyDict::new(py);
         d.set_item("max_ere", m.value)?;
@@ -350,7 +377,8 @@ impl PyCalibResult {
 
     /// Next-view suggestion (dict: index, pose, pixels, target_index, expected_max_ere,
     /// current_max_ere, scores, candidates).
-    #[pyo3(signature = (target, candidates=None, samples=100, grid=5, seed=0))]
+    #[pyo3(signature = (target, candidates=None, samples=100, grid=5, seed=0, grid_margin=None))]
+    #[allow(clippy::too_many_arguments)]
     fn suggest_next_view<'py>(
         &self,
         py: Python<'py>,
@@ -359,12 +387,14 @@ impl PyCalibResult {
         samples: usize,
         grid: usize,
         seed: u64,
+        grid_margin: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let target = target_arg(target)?;
         let cands = candidates.map(|c| poses_arg(c, "candidates")).transpose()?;
+        let pixels = grid_pixels(&self.inner.camera, grid, grid_margin)?;
         let s = convert::detached(py, || {
             self.inner
-                .suggest_next_view(&target, cands.as_deref(), samples, grid, seed)
+                .suggest_next_view_at(&target, cands.as_deref(), samples, &pixels, seed)
                 .map_err(calib_err)
         })?;
         let d = PyDict::new(py);
@@ -527,6 +557,23 @@ fn calib_candidate_poses<'py>(
     poses_out(py, &poses)
 }
 
+/// The first target pose `(4, 4)` of a guided session: image centre, near, tilted about both
+/// target axes.
+#[pyfunction]
+fn calib_first_view_pose<'py>(
+    py: Python<'py>,
+    model: &str,
+    params: &Bound<'py, PyAny>,
+    width: u32,
+    height: u32,
+    target: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let cam = camera_arg(model, params, width, height)?;
+    let target = target_arg(target)?;
+    let pose = first_view_pose(&cam, &target).map_err(calib_err)?;
+    poses_out(py, &[pose])
+}
+
 /// `count` random target poses `(count, 4, 4)` (seeded) for simulated sessions and test sets.
 #[pyfunction]
 #[pyo3(signature = (model, params, width, height, target, count, *, max_tilt=0.7, seed=0))]
@@ -618,8 +665,10 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(calib_calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(calib_select_model, m)?)?;
     m.add_function(wrap_pyfunction!(calib_candidate_poses, m)?)?;
+    m.add_function(wrap_pyfunction!(calib_first_view_pose, m)?)?;
     m.add_function(wrap_pyfunction!(calib_random_poses, m)?)?;
     m.add_function(wrap_pyfunction!(calib_novice_poses, m)?)?;
     m.add_function(wrap_pyfunction!(calib_synthesize_view, m)?)?;
+    m.add("CALIB_GRID_MARGIN", GRID_MARGIN)?;
     Ok(())
 }

@@ -121,6 +121,19 @@ fn summary_dict<'py>(py: Python<'py>, s: &Summary) -> PyResult<Bound<'py, PyDict
 }
 
 fn indices(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<usize>> {
+    // An int64 NumPy vector is read as one slice (the Python wrappers pass these); anything
+    // else goes through the sequence protocol.
+    if let Ok(arr) = obj.extract::<numpy::PyReadonlyArray1<'_, i64>>() {
+        let view = arr.as_array();
+        return view
+            .iter()
+            .enumerate()
+            .map(|(k, &i)| {
+                usize::try_from(i)
+                    .map_err(|_| errors::invalid_input(format!("{name}[{k}] = {i} is negative")))
+            })
+            .collect();
+    }
     let v: Vec<i64> = obj.extract().map_err(|_| {
         errors::invalid_input(format!(
             "{name} must be a sequence or 1-D array of integers"

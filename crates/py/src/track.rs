@@ -114,7 +114,8 @@ impl PyTracker {
         max_missed = 30, min_hits = 2, rim_merge_distance = 4.0, image_size = None,
         intrinsics = None, wafer_radius = 0.15, normal_prior = None, circle_window = 6,
         prefer_projection = false, multiview_circle = true, normal_prior_sigma = 0.05,
-        circle_fit_iterations = 1, projection_max_center_std = 0.003, projection_max_rms = 2.0, max_missed_3d = 300, stack_axis_sigma = Some(0.002)))]
+        circle_fit_iterations = 1, projection_max_center_std = 0.003, projection_max_rms = 2.0, max_missed_3d = 300, stack_axis_sigma = Some(0.002),
+        slot_pitch = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         sigma: f64,
@@ -142,6 +143,7 @@ impl PyTracker {
         projection_max_rms: f64,
         max_missed_3d: usize,
         stack_axis_sigma: Option<f64>,
+        slot_pitch: Option<f64>,
     ) -> PyResult<Self> {
         let associator = match associator {
             "hierarchical" => Associator::Hierarchical,
@@ -186,6 +188,7 @@ impl PyTracker {
             projection_max_rms,
             max_missed_3d,
             stack_axis_sigma,
+            slot_pitch,
         };
         Ok(PyTracker {
             inner: Tracker::new(options).map_err(errors::detect)?,

@@ -33,6 +33,13 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     )
     p.add_argument("--window", type=int, default=5, help="sliding-window size in frames (0: batch only)")
     p.add_argument("--baseline", action="store_true", help="also solve with the point-reprojection baseline")
+    p.add_argument(
+        "--min-band-px",
+        type=float,
+        default=2.5,
+        help="detect front end: drop edge points where the wafer's side band is narrower than this (pixels; "
+        "about 3x the edge blur of the optics; 0 keeps all)",
+    )
     p.set_defaults(func=_run)
 
 
@@ -45,9 +52,16 @@ def _run(args: argparse.Namespace) -> int:
 
     if args.window < 0:
         raise InvalidInputError(f"--window must be >= 0, got {args.window}")
+    if not args.min_band_px >= 0.0 or args.min_band_px == float("inf"):
+        raise InvalidInputError(f"--min-band-px must be finite and >= 0, got {args.min_band_px}")
     session = read_log(args.log)
     result = autoteach(
-        session, frontend=args.frontend, window=args.window, baseline=args.baseline, progress=_progress_enabled(args)
+        session,
+        frontend=args.frontend,
+        window=args.window,
+        baseline=args.baseline,
+        min_band_px=args.min_band_px,
+        progress=_progress_enabled(args),
     )
     out_log = args.out if args.out is not None and args.out.suffix == ".mcap" else None
     out = args.report or (args.out if args.out is not None and out_log is None else None)

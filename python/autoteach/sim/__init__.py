@@ -15,7 +15,13 @@ recorded data and the ground truth. Sessions are stored as MCAP logs by :mod:`au
 from __future__ import annotations
 
 from autoteach.sim.config import DEFAULT_BASE_POSE, DEFAULT_SLOTS, Lighting, SimConfig, TrajectoryConfig
-from autoteach.sim.odometry import OdometryConfig, integrate_odometry, simulate_odometry, true_increments
+from autoteach.sim.odometry import (
+    OdometryConfig,
+    integrate_odometry,
+    relative_odometry,
+    simulate_odometry,
+    true_increments,
+)
 from autoteach.sim.session import JOINT_NAMES, Calibration, CameraInfo, Session
 from autoteach.sim.simulate import simulate_session, wafer_poses
 from autoteach.sim.trajectory import BSpline
@@ -33,6 +39,7 @@ __all__ = [
     "SimConfig",
     "TrajectoryConfig",
     "integrate_odometry",
+    "relative_odometry",
     "simulate_odometry",
     "simulate_session",
     "true_increments",

@@ -104,3 +104,28 @@ def integrate_odometry(start: np.ndarray, increments: np.ndarray) -> np.ndarray:
         p[:3, :3] = p[:3, :3] @ _exp_so3(u[3:])
         poses.append(p)
     return np.stack(poses)
+
+
+def relative_odometry(increments: np.ndarray, start_rotation: np.ndarray) -> np.ndarray:
+    """Odometry increments ``[u_T; u_R]`` (F−1, 6) as relative camera poses ``T_wc(t)⁻¹·T_wc(t+1)`` (F−1, 4, 4).
+
+    ``u_T`` is expressed in the odometry's world frame and ``u_R`` in the camera frame
+    (eq. (5.1)), so the relative pose is ``[Exp(u_R), R(t)ᵀ·u_T]`` with ``R(t)`` the
+    odometry's own rotation at ``t``, chained from ``start_rotation`` (the odometry's world
+    orientation of the first camera frame): the form of the visual-odometry factor between
+    consecutive camera poses (000_3b1454b2b2194811.txt eqs. (5.6), (5.11)).
+    """
+    inc = np.asarray(increments, dtype=np.float64)
+    if inc.ndim != 2 or inc.shape[1] != 6 or not np.all(np.isfinite(inc)):
+        raise InvalidInputError(f"odometry increments must be a finite (F-1, 6) array, got shape {inc.shape}")
+    r = np.asarray(start_rotation, dtype=np.float64)
+    if r.shape != (3, 3) or not np.all(np.isfinite(r)) or not np.allclose(r.T @ r, np.eye(3), atol=1e-6):
+        raise InvalidInputError("start_rotation must be a finite 3x3 rotation matrix")
+    out = np.zeros((len(inc), 4, 4))
+    for k, u in enumerate(inc):
+        step = _exp_so3(u[3:])
+        out[k, :3, :3] = step
+        out[k, :3, 3] = r.T @ u[:3]
+        out[k, 3, 3] = 1.0
+        r = r @ step
+    return out

@@ -32,9 +32,11 @@
 //!   constant `c` (its posteriors are below `1e−6/M`, set to 0) or evaluated exactly against
 //!   all points. Used automatically when the neighbouring runs hold under half of the pairs
 //!   (large sets late in the iteration, when σ is small);
-//! - for large sets at large σ (above 10⁷ pairs, when the grid cannot prune), the fast Gauss
-//!   transform of the `fgt` module: separable tensor Chebyshev interpolation of the kernel in
-//!   `O((N + M) p^D)`, kernel values to ~1e−12.
+//! - for large sets (above 10⁷ pairs) whenever its estimated cost is under half of the exact
+//!   strategy's, the fast Gauss transform of the `fgt` module: separable tensor Chebyshev
+//!   interpolation of the kernel, over the whole bounding box at large σ or piecewise on boxes
+//!   a few σ wide (interacting with neighbours up to 7.7σ away) in the middle range, in
+//!   `O((N + M) p^D)` plus the node-grid products; kernel values to ~1e−12.
 
 // Loops over the D ≤ 3 coordinates index several arrays at once; ranges read clearest.
 #![allow(clippy::needless_range_loop)]
@@ -114,9 +116,10 @@ pub(crate) struct EStepSums<const D: usize> {
 /// How the E-step sums are evaluated (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum EStep {
-    /// Grid truncation when it pays off (neighbouring cells hold under half of the pairs);
-    /// else, above 10⁷ pairs, the fast Gauss transform when its node count makes it at least
-    /// ~2× cheaper than every pair; dense otherwise.
+    /// The cheapest by estimated cost: grid truncation when it pays off (neighbouring cells
+    /// hold under half of the pairs), every pair otherwise, and, above 10⁷ pairs, the fast
+    /// Gauss transform (one box or boxes a few σ wide) when it is at least ~2× cheaper than
+    /// the exact strategy it replaces.
     #[default]
     Auto,
     /// Every pair (exact).
@@ -124,7 +127,8 @@ pub enum EStep {
     /// Grid truncation whenever σ allows a grid (to ε = 1e−8 of each row's largest term).
     Truncated,
     /// The fast Gauss transform of the `fgt` module (kernel values to ~1e−12) whenever σ
-    /// allows it (at most 72 interpolation nodes per axis), dense otherwise.
+    /// allows it (at most 72 interpolation nodes per box and axis, a node grid of at most
+    /// 2²² values), dense otherwise.
     FastGauss,
 }
 
@@ -306,22 +310,30 @@ impl<const D: usize> EStepWork<D> {
                     true
                 }
             }
-            // Pays off when the neighbouring runs hold under half of all pairs.
+            // The cheapest of: every pair, the grid truncation (when its neighbouring runs
+            // hold under half of the pairs), and (above 10⁷ pairs) the fast Gauss transform
+            // when its estimated cost is under half of the cheaper exact strategy.
             EStep::Auto => {
-                n * m > 250_000
+                let tiles = (n * m > 250_000
                     && self.grid.build(t, h2.sqrt())
-                    && self.grid.cells.len() > 3usize.pow(D as u32)
-                    && self.plan_tiles(x, t) * 2 < n * m
+                    && self.grid.cells.len() > 3usize.pow(D as u32))
+                .then(|| self.plan_tiles(x, t))
+                .filter(|&pairs| pairs * 2 < n * m);
+                if n * m > AUTO_FGT_PAIRS {
+                    let exact = tiles.unwrap_or(n * m);
+                    let budget = exact.saturating_mul(super::fgt::PAIR_COST) / 2;
+                    if let Some(plan) = super::fgt::Plan::new(x, t, sigma2, budget)
+                        && let Some(sums) = plan.estep(x, t, sigma2, c, self.arch)
+                    {
+                        return sums;
+                    }
+                }
+                tiles.is_some()
             }
         };
         if !use_grid {
-            let budget = match self.mode {
-                EStep::FastGauss => usize::MAX,
-                EStep::Auto if n * m > AUTO_FGT_PAIRS => n * m * 3 / (2 * (n + m)),
-                _ => 0,
-            };
-            if budget > 0
-                && let Some(plan) = super::fgt::Plan::new(x, t, sigma2, budget)
+            if self.mode == EStep::FastGauss
+                && let Some(plan) = super::fgt::Plan::new(x, t, sigma2, usize::MAX)
                 && let Some(sums) = plan.estep(x, t, sigma2, c, self.arch)
             {
                 return sums;

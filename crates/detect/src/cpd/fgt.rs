@@ -1,30 +1,38 @@
-//! A fast Gauss transform for the CPD E-step at large σ (000_3b1454b2b2194811.txt eq. (3.13);
+//! A fast Gauss transform for the CPD E-step (000_3b1454b2b2194811.txt eq. (3.13);
 //! Myronenko & Song 2010 §5 use the fast Gauss transform for the same sums): the Gaussian
-//! kernel `k(x, t) = Π_d g(x_d − t_d)`, `g(u) = exp(−u²/2σ²)`, is separable, and on the
-//! bounding box of both point sets each factor is replaced by its tensor Chebyshev interpolant
-//! in both arguments,
+//! kernel `k(x, t) = Π_d g(x_d − t_d)`, `g(u) = exp(−u²/2σ²)`, is separable, and each factor
+//! is replaced by its Chebyshev interpolant in both arguments,
 //!
 //! ```text
 //! g(x_d − t_d) ≈ Σ_i Σ_j S_i(x_d) · g(ξ_i − ξ_j) · S_j(t_d),
 //! ```
 //!
-//! with `S_i` the barycentric Lagrange basis on `p` Chebyshev–Lobatto nodes `ξ_i` of the
-//! interval (a single-level "black-box" fast multipole scheme). A Gauss transform
-//! `f(x_n) = Σ_m q_m k(x_n, t_m)` then costs `O((N + M) p^D + D p^{D+1})` instead of `O(N M)`:
-//! spread the weights onto the `p^D` nodes, apply the `p × p` node matrix along each axis,
-//! interpolate at the targets. The E-step needs two transforms: the row sums
-//! `s_n = Σ_m k_mn` (weights 1 at the sources `t_m`), then `P1`, `PX` with the weights
-//! `1/(s_n + c)` and `x_n/(s_n + c)` at the sources `x_n`.
+//! with `S_i` the barycentric Lagrange basis on `p` Chebyshev–Lobatto nodes `ξ_i`. The nodes
+//! are either those of the whole extent of the sets along the axis (one box: large σ), or
+//! piecewise, `p` nodes in each of the boxes of a uniform partition of the axis into boxes a
+//! few σ wide (the middle range of σ, where one interpolant over the extent would need more
+//! than [`MAX_NODES`] nodes). The node sets of the axes span a tensor grid; a Gauss transform
+//! `f(x_n) = Σ_m q_m k(x_n, t_m)` spreads the weights onto the `p^D` nodes of each source's
+//! boxes, applies the node matrices `g(ξ_i − ξ_j)` along each axis (block-banded in the
+//! piecewise case: boxes more than `r = ⌈7.74σ / width⌉` boxes apart along an axis are at
+//! least 7.74σ apart, where `g < 1e−13`, and are skipped), and interpolates at the targets —
+//! a single-level "black-box" fast multipole scheme (Fong & Darve 2009) with the Gaussian's
+//! tail truncated as in the improved fast Gauss transform. Cost
+//! `O((N + M) p^D + nodes · Σ_d (2r + 1) p)` instead of `O(N M)`. The E-step needs two
+//! transforms: the row sums `s_n = Σ_m k_mn` (weights 1 at the sources `t_m`), then `P1`, `PX`
+//! with the weights `1/(s_n + c)` and `x_n/(s_n + c)` at the sources `x_n`. [`Plan::new`]
+//! picks the cheapest layout (one box, or boxes 1.5–6σ wide) by its multiply–add count.
 //!
-//! Accuracy: `p` is chosen per axis as the smallest size whose interpolant of `g(x − t)` over
-//! the box has a maximum error below `1e−13` on a test grid four times finer than the nodes
-//! (times the Lebesgue-constant bound for interpolating in both arguments), so every kernel
-//! value is within about `D·1e−12` of the exact one. A row whose interpolated sum is not
-//! above `1e6 · M ·` that error (a target far from every source) is evaluated exactly instead,
-//! so each row's posteriors carry a relative error below 1e−6, and far below it in the
-//! regime where the transform is used (rows summing many kernel values, σ comparable with the
-//! extent of the sets). When σ is small against the box the node count grows as `(extent/σ)^D`
-//! and the transform is not used (the grid truncation of the `estep` module takes over).
+//! Accuracy: `p` is chosen per box width as the smallest size whose interpolant of `g(x − t)`
+//! over a box, for centres `t` in the box and the adjacent ones, has a maximum error below
+//! `1e−13` on a test grid four times finer than the nodes (times the Lebesgue-constant bound
+//! for interpolating in both arguments; farther boxes see smaller, smoother values — checked
+//! in the tests), so every kernel value is within about `D·1e−12` of the exact one. A row
+//! whose interpolated sum is not above `1e6 · M ·` that error (a target far from every source)
+//! is evaluated exactly instead, so each row's posteriors carry a relative error below 1e−6,
+//! and far below it where the transform is used (rows summing many kernel values). When σ
+//! is small against the extent the node grid grows as `(extent/σ)^D` and the transform is not
+//! used (the grid truncation of the `estep` module takes over).
 
 // Loops over the D ≤ 3 axes index several arrays at once; ranges read clearest.
 #![allow(clippy::needless_range_loop)]
@@ -37,101 +45,201 @@ use super::estep::{EStepSums, exp_neg};
 /// Kernel-value accuracy the node count is chosen for.
 const KERNEL_TOL: f64 = 1e-13;
 
-/// Largest node count per axis considered.
+/// Largest node count per box and axis considered.
 const MAX_NODES: usize = 72;
 
-/// Chebyshev interpolation on one axis.
+/// Box widths (in units of σ) tried for the piecewise scheme.
+const BOX_WIDTHS: [f64; 5] = [1.5, 2.0, 3.0, 4.5, 6.0];
+
+/// Truncation radius of the piecewise scheme in units of σ, `√(2 ln(1/KERNEL_TOL))`: kernel
+/// values between points farther apart than this along one axis (`< 10⁻¹³`) are dropped.
+const TRUNC_SIGMAS: f64 = 7.7385;
+
+/// Most node-grid values (nodes × weights) one transform may hold.
+const MAX_GRID: usize = 1 << 22;
+
+/// Cost of one exactly evaluated pair in multiply–adds of the transform (distance, exponential,
+/// posterior scatter), for choosing between the strategies.
+pub(crate) const PAIR_COST: usize = 16;
+
+/// Piecewise Chebyshev interpolation on one axis: `nb` boxes of equal width, each with its own
+/// `p` Chebyshev–Lobatto nodes; boxes interact with their `r` neighbours on either side.
 #[derive(Debug, Clone)]
 struct Axis {
     lo: f64,
-    hi: f64,
-    /// Nodes, mapped to `[lo, hi]`.
-    nodes: Vec<f64>,
+    width: f64,
+    nb: usize,
+    r: usize,
+    /// Node positions within a box, in `[0, width]`.
+    local: Vec<f64>,
     /// Barycentric weights.
     bw: Vec<f64>,
-    /// Node matrix `g(ξ_i − ξ_j)`, row-major `p × p`.
+    /// Node matrices `g(ξ_i − ξ_j − o·width)` for box offsets `o = −r..=r`, row-major `p × p`
+    /// each, offset-major.
     g: Vec<f64>,
 }
 
+/// Chebyshev–Lobatto nodes of `[0, width]` and their barycentric weights.
+fn lobatto(width: f64, p: usize) -> (Vec<f64>, Vec<f64>) {
+    let nodes = (0..p)
+        .map(|i| 0.5 * width * (1.0 + (std::f64::consts::PI * i as f64 / (p - 1) as f64).cos()))
+        .collect();
+    let bw = (0..p)
+        .map(|i| {
+            let s = if i % 2 == 0 { 1.0 } else { -1.0 };
+            if i == 0 || i == p - 1 { 0.5 * s } else { s }
+        })
+        .collect();
+    (nodes, bw)
+}
+
+/// The barycentric Lagrange basis at `x` (local coordinate) into `out`.
+#[inline]
+fn basis_at(nodes: &[f64], bw: &[f64], x: f64, out: &mut [f64]) {
+    let mut den = 0.0;
+    for (i, (&xi, &w)) in nodes.iter().zip(bw).enumerate() {
+        let d = x - xi;
+        if d == 0.0 {
+            out.fill(0.0);
+            out[i] = 1.0;
+            return;
+        }
+        let v = w / d;
+        out[i] = v;
+        den += v;
+    }
+    let inv = 1.0 / den;
+    for o in out.iter_mut() {
+        *o *= inv;
+    }
+}
+
+/// Largest error of the interpolant on `p` nodes of `u ↦ exp(−(u − t)²/2)` (σ = 1) over a box
+/// `[0, width]`, for centres `t` in the box and, when `neighbours`, in the adjacent boxes
+/// (the farther boxes see smaller kernel values); test grids 4p wide per box.
+fn interp_error(width: f64, p: usize, neighbours: bool) -> f64 {
+    let (nodes, bw) = lobatto(width, p);
+    let q = 4 * p;
+    let xs: Vec<f64> = (0..q)
+        .map(|i| width * (i as f64 + 0.37) / q as f64)
+        .collect();
+    let span = if neighbours { 3 } else { 1 };
+    let ts: Vec<f64> = (0..2 * p * span)
+        .map(|i| {
+            let u = (i as f64 + 0.5) / (2 * p * span) as f64;
+            if neighbours {
+                width * (3.0 * u - 1.0)
+            } else {
+                width * u
+            }
+        })
+        .collect();
+    let mut s = vec![0.0; p];
+    let mut worst: f64 = 0.0;
+    for &t in &ts {
+        let at_nodes: Vec<f64> = nodes
+            .iter()
+            .map(|&xi| exp_neg(-0.5 * (xi - t) * (xi - t)))
+            .collect();
+        for &x in &xs {
+            basis_at(&nodes, &bw, x, &mut s);
+            let approx: f64 = s.iter().zip(&at_nodes).map(|(a, b)| a * b).sum();
+            let exact = exp_neg(-0.5 * (x - t) * (x - t));
+            worst = worst.max((approx - exact).abs());
+        }
+    }
+    worst
+}
+
+/// Smallest node count per box (≤ [`MAX_NODES`]) whose two-sided interpolation error bound
+/// (`error · (1 + Lebesgue constant)`) is below [`KERNEL_TOL`] for boxes `width_sigma` σ wide,
+/// with the bound; memoised on a 5 % ladder of widths (rounded up, so the count is safe).
+fn nodes_for(width_sigma: f64, neighbours: bool) -> Option<(usize, f64)> {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    type Table = HashMap<(i64, bool), Option<(usize, f64)>>;
+    static CACHE: OnceLock<Mutex<Table>> = OnceLock::new();
+    if !(width_sigma > 0.0) || !width_sigma.is_finite() || width_sigma > 1e4 {
+        return None;
+    }
+    let rung = (width_sigma.ln() / 1.05f64.ln()).ceil() as i64;
+    let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
+    if let Ok(c) = cache.lock()
+        && let Some(v) = c.get(&(rung, neighbours))
+    {
+        return *v;
+    }
+    let w = 1.05f64.powi(rung as i32);
+    let bound = |p: usize| {
+        let lebesgue = 2.0 / std::f64::consts::PI * (p as f64).ln() + 1.0;
+        interp_error(w, p, neighbours) * (1.0 + lebesgue)
+    };
+    // Binary search on p (the error falls with p); None when even MAX_NODES fails.
+    let result = if bound(MAX_NODES) >= KERNEL_TOL {
+        None
+    } else {
+        let (mut lo, mut hi) = (3usize, MAX_NODES);
+        while hi - lo > 1 {
+            let mid = (lo + hi) / 2;
+            if bound(mid) < KERNEL_TOL {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        Some((hi, bound(hi)))
+    };
+    if let Ok(mut c) = cache.lock() {
+        c.insert((rung, neighbours), result);
+    }
+    result
+}
+
 impl Axis {
-    fn new(lo: f64, hi: f64, p: usize, inv2s2: f64) -> Self {
-        let nodes: Vec<f64> = (0..p)
-            .map(|i| {
-                let c = (std::f64::consts::PI * i as f64 / (p - 1) as f64).cos();
-                0.5 * (lo + hi) + 0.5 * (hi - lo) * c
-            })
-            .collect();
-        let bw = (0..p)
-            .map(|i| {
-                let s = if i % 2 == 0 { 1.0 } else { -1.0 };
-                if i == 0 || i == p - 1 { 0.5 * s } else { s }
-            })
-            .collect();
-        let mut g = vec![0.0; p * p];
-        for i in 0..p {
-            for j in 0..p {
-                let u = nodes[i] - nodes[j];
-                g[i * p + j] = exp_neg(-u * u * inv2s2);
+    fn new(lo: f64, width: f64, nb: usize, r: usize, p: usize, inv2s2: f64) -> Self {
+        let (local, bw) = lobatto(width, p);
+        let mut g = vec![0.0; (2 * r + 1) * p * p];
+        for o in 0..2 * r + 1 {
+            let shift = (o as f64 - r as f64) * width;
+            for i in 0..p {
+                for j in 0..p {
+                    let u = local[i] - local[j] - shift;
+                    g[(o * p + i) * p + j] = exp_neg(-u * u * inv2s2);
+                }
             }
         }
         Self {
             lo,
-            hi,
-            nodes,
+            width,
+            nb,
+            r,
+            local,
             bw,
             g,
         }
     }
 
     fn p(&self) -> usize {
-        self.nodes.len()
+        self.local.len()
     }
 
-    /// The Lagrange basis values `S_i(x)` into `out` (length p).
+    /// Nodes on the axis (`nb · p`).
+    fn len(&self) -> usize {
+        self.nb * self.p()
+    }
+
+    /// The box of `x` and the Lagrange basis values `S_i(x)` of that box into `out`.
     #[inline]
-    fn basis(&self, x: f64, out: &mut [f64]) {
-        let mut den = 0.0;
-        for (i, (&xi, &w)) in self.nodes.iter().zip(&self.bw).enumerate() {
-            let d = x - xi;
-            if d == 0.0 {
-                out.fill(0.0);
-                out[i] = 1.0;
-                return;
-            }
-            let v = w / d;
-            out[i] = v;
-            den += v;
-        }
-        let inv = 1.0 / den;
-        for o in out.iter_mut() {
-            *o *= inv;
-        }
-    }
-
-    /// Largest error of the interpolant of `g(x − t)` in `x` over the interval, for `t` on
-    /// the same test grid, on a test grid 4p points wide.
-    fn error(&self, inv2s2: f64) -> f64 {
-        let p = self.p();
-        let q = 4 * p;
-        let mut s = vec![0.0; p];
-        let mut worst: f64 = 0.0;
-        let pts: Vec<f64> = (0..q)
-            .map(|i| self.lo + (self.hi - self.lo) * (i as f64 + 0.37) / q as f64)
-            .collect();
-        for &t in &pts {
-            let at_nodes: Vec<f64> = self
-                .nodes
-                .iter()
-                .map(|&xi| exp_neg(-(xi - t) * (xi - t) * inv2s2))
-                .collect();
-            for &x in &pts {
-                self.basis(x, &mut s);
-                let approx: f64 = s.iter().zip(&at_nodes).map(|(a, b)| a * b).sum();
-                let exact = exp_neg(-(x - t) * (x - t) * inv2s2);
-                worst = worst.max((approx - exact).abs());
-            }
-        }
-        worst
+    fn basis(&self, x: f64, out: &mut [f64]) -> usize {
+        let u = ((x - self.lo) / self.width).floor();
+        let b = if u > 0.0 {
+            (u as usize).min(self.nb - 1)
+        } else {
+            0
+        };
+        let xl = x - (self.lo + b as f64 * self.width);
+        basis_at(&self.local, &self.bw, xl, out);
+        b
     }
 }
 
@@ -143,11 +251,13 @@ pub(crate) struct Plan<const D: usize> {
 }
 
 impl<const D: usize> Plan<D> {
-    /// The scheme for the bounding box of `x ∪ t` at variance `sigma2`, or `None` when some
-    /// axis would need more than [`MAX_NODES`] nodes or more than `max_nodes` nodes overall.
-    pub fn new(x: &[[f64; D]], t: &[[f64; D]], sigma2: f64, max_nodes: usize) -> Option<Self> {
+    /// The cheapest scheme for the bounding box of `x ∪ t` at variance `sigma2` — one box per
+    /// axis (the whole extent) or boxes [`BOX_WIDTHS`] σ wide — whose estimated cost (in
+    /// multiply–adds, both transforms of an E-step) is at most `max_cost`; `None` when none is.
+    pub fn new(x: &[[f64; D]], t: &[[f64; D]], sigma2: f64, max_cost: usize) -> Option<Self> {
         let inv2s2 = 0.5 / sigma2;
-        if !inv2s2.is_finite() || x.is_empty() || t.is_empty() {
+        let sigma = sigma2.sqrt();
+        if !inv2s2.is_finite() || !(sigma > 0.0) || x.is_empty() || t.is_empty() {
             return None;
         }
         let mut lo = [f64::INFINITY; D];
@@ -158,53 +268,85 @@ impl<const D: usize> Plan<D> {
                 hi[d] = hi[d].max(p[d]);
             }
         }
-        let mut axes = Vec::with_capacity(D);
-        let mut total = 1usize;
-        let mut err_sum = 0.0;
-        for d in 0..D {
-            let (a, b) = if hi[d] > lo[d] {
-                (lo[d], hi[d])
+        let ext: [(f64, f64); D] = std::array::from_fn(|d| {
+            if hi[d] > lo[d] {
+                (lo[d], hi[d] - lo[d])
             } else {
-                (lo[d] - 1.0, lo[d] + 1.0)
-            };
-            // Start from the size a Gaussian of this width over this interval needs roughly
-            // (√(2γ·ln(1/tol)), γ = (half-length)²/2σ²), then grow until the test passes.
-            let gamma = 0.25 * (b - a) * (b - a) * inv2s2;
-            let mut p = ((2.0 * gamma * 30.0).sqrt() * 0.6).ceil().max(6.0) as usize;
-            let axis = loop {
-                if p > MAX_NODES {
-                    return None;
-                }
-                let axis = Axis::new(a, b, p, inv2s2);
-                let lebesgue = 2.0 / std::f64::consts::PI * (p as f64).ln() + 1.0;
-                let err = axis.error(inv2s2) * (1.0 + lebesgue);
-                if err < KERNEL_TOL {
-                    err_sum += err;
-                    break axis;
-                }
-                p += 2;
-            };
-            total = total.saturating_mul(axis.p());
-            if total > max_nodes {
+                (lo[d] - 1.0, 2.0)
+            }
+        });
+        let points = x.len() + t.len();
+        // Weights carried: 1 (row sums) and D + 1 (P1, PX).
+        let weights = D + 2;
+        // Per axis (lo, width, boxes, band r, nodes p); the best as (cost, shape, kernel error).
+        type Shape<const D: usize> = [(f64, f64, usize, usize, usize); D];
+        let mut best: Option<(usize, Shape<D>, f64)> = None;
+        let mut consider = |shape: [(f64, f64, usize, usize, usize); D], err: f64| {
+            let pd: usize = shape.iter().map(|s| s.4).product();
+            let nodes = shape
+                .iter()
+                .try_fold(1usize, |a, s| a.checked_mul(s.2.checked_mul(s.4)?))?;
+            if nodes.checked_mul(D + 1)? > MAX_GRID {
                 return None;
             }
-            axes.push(axis);
+            let per_point = pd * weights + shape.iter().map(|s| 8 * s.4).sum::<usize>();
+            let band: usize = shape.iter().map(|s| (2 * s.3 + 1) * s.4).sum();
+            let cost = points
+                .checked_mul(per_point)?
+                .checked_add(nodes.checked_mul(band)?.checked_mul(weights)?)?;
+            if cost <= max_cost && best.as_ref().is_none_or(|b| cost < b.0) {
+                best = Some((cost, shape, err));
+            }
+            Some(())
+        };
+        // One box per axis.
+        let mut global = [(0.0, 0.0, 1usize, 0usize, 0usize); D];
+        let mut err = 0.0;
+        let mut ok = true;
+        for d in 0..D {
+            match nodes_for(ext[d].1 / sigma, false) {
+                Some((p, e)) => {
+                    global[d] = (ext[d].0, ext[d].1, 1, 0, p);
+                    err += e;
+                }
+                None => ok = false,
+            }
         }
-        let axes: [Axis; D] = axes.try_into().ok()?;
-        Some(Self {
-            axes,
-            kernel_err: err_sum,
-        })
+        if ok {
+            let _ = consider(global, err);
+        }
+        // Boxes a few σ wide.
+        for &w in &BOX_WIDTHS {
+            let Some((p, e)) = nodes_for(w, true) else {
+                continue;
+            };
+            let width = w * sigma;
+            let r = (TRUNC_SIGMAS / w).ceil() as usize;
+            let mut shape = [(0.0, 0.0, 1usize, 0usize, 0usize); D];
+            let mut several = false;
+            for d in 0..D {
+                let nb = (ext[d].1 / width).ceil().clamp(1.0, 1e9) as usize;
+                several |= nb > 1;
+                shape[d] = (ext[d].0, width, nb, r.min(nb - 1), p);
+            }
+            if several {
+                // Interpolation error per axis plus the dropped tail.
+                let _ = consider(shape, D as f64 * e + KERNEL_TOL);
+            }
+        }
+        let (_, shape, kernel_err) = best?;
+        let axes = shape.map(|(lo, width, nb, r, p)| Axis::new(lo, width, nb, r, p, inv2s2));
+        Some(Self { axes, kernel_err })
     }
 
-    /// Number of nodes `p^D`.
+    /// Number of nodes of the grid.
     pub fn nodes(&self) -> usize {
-        self.axes.iter().map(Axis::p).product()
+        self.axes.iter().map(Axis::len).product()
     }
 
-    /// Strides of the row-major node grid.
+    /// Nodes per axis of the row-major node grid.
     fn dims(&self) -> [usize; D] {
-        std::array::from_fn(|d| self.axes[d].p())
+        std::array::from_fn(|d| self.axes[d].len())
     }
 
     /// Spreads `K` weight vectors (`weights(i, &mut [f64; K])` for point `i`) at `pts` onto the
@@ -245,28 +387,75 @@ impl<const D: usize> Plan<D> {
         out
     }
 
-    /// Applies the node matrices along every axis (in place, `K` interleaved grids).
+    /// Applies the (banded, box-blocked) node matrices along every axis, `K` interleaved grids.
     fn transform<const K: usize>(&self, grid: &mut Vec<f64>) {
         let dims = self.dims();
         for axis in 0..D {
-            let p = dims[axis];
+            let ax = &self.axes[axis];
+            let (p, nb, r) = (ax.p(), ax.nb, ax.r);
+            let len = dims[axis];
             let inner: usize = dims[axis + 1..].iter().product::<usize>() * K;
             let outer: usize = dims[..axis].iter().product();
-            let g = &self.axes[axis].g;
             let mut out = vec![0.0; grid.len()];
-            for o in 0..outer {
-                let base = o * p * inner;
-                for i in 0..p {
-                    let dst = &mut out[base + i * inner..base + (i + 1) * inner];
-                    for j in 0..p {
-                        let gij = g[i * p + j];
-                        let src = &grid[base + j * inner..base + (j + 1) * inner];
-                        for (dv, sv) in dst.iter_mut().zip(src) {
-                            *dv += gij * sv;
+            let src_all: &[f64] = grid;
+            if axis == D - 1 {
+                // Innermost axis (`inner = K`): weight-major copy of each node row, then
+                // contiguous dot products of length p.
+                out.par_chunks_mut(len * K)
+                    .zip(src_all.par_chunks(len * K))
+                    .for_each_init(
+                        || vec![0.0; len * K],
+                        |tk, (dst, src)| {
+                            for (node, v) in src.chunks_exact(K).enumerate() {
+                                for k in 0..K {
+                                    tk[k * len + node] = v[k];
+                                }
+                            }
+                            for a in 0..nb {
+                                let b_lo = a.saturating_sub(r);
+                                let b_hi = (a + r).min(nb - 1);
+                                for i in 0..p {
+                                    for k in 0..K {
+                                        let mut acc = 0.0;
+                                        for bx in b_lo..=b_hi {
+                                            let o = bx + r - a;
+                                            let gblk = &ax.g[(o * p + i) * p..(o * p + i + 1) * p];
+                                            let sv = &tk[k * len + bx * p..k * len + (bx + 1) * p];
+                                            acc += dot(gblk, sv);
+                                        }
+                                        dst[(a * p + i) * K + k] = acc;
+                                    }
+                                }
+                            }
+                        },
+                    );
+                *grid = out;
+                continue;
+            }
+            out.par_chunks_mut(len * inner)
+                .zip(src_all.par_chunks(len * inner))
+                .take(outer)
+                .for_each(|(dst_all, src)| {
+                    for a in 0..nb {
+                        let b_lo = a.saturating_sub(r);
+                        let b_hi = (a + r).min(nb - 1);
+                        for i in 0..p {
+                            let row = a * p + i;
+                            let dst = &mut dst_all[row * inner..(row + 1) * inner];
+                            for bx in b_lo..=b_hi {
+                                let o = bx + r - a;
+                                let gblk = &ax.g[(o * p + i) * p..(o * p + i + 1) * p];
+                                for (j, &gij) in gblk.iter().enumerate() {
+                                    let col = bx * p + j;
+                                    let sv = &src[col * inner..(col + 1) * inner];
+                                    for (dv, s) in dst.iter_mut().zip(sv) {
+                                        *dv += gij * s;
+                                    }
+                                }
+                            }
                         }
                     }
-                }
-            }
+                });
             *grid = out;
         }
     }
@@ -410,6 +599,24 @@ impl<const D: usize> Plan<D> {
     }
 }
 
+/// `Σ a_i b_i` with four partial sums (vectorises).
+#[inline(always)]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let mut ca = a.chunks_exact(4);
+    let mut cb = b.chunks_exact(4);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for l in 0..4 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+        s += x * y;
+    }
+    s
+}
+
 /// Spreading of one chunk of points, under the dispatched instruction set.
 struct SpreadOp<'a, const D: usize, const K: usize, W> {
     plan: &'a Plan<D>,
@@ -417,6 +624,41 @@ struct SpreadOp<'a, const D: usize, const K: usize, W> {
     offset: usize,
     weights: &'a W,
     grid: &'a mut [f64],
+}
+
+/// Offsets into the row-major node grid of the `Π_{d<D−1} p_d` node rows a point in the boxes
+/// `boxes` touches (first node of its last-axis box), with the product of the outer basis
+/// values for each.
+#[inline(always)]
+fn outer_rows<const D: usize>(
+    plan: &Plan<D>,
+    dims: &[usize; D],
+    boxes: &[usize; D],
+    s: &[Vec<f64>; D],
+    mut f: impl FnMut(usize, f64),
+) {
+    let last = &plan.axes[D - 1];
+    let row_len = dims[D - 1];
+    let last_off = boxes[D - 1] * last.p();
+    let count: usize = plan.axes[..D - 1].iter().map(Axis::p).product();
+    for o in 0..count {
+        let mut rem = o;
+        let mut idx = 0usize;
+        let mut fac = 1.0;
+        // Decode the local indices, most significant axis first.
+        let mut locals = [0usize; D];
+        for d in (0..D - 1).rev() {
+            let p = plan.axes[d].p();
+            locals[d] = rem % p;
+            rem /= p;
+        }
+        for d in 0..D - 1 {
+            let p = plan.axes[d].p();
+            idx = idx * dims[d] + boxes[d] * p + locals[d];
+            fac *= s[d][locals[d]];
+        }
+        f(idx * row_len + last_off, fac);
+    }
 }
 
 impl<const D: usize, const K: usize, W: Fn(usize, &mut [f64; K]) + Sync> WithSimd
@@ -428,14 +670,15 @@ impl<const D: usize, const K: usize, W: Fn(usize, &mut [f64; K]) + Sync> WithSim
     fn with_simd<S: Simd>(self, _simd: S) -> Self::Output {
         let plan = self.plan;
         let dims = plan.dims();
-        let mut s: [Vec<f64>; D] = std::array::from_fn(|d| vec![0.0; dims[d]]);
-        let last = dims[D - 1];
+        let mut s: [Vec<f64>; D] = std::array::from_fn(|d| vec![0.0; plan.axes[d].p()]);
+        let pl = plan.axes[D - 1].p();
         let mut w = [0.0; K];
         // Weighted basis of the last axis, K interleaved: row[j * K + k] = w_k · S_j.
-        let mut row = vec![0.0; last * K];
+        let mut row = vec![0.0; pl * K];
+        let mut boxes = [0usize; D];
         for (i, p) in self.pts.iter().enumerate() {
             for d in 0..D {
-                plan.axes[d].basis(p[d], &mut s[d]);
+                boxes[d] = plan.axes[d].basis(p[d], &mut s[d]);
             }
             (self.weights)(self.offset + i, &mut w);
             for (j, sv) in s[D - 1].iter().enumerate() {
@@ -443,20 +686,13 @@ impl<const D: usize, const K: usize, W: Fn(usize, &mut [f64; K]) + Sync> WithSim
                     row[j * K + k] = w[k] * sv;
                 }
             }
-            // Outer axes: every combination of the first D − 1 node indices.
-            let outer: usize = dims[..D - 1].iter().product();
-            for o in 0..outer {
-                let mut f = 1.0;
-                let mut rem = o;
-                for d in (0..D - 1).rev() {
-                    f *= s[d][rem % dims[d]];
-                    rem /= dims[d];
-                }
-                let dst = &mut self.grid[o * last * K..(o + 1) * last * K];
+            let grid = &mut *self.grid;
+            outer_rows(plan, &dims, &boxes, &s, |start, f| {
+                let dst = &mut grid[start * K..(start + pl) * K];
                 for (dv, rv) in dst.iter_mut().zip(&row) {
                     *dv += f * rv;
                 }
-            }
+            });
         }
     }
 }
@@ -476,28 +712,23 @@ impl<const D: usize, const K: usize> WithSimd for InterpOp<'_, D, K> {
     fn with_simd<S: Simd>(self, _simd: S) -> Self::Output {
         let plan = self.plan;
         let dims = plan.dims();
-        let mut s: [Vec<f64>; D] = std::array::from_fn(|d| vec![0.0; dims[d]]);
-        let last = dims[D - 1];
-        let outer: usize = dims[..D - 1].iter().product();
-        // Σ over the outer axes of f_o · grid row o, then the dot with the last axis basis.
-        let mut acc = vec![0.0; last * K];
+        let mut s: [Vec<f64>; D] = std::array::from_fn(|d| vec![0.0; plan.axes[d].p()]);
+        let pl = plan.axes[D - 1].p();
+        // Σ over the outer node rows of f_o · grid row o, then the dot with the last-axis basis.
+        let mut acc = vec![0.0; pl * K];
+        let mut boxes = [0usize; D];
         for (p, o_val) in self.pts.iter().zip(self.out.iter_mut()) {
             for d in 0..D {
-                plan.axes[d].basis(p[d], &mut s[d]);
+                boxes[d] = plan.axes[d].basis(p[d], &mut s[d]);
             }
             acc.fill(0.0);
-            for o in 0..outer {
-                let mut f = 1.0;
-                let mut rem = o;
-                for d in (0..D - 1).rev() {
-                    f *= s[d][rem % dims[d]];
-                    rem /= dims[d];
-                }
-                let src = &self.grid[o * last * K..(o + 1) * last * K];
+            let grid = self.grid;
+            outer_rows(plan, &dims, &boxes, &s, |start, f| {
+                let src = &grid[start * K..(start + pl) * K];
                 for (av, gv) in acc.iter_mut().zip(src) {
                     *av += f * gv;
                 }
-            }
+            });
             let mut v = [0.0; K];
             for (j, sv) in s[D - 1].iter().enumerate() {
                 for k in 0..K {
@@ -523,15 +754,18 @@ mod tests {
             .collect()
     }
 
-    fn check<const D: usize>(sigma2: f64, w: f64) {
-        let x = cloud::<D>(700, 1, 4.0);
+    /// The transform's sums against every pair; returns the boxes per axis of the plan used.
+    fn check<const D: usize>(sigma2: f64, w: f64, far: bool) -> usize {
+        let mut x = cloud::<D>(700, 1, 4.0);
         let mut t = cloud::<D>(600, 2, 4.0);
-        // A far-away source and target exercise the exact-row path.
-        t.push([40.0; D]);
-        let mut x = x;
-        x.push([-30.0; D]);
+        if far {
+            // A far-away source and target exercise the exact-row path.
+            t.push([40.0; D]);
+            x.push([-30.0; D]);
+        }
         let c = super::super::estep::outlier_constant(sigma2, w, t.len(), x.len(), D);
         let plan = Plan::<D>::new(&x, &t, sigma2, usize::MAX).expect("plan");
+        let boxes = plan.axes[0].nb;
         let fast = plan
             .estep(&x, &t, sigma2, c, pulp::Arch::new())
             .expect("estep");
@@ -553,15 +787,52 @@ mod tests {
             "D = {D}, σ² = {sigma2}: worst relative error {worst:e}"
         );
         assert!(rel(fast.np, exact.np) < 1e-9);
+        boxes
     }
 
     #[test]
     fn fast_gauss_matches_dense_sums() {
-        // The box is ~70 wide (far points): only large σ keep the node count small, so the
-        // far rows go through the exact path and the rest through the transform.
+        // The box is ~70 wide (far points): at large σ the far rows go through the exact path
+        // and the rest through the transform.
         for (s2, w) in [(60.0, 0.0), (30.0, 0.2)] {
-            check::<2>(s2, w);
-            check::<3>(s2, w);
+            check::<2>(s2, w, true);
+            check::<3>(s2, w, true);
+        }
+    }
+
+    #[test]
+    fn piecewise_fast_gauss_matches_dense_sums() {
+        // σ small against the extent: boxes a few σ wide.
+        assert!(check::<2>(0.3, 0.0, false) > 1);
+        assert!(check::<2>(0.3, 0.1, true) > 1);
+        assert!(check::<2>(0.05, 0.1, false) > 1);
+        assert!(check::<3>(0.25, 0.0, false) > 1);
+    }
+
+    #[test]
+    fn farther_boxes_interpolate_no_worse_than_adjacent_ones() {
+        // The node count is chosen for centres up to one box away; the kernel seen from
+        // farther boxes is smaller and smoother: check offsets up to 4 boxes.
+        for &w in &BOX_WIDTHS {
+            let (p, bound) = nodes_for(w, true).expect("node count");
+            let (nodes, bw) = lobatto(w, p);
+            let mut s = vec![0.0; p];
+            let mut worst: f64 = 0.0;
+            for k in 0..400 {
+                let t = w * (2.0 + 3.0 * k as f64 / 400.0);
+                for q in 0..97 {
+                    let x = w * (q as f64 + 0.5) / 97.0;
+                    basis_at(&nodes, &bw, x, &mut s);
+                    let approx: f64 = s
+                        .iter()
+                        .zip(&nodes)
+                        .map(|(a, xi)| a * (-0.5 * (xi - t) * (xi - t)).exp())
+                        .sum();
+                    worst = worst.max((approx - (-0.5 * (x - t) * (x - t)).exp()).abs());
+                }
+            }
+            assert!(worst < bound, "width {w}σ, p = {p}: {worst:e} vs {bound:e}");
+            assert!(bound < KERNEL_TOL);
         }
     }
 
@@ -572,6 +843,7 @@ mod tests {
         let b = Plan::<2>::new(&x, &x, 0.5, usize::MAX).expect("plan");
         assert!(b.nodes() > a.nodes());
         assert!(a.kernel_err < 1e-12);
+        // Boxes of a few σ at σ = 0.01 over a 10-wide set: too many nodes.
         assert!(Plan::<2>::new(&x, &x, 1e-4, usize::MAX).is_none());
         assert!(Plan::<2>::new(&x, &x, 0.5, 10).is_none());
     }

@@ -129,9 +129,119 @@ fn farthest_points<const D: usize>(y: &[[f64; D]], l: usize) -> Vec<usize> {
     chosen
 }
 
-/// Orthonormal basis of the columns of `z` (thin QR).
+/// Orthonormal basis of the columns of `z` (thin QR, faer: blocked and parallel).
 fn orthonormalize(z: DMatrix<f64>) -> DMatrix<f64> {
-    z.qr().q()
+    let (r, c) = z.shape();
+    let q = faer::MatRef::from_column_major_slice(z.as_slice(), r, c)
+        .qr()
+        .compute_thin_Q();
+    from_faer(q.as_ref())
+}
+
+/// `G v` for a symmetric `G` (M × M) and a thin `v` (M × k, k ≤ 3 here): element `i` of column
+/// `c` is the dot product of column `i` of `G` (= row `i`) with `v_c`, columns in parallel. One
+/// streaming pass over `G` for all `k` columns; the `M × M × k` product of a general GEMM is
+/// memory-bound here and its thread synchronisation dominated the full-rank CG step.
+pub(crate) fn sym_times(g: &DMatrix<f64>, v: &DMatrix<f64>) -> DMatrix<f64> {
+    let m = g.nrows();
+    let k = v.ncols();
+    let mut out = vec![0.0; m * k];
+    let gs = g.as_slice();
+    let vs = v.as_slice();
+    // Row-major output chunks: rows i.. of out, k values each.
+    out.par_chunks_mut(32 * k.max(1))
+        .enumerate()
+        .for_each(|(c, chunk)| {
+            for (r, o) in chunk.chunks_mut(k.max(1)).enumerate() {
+                let i = c * 32 + r;
+                let col = &gs[i * m..(i + 1) * m];
+                for (cc, ov) in o.iter_mut().enumerate() {
+                    let vc = &vs[cc * m..(cc + 1) * m];
+                    let mut acc = [0.0; 4];
+                    let mut a = col.chunks_exact(4);
+                    let mut b = vc.chunks_exact(4);
+                    for (x, y) in (&mut a).zip(&mut b) {
+                        for l in 0..4 {
+                            acc[l] += x[l] * y[l];
+                        }
+                    }
+                    let mut sum = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+                    for (x, y) in a.remainder().iter().zip(b.remainder()) {
+                        sum += x * y;
+                    }
+                    *ov = sum;
+                }
+            }
+        });
+    DMatrix::from_row_slice(m, k, &out)
+}
+
+/// A faer matrix as a nalgebra one.
+pub(crate) fn from_faer(m: faer::MatRef<'_, f64>) -> DMatrix<f64> {
+    DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
+}
+
+/// Rows per task of the tall products in [`mul`].
+const MUL_ROWS: usize = 2048;
+
+/// `op(a) · b` (`op(a) = aᵀ` when `transpose_a`) for the tall-and-thin products of the kernels
+/// (`Qᵀ D Q`, `Qᵀ F`, `Q z`, `G_ML U`): the long dimension is cut into blocks of
+/// [`MUL_ROWS`] rows, one rayon task each running faer's sequential kernel; partial sums of
+/// `aᵀ b` are added in block order (deterministic). faer's own parallel product synchronises
+/// its threads with spinning barriers, which dominated these small products on a loaded
+/// machine.
+pub(crate) fn mul(a: &DMatrix<f64>, transpose_a: bool, b: &DMatrix<f64>) -> DMatrix<f64> {
+    use faer::{Accum, MatMut, MatRef, Par};
+    let fa = MatRef::from_column_major_slice(a.as_slice(), a.nrows(), a.ncols());
+    let fb = MatRef::from_column_major_slice(b.as_slice(), b.nrows(), b.ncols());
+    let seq = |dst: MatMut<'_, f64>, l: MatRef<'_, f64>, r: MatRef<'_, f64>| {
+        faer::linalg::matmul::matmul(dst, Accum::Replace, l, r, 1.0, Par::Seq);
+    };
+    let long = a.nrows();
+    let blocks = long.div_ceil(MUL_ROWS);
+    if transpose_a {
+        let (r, c) = (a.ncols(), b.ncols());
+        let parts: Vec<DMatrix<f64>> = (0..blocks)
+            .into_par_iter()
+            .map(|k| {
+                let r0 = k * MUL_ROWS;
+                let len = MUL_ROWS.min(long - r0);
+                let mut part = DMatrix::zeros(r, c);
+                seq(
+                    MatMut::from_column_major_slice_mut(part.as_mut_slice(), r, c),
+                    fa.subrows(r0, len).transpose(),
+                    fb.subrows(r0, len),
+                );
+                part
+            })
+            .collect();
+        let mut out = DMatrix::zeros(r, c);
+        for part in &parts {
+            out += part;
+        }
+        out
+    } else {
+        let c = b.ncols();
+        let parts: Vec<DMatrix<f64>> = (0..blocks)
+            .into_par_iter()
+            .map(|k| {
+                let r0 = k * MUL_ROWS;
+                let len = MUL_ROWS.min(long - r0);
+                let mut part = DMatrix::zeros(len, c);
+                seq(
+                    MatMut::from_column_major_slice_mut(part.as_mut_slice(), len, c),
+                    fa.subrows(r0, len),
+                    fb,
+                );
+                part
+            })
+            .collect();
+        let mut out = DMatrix::zeros(long, c);
+        for (k, part) in parts.iter().enumerate() {
+            out.rows_mut(k * MUL_ROWS, part.nrows()).copy_from(part);
+        }
+        out
+    }
 }
 
 /// Top-`k` eigenpairs of `G` (eigenvalues in decreasing order): `(Q (M × k'), λ (k'))` with
@@ -142,6 +252,28 @@ pub(crate) fn low_rank_kernel<const D: usize>(
     k: usize,
     power_iterations: usize,
 ) -> (DMatrix<f64>, DVector<f64>) {
+    low_rank_impl(y, beta, k, power_iterations, None)
+}
+
+/// [`low_rank_kernel`] for a kernel matrix already formed (`g = kernel_matrix(y, beta)`): the
+/// landmark columns are read from `g` and the subspace iterations multiply by it.
+pub(crate) fn low_rank_of_dense<const D: usize>(
+    y: &[[f64; D]],
+    beta: f64,
+    g: &DMatrix<f64>,
+    k: usize,
+    power_iterations: usize,
+) -> (DMatrix<f64>, DVector<f64>) {
+    low_rank_impl(y, beta, k, power_iterations, Some(g))
+}
+
+fn low_rank_impl<const D: usize>(
+    y: &[[f64; D]],
+    beta: f64,
+    k: usize,
+    power_iterations: usize,
+    dense: Option<&DMatrix<f64>>,
+) -> (DMatrix<f64>, DVector<f64>) {
     let m = y.len();
     let inv2b2 = 0.5 / (beta * beta);
     let l = m.min(2 * k + 16);
@@ -149,7 +281,10 @@ pub(crate) fn low_rank_kernel<const D: usize>(
     let l = land.len();
     let yl: Vec<[f64; D]> = land.iter().map(|&i| y[i]).collect();
     // G_LL eigenpairs.
-    let gll = kernel_matrix(&yl, beta);
+    let gll = match dense {
+        Some(g) => DMatrix::from_fn(l, l, |r, c| g[(land[r], land[c])]),
+        None => kernel_matrix(&yl, beta),
+    };
     let eig = SymmetricEigen::new(gll);
     let smax = eig.eigenvalues.max();
     let keep: Vec<usize> = (0..l)
@@ -163,31 +298,61 @@ pub(crate) fn low_rank_kernel<const D: usize>(
             us[(r, c)] = eig.eigenvectors[(r, i)] / s;
         }
     }
-    let mut gml = DMatrix::zeros(m, l);
-    for (c, yc) in yl.iter().enumerate() {
-        for (r, yr) in y.iter().enumerate() {
-            let mut d = 0.0;
-            for a in 0..D {
-                let e = yr[a] - yc[a];
-                d += e * e;
+    let mut gdata = vec![0.0; m * l];
+    gdata
+        .par_chunks_mut(m.max(1))
+        .zip(yl.par_iter().zip(land.par_iter()))
+        .for_each(|(col, (yc, &lc))| {
+            for (r, (v, yr)) in col.iter_mut().zip(y).enumerate() {
+                *v = match dense {
+                    Some(g) => g[(r, lc)],
+                    None => {
+                        let mut d = 0.0;
+                        for a in 0..D {
+                            let e = yr[a] - yc[a];
+                            d += e * e;
+                        }
+                        exp_neg(-d * inv2b2)
+                    }
+                };
             }
-            gml[(r, c)] = exp_neg(-d * inv2b2);
-        }
-    }
-    let cmat = gml * us;
-    let mut basis = orthonormalize(cmat.clone());
+        });
+    let gml = DMatrix::from_vec(m, l, gdata);
+    let cmat = mul(&gml, false, &us);
     if power_iterations == 0 && l < m {
-        // Nyström only: the eigenpairs of C Cᵀ on its range, H = (BᵀC)(BᵀC)ᵀ.
-        let btc = basis.transpose() * &cmat;
-        let h = &btc * btc.transpose();
-        return ritz(&basis, h, k);
+        // Nyström only: the eigenpairs of C Cᵀ from those of the small CᵀC = V Σ² Vᵀ:
+        // C Cᵀ (C v_i) = σ_i² (C v_i), so q_i = C v_i / σ_i (orthonormal: q_iᵀ q_j = δ_ij).
+        let ctc = mul(&cmat, true, &cmat);
+        let ctc = (&ctc + ctc.transpose()) * 0.5;
+        let eig = SymmetricEigen::new(ctc);
+        let mut order: Vec<usize> = (0..eig.eigenvalues.len()).collect();
+        order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+        let lmax = eig.eigenvalues.max().max(0.0);
+        let order: Vec<usize> = order
+            .into_iter()
+            .filter(|&i| eig.eigenvalues[i] > 1e-12 * lmax)
+            .take(k)
+            .collect();
+        let mut vs = DMatrix::zeros(eig.eigenvectors.nrows(), order.len());
+        let mut lam = DVector::zeros(order.len());
+        for (c, &i) in order.iter().enumerate() {
+            let s = eig.eigenvalues[i].sqrt();
+            vs.set_column(c, &(eig.eigenvectors.column(i) / s));
+            lam[c] = eig.eigenvalues[i];
+        }
+        return (mul(&cmat, false, &vs), lam);
     }
+    let mut basis = orthonormalize(cmat.clone());
+    let times = |b: &DMatrix<f64>| match dense {
+        Some(g) => mul(g, false, b),
+        None => kernel_times(y, inv2b2, b),
+    };
     for _ in 0..power_iterations {
-        basis = orthonormalize(kernel_times(y, inv2b2, &basis));
+        basis = orthonormalize(times(&basis));
     }
     // Rayleigh–Ritz on span(basis): H = Bᵀ G B with the exact G.
-    let gb = kernel_times(y, inv2b2, &basis);
-    let h = basis.transpose() * &gb;
+    let gb = times(&basis);
+    let h = mul(&basis, true, &gb);
     let h = (&h + h.transpose()) * 0.5;
     ritz(&basis, h, k)
 }
@@ -209,7 +374,7 @@ fn ritz(basis: &DMatrix<f64>, h: DMatrix<f64>, k: usize) -> (DMatrix<f64>, DVect
         v.set_column(c, &eig.eigenvectors.column(i));
         lam[c] = eig.eigenvalues[i];
     }
-    (basis * v, lam)
+    (mul(basis, false, &v), lam)
 }
 
 #[cfg(test)]

@@ -52,6 +52,7 @@ mod estep;
 mod fgt;
 mod global;
 mod lowrank;
+mod pcg;
 #[cfg(test)]
 mod tests;
 
@@ -663,8 +664,8 @@ fn affine_d<const D: usize>(
 
 /// The kernel in one of its two forms.
 enum Kernel {
-    /// Full `G` (M × M).
-    Full(DMatrix<f64>),
+    /// Full `G` (M × M), solved by preconditioned CG.
+    Full(Box<pcg::FullSystem>),
     /// `G ≈ Q Λ Qᵀ`.
     LowRank {
         q: DMatrix<f64>,
@@ -676,13 +677,13 @@ impl Kernel {
     /// `G W`.
     fn times(&self, w: &DMatrix<f64>) -> DMatrix<f64> {
         match self {
-            Kernel::Full(g) => g * w,
+            Kernel::Full(g) => g.times(w),
             Kernel::LowRank { q, lambda } => {
-                let mut qtw = q.transpose() * w;
+                let mut qtw = lowrank::mul(q, true, w);
                 for (mut row, l) in qtw.row_iter_mut().zip(lambda.iter()) {
                     row *= *l;
                 }
-                q * qtw
+                lowrank::mul(q, false, &qtw)
             }
         }
     }
@@ -749,8 +750,8 @@ fn nonrigid_d<const D: usize>(
     let ys = points::<D>(y, "Y")?;
     let m = ys.len();
     let mut em = Em::new(&xs, &ys, o)?;
-    let kernel = match options.low_rank {
-        None => Kernel::Full(lowrank::kernel_matrix(&ys, options.beta)),
+    let mut kernel = match options.low_rank {
+        None => Kernel::Full(Box::new(pcg::FullSystem::new(&ys, options.beta))),
         Some(k) => {
             let iters = options
                 .power_iterations
@@ -769,11 +770,16 @@ fn nonrigid_d<const D: usize>(
         let lam_s2 = options.lambda * em.sigma2;
         // F = PX − d(P1) Y.
         let f = DMatrix::from_fn(m, D, |i, d| e.px[i][d] - e.p1[i] * ym[(i, d)]);
-        w = match &kernel {
-            Kernel::Full(g) => solve_full(g, &e.p1, &f, lam_s2)?,
-            Kernel::LowRank { q, lambda } => solve_woodbury(q, lambda, &e.p1, &f, lam_s2)?,
+        let gw = match &mut kernel {
+            Kernel::Full(sys) => {
+                w = sys.solve(&e.p1, &f, lam_s2)?;
+                sys.last_gw().cloned().unwrap_or_else(|| sys.times(&w))
+            }
+            Kernel::LowRank { q, lambda } => {
+                w = solve_woodbury(q, lambda, &e.p1, &f, lam_s2)?;
+                kernel.times(&w)
+            }
         };
-        let gw = kernel.times(&w);
         for (i, t) in ty.iter_mut().enumerate() {
             for d in 0..D {
                 t[d] = ys[i][d] + gw[(i, d)];
@@ -839,8 +845,15 @@ fn mean<const D: usize>(p: &[[f64; D]]) -> [f64; D] {
     m.map(|v| v / p.len() as f64)
 }
 
-/// Full-rank W: `(D^{½} G D^{½} + λσ² I) V = D^{-½} F`, `W = D^{½} V` (Cholesky, faer).
-fn solve_full(g: &DMatrix<f64>, p1: &[f64], f: &DMatrix<f64>, lam_s2: f64) -> Result<DMatrix<f64>> {
+/// Full-rank W: `(D^{½} G D^{½} + λσ² I) V = D^{-½} F`, `W = D^{½} V` (Cholesky, faer): the
+/// direct solve, the fallback of the CG solver of the `pcg` module and its reference in the
+/// tests.
+pub(crate) fn solve_full(
+    g: &DMatrix<f64>,
+    p1: &[f64],
+    f: &DMatrix<f64>,
+    lam_s2: f64,
+) -> Result<DMatrix<f64>> {
     use faer::linalg::solvers::Solve;
     let m = g.nrows();
     let sq: Vec<f64> = p1.iter().map(|p| p.max(0.0).sqrt()).collect();
@@ -875,7 +888,7 @@ fn solve_woodbury(
     for (mut row, p) in dq.row_iter_mut().zip(p1) {
         row *= *p;
     }
-    let mut inner = q.transpose() * &dq;
+    let mut inner = lowrank::mul(q, true, &dq);
     for i in 0..k {
         inner[(i, i)] += lam_s2 / lambda[i];
     }
@@ -884,6 +897,6 @@ fn solve_woodbury(
             reason: format!("the low-rank CPD system is not positive definite at λσ² = {lam_s2:e}"),
         });
     };
-    let z = chol.solve(&(q.transpose() * f));
-    Ok((f - dq * z) / lam_s2)
+    let z = chol.solve(&lowrank::mul(q, true, f));
+    Ok((f - lowrank::mul(&dq, false, &z)) / lam_s2)
 }

@@ -283,3 +283,77 @@ fn bad_input_is_rejected() {
         Err(DetectError::Degenerate { .. })
     ));
 }
+
+/// The full-rank fit (CG M-step) equals the fit with the direct Cholesky M-step of every
+/// iteration, and the fast Gauss transform E-step (boxes a few σ wide in the middle range)
+/// gives the same low-rank fit as the dense one.
+#[test]
+fn cg_and_fast_gauss_fits_match_direct_and_dense() {
+    let n = 600;
+    let mut rng = Pcg64::seed_from_u64(21);
+    let y = DMatrix::from_fn(n, 2, |_, _| rng.random::<f64>() * 6.0);
+    let x = DMatrix::from_fn(n, 2, |i, d| {
+        let v = if d == 0 {
+            (0.5 * y[(i, 1)]).sin()
+        } else {
+            (0.4 * y[(i, 0)]).cos()
+        };
+        y[(i, d)] + 0.3 * v
+    });
+    let opts = NonrigidOptions {
+        beta: 1.5,
+        lambda: 2.0,
+        ..Default::default()
+    };
+    let fit = nonrigid(&x, &y, &opts).unwrap();
+    // Reference: the same EM with the dense Cholesky M-step.
+    let xs = points::<2>(&x, "X").unwrap();
+    let ys = points::<2>(&y, "Y").unwrap();
+    let g = lowrank::kernel_matrix(&ys, opts.beta);
+    let mut em = Em::new(&xs, &ys, &opts.cpd).unwrap();
+    let mut ty = ys.clone();
+    for _ in 0..fit.iterations {
+        let e = em.e_step(&xs, &ty, false).unwrap();
+        let f = DMatrix::from_fn(n, 2, |i, d| e.px[i][d] - e.p1[i] * ys[i][d]);
+        let w = solve_full(&g, &e.p1, &f, opts.lambda * em.sigma2).unwrap();
+        let gw = &g * &w;
+        for (i, t) in ty.iter_mut().enumerate() {
+            *t = [ys[i][0] + gw[(i, 0)], ys[i][1] + gw[(i, 1)]];
+        }
+        let c = mean(&xs);
+        let (mut xpx, mut trpxt, mut tpt) = (0.0, 0.0, 0.0);
+        for (p, q) in e.pt1.iter().zip(&xs) {
+            xpx += p * ((q[0] - c[0]).powi(2) + (q[1] - c[1]).powi(2));
+        }
+        for ((pxm, p1m), t) in e.px.iter().zip(&e.p1).zip(&ty) {
+            for d in 0..2 {
+                trpxt += (pxm[d] - p1m * c[d]) * (t[d] - c[d]);
+                tpt += p1m * (t[d] - c[d]).powi(2);
+            }
+        }
+        let _ = em.set_sigma2(
+            (xpx - 2.0 * trpxt + tpt) / (e.np * 2.0),
+            (xpx + tpt) / (e.np * 2.0),
+            opts.cpd.tolerance,
+        );
+    }
+    let diff = (&fit.transformed - to_matrix(&ty)).amax();
+    assert!(diff < 1e-7, "CG vs direct M-step: {diff:e}");
+    assert!(
+        (fit.sigma2 - em.sigma2).abs() < 1e-6 * em.sigma2,
+        "σ² {:e} vs {:e}",
+        fit.sigma2,
+        em.sigma2
+    );
+
+    let lr = |e_step| {
+        let mut o = opts.clone();
+        o.low_rank = Some(60);
+        o.cpd.e_step = e_step;
+        nonrigid(&x, &y, &o).unwrap()
+    };
+    let (fast, dense) = (lr(EStep::FastGauss), lr(EStep::Dense));
+    assert_eq!(fast.iterations, dense.iterations);
+    let diff = (&fast.transformed - &dense.transformed).amax();
+    assert!(diff < 1e-6, "fast Gauss vs dense E-step: {diff:e}");
+}

@@ -22,7 +22,8 @@
 //! previous frame, and its track is kept [`TrackerOptions::max_missed_3d`] frames for
 //! re-acquisition. Tracks unseen for more than
 //! [`TrackerOptions::max_missed`] frames are retired, as the seed discards long-invisible
-//! wafers.
+//! wafers. With the carrier's slot pitch ([`TrackerOptions::slot_pitch`]) the free slots next to
+//! the tracks are predicted by eq. (4.1) too and compete in the registration as new wafers.
 //!
 //! ```
 //! use autoteach_detect::track::{Tracker, TrackerOptions};
@@ -51,17 +52,19 @@ pub mod circle_fit;
 pub mod registration;
 
 use std::collections::VecDeque;
+use std::num::NonZeroUsize;
 
 use autoteach_geometry::conic::{Ellipse, project_circle_world};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Isometry3, Matrix3, Vector2, Vector3};
 
-use crate::assignment::Assignment;
 use crate::wafers::{RimKind, WaferEdge};
 use crate::{DetectError, Result};
 use circle::{Circle3, check_intrinsics, circles_from_ellipse, project};
 use circle_fit::{CircleFit, CircleFitOptions, RimView, refine_circle};
 use registration::{
-    RegistrationOptions, SegmentPoints, greedy_nearest_centre, register_segments_gated,
+    Registration, RegistrationOptions, SegmentPoints, greedy_nearest_centre,
+    register_segments_gated,
 };
 
 /// Which associator registers predicted and observed segments.
@@ -135,6 +138,15 @@ pub struct TrackerOptions {
     /// it, so that one partial or edge-on view already fixes its height on the stack and the
     /// projection prediction (4.1) replaces image-motion extrapolation of noisy ellipses.
     pub stack_axis_sigma: Option<f64>,
+    /// Carrier slot pitch (metres; `None`: off). The carrier holds the wafers at this pitch
+    /// along its axis, so the slots next to a tracked wafer are known up to occupancy: each
+    /// free neighbouring slot (±pitch along the axis from a track's 3D estimate, with no track
+    /// within half a pitch of it) is predicted by eq. (4.1) — the track's predicted points
+    /// moved by the image displacement between its rim and the rim one pitch away — and enters
+    /// the registration (Algorithm 5) as a column of its own, whose registered segment starts a
+    /// new track. A wafer appearing next to a track whose own wafer is missed then explains its
+    /// points by its own slot instead of the track's prediction one pitch away.
+    pub slot_pitch: Option<f64>,
 }
 
 impl Default for TrackerOptions {
@@ -160,6 +172,7 @@ impl Default for TrackerOptions {
             projection_max_rms: 2.0,
             max_missed_3d: 300,
             stack_axis_sigma: Some(0.002),
+            slot_pitch: None,
         }
     }
 }
@@ -187,6 +200,9 @@ impl TrackerOptions {
         positive("projection_max_rms", self.projection_max_rms)?;
         if let Some(s) = self.stack_axis_sigma {
             positive("stack_axis_sigma", s)?;
+        }
+        if let Some(p) = self.slot_pitch {
+            positive("slot_pitch", p)?;
         }
         for (what, v) in [
             ("max_points_per_segment", self.max_points_per_segment),
@@ -421,8 +437,27 @@ impl Tracker {
             .map(|t| self.predict(t, frame, t_wc))
             .collect();
         let t1 = std::time::Instant::now();
+        // Rows registered to a free slot (row, slot column) and the score matrix C(k, l).
+        let mut slot_rows: Vec<(usize, usize)> = Vec::new();
+        let mut slot_score = None;
         let assignment = match self.options.associator {
-            Associator::Hierarchical => self.register_hierarchical(edges, &groups, &predictions)?,
+            Associator::Hierarchical => {
+                let slots = self.free_neighbour_slots(&predictions, t_wc);
+                let reg = self.register_hierarchical(edges, &groups, &predictions, &slots)?;
+                let mut a = reg.assignment;
+                // A segment registered to a free slot is no track's: it starts a new one
+                // unless it is the other rim or a duplicate of a wafer registered in this
+                // frame that the track explains at least as well as the slot (see below).
+                for (k, r) in a.row_to_col.iter_mut().enumerate() {
+                    if let Some(v) = r.filter(|&l| l >= self.tracks.len()) {
+                        slot_rows.push((k, v));
+                        *r = None;
+                    }
+                }
+                a.col_to_row.truncate(self.tracks.len());
+                slot_score = Some(reg.score);
+                a
+            }
             Associator::GreedyNearestCentre => {
                 let observed: Vec<Vector2<f64>> = groups
                     .iter()
@@ -466,7 +501,16 @@ impl Tracker {
             if assignment.row_to_col[k].is_some() {
                 continue;
             }
-            match self.merge_target(edges, idx) {
+            let mut target = self.merge_target(edges, idx);
+            if let (Some(l), Some(&(_, v)), Some(c)) = (
+                target,
+                slot_rows.iter().find(|r| r.0 == k),
+                slot_score.as_ref(),
+            ) && c[(k, l)] < c[(k, v)]
+            {
+                target = None;
+            }
+            match target {
                 Some(l) => {
                     let edges_k: Vec<&WaferEdge> = idx.iter().map(|&i| &edges[i]).collect();
                     self.register(l, &edges_k, frame, t_wc);
@@ -539,7 +583,8 @@ impl Tracker {
         edges: &[WaferEdge],
         groups: &[(usize, Vec<usize>)],
         predictions: &[Prediction],
-    ) -> Result<Assignment> {
+        free_slots: &[Vec<[f64; 2]>],
+    ) -> Result<Registration> {
         let m = self.options.max_points_per_segment;
         let mut observed = SegmentPoints::default();
         for (_, idx) in groups {
@@ -553,14 +598,20 @@ impl Tracker {
         for p in predictions {
             predicted.push_segment(p.points.iter().copied());
         }
-        let tight: Vec<bool> = predictions.iter().map(|p| p.tight).collect();
-        Ok(register_segments_gated(
+        for pts in free_slots {
+            predicted.push_segment(pts.iter().copied());
+        }
+        let tight: Vec<bool> = predictions
+            .iter()
+            .map(|p| p.tight)
+            .chain(free_slots.iter().map(|_| false))
+            .collect();
+        register_segments_gated(
             &observed,
             &predicted,
             &self.options.registration,
             Some(&tight),
-        )?
-        .assignment)
+        )
     }
 
     /// The track registered in this frame whose edges the group's edges lie next to
@@ -799,6 +850,99 @@ impl Tracker {
         out
     }
 
+    /// The predicted points of the free carrier slots next to the tracks (see
+    /// [`TrackerOptions::slot_pitch`]), one list per slot; empty without `slot_pitch`, a camera
+    /// pose or intrinsics.
+    ///
+    /// A track `l` with a 3D estimate `c_l` (unit axis `a`: the carrier axis if estimated, else
+    /// the rim normal) has neighbouring slots at `c_l ± p·a`. A slot is free when no track's
+    /// estimate lies within `p/2` of it along the axis (and within a radius across it) and no
+    /// free slot was taken for it already. Its predicted points are the track's predicted
+    /// points `x̂_j` moved by `π(c_l ± p·a, φ_j) − π(c_l, φ_j)` (eq. 4.1 for both circles), `φ_j`
+    /// the rim angle of `x̂_j`'s ray on `c_l`: the relative displacement is accurate even when
+    /// a young track's absolute 3D estimate is not.
+    fn free_neighbour_slots(
+        &self,
+        predictions: &[Prediction],
+        t_wc: Option<&Isometry3<f64>>,
+    ) -> Vec<Vec<[f64; 2]>> {
+        let (Some(pitch), Some(pose), Some(k)) = (
+            self.options.slot_pitch,
+            t_wc,
+            self.options.intrinsics.as_ref(),
+        ) else {
+            return Vec::new();
+        };
+        let Some(k_inv) = k.try_inverse() else {
+            return Vec::new();
+        };
+        let circles: Vec<Option<Circle3>> = self.tracks.iter().map(Track::circle).collect();
+        // Tracks whose 3D estimate is good enough to tell slots apart along the axis.
+        let tight: Vec<Vector3<f64>> = self
+            .tracks
+            .iter()
+            .filter_map(|t| {
+                t.rims
+                    .iter()
+                    .flatten()
+                    .find(|r| self.well_estimated(r))
+                    .and_then(|r| r.circle)
+                    .map(|c| c.center)
+            })
+            .collect();
+        let origin = pose.translation.vector;
+        let t_cw = pose.inverse();
+        let image_of = |x: &Vector3<f64>| {
+            let x_c = t_cw * nalgebra::Point3::from(*x);
+            project(k, &x_c.coords)
+        };
+        let mut out = Vec::new();
+        let mut tree = None;
+        for (l, p) in predictions.iter().enumerate() {
+            let Some(c) = circles[l] else { continue };
+            if p.points.is_empty() {
+                continue;
+            }
+            let a = match self.axis {
+                Some((_, d)) => d,
+                None => c.normal,
+            };
+            for side in [-1.0, 1.0] {
+                let centre = c.center + a * (side * pitch);
+                let occupied = tight.iter().any(|x| {
+                    let d = x - centre;
+                    let along = d.dot(&a);
+                    along.abs() < 0.5 * pitch && (d - a * along).norm() < c.radius
+                });
+                if occupied {
+                    continue;
+                }
+                let moved = Circle3 {
+                    center: centre,
+                    ..c
+                };
+                // Each moved point with the length of its displacement.
+                let pts: Vec<([f64; 2], f64)> = p
+                    .points
+                    .iter()
+                    .filter_map(|q| {
+                        let ray = pose.rotation * (k_inv * Vector3::new(q[0], q[1], 1.0));
+                        let phi = rim_angle_of_ray(&c, &origin, &ray)?;
+                        let d = image_of(&moved.point_at(phi))? - image_of(&c.point_at(phi))?;
+                        let v = [q[0] + d.x, q[1] + d.y];
+                        (v.iter().all(|x| x.is_finite()) && self.in_image(&v))
+                            .then_some((v, d.norm()))
+                    })
+                    .collect();
+                if pts.is_empty() || occupied_in_image(&pts, l, predictions, &mut tree) {
+                    continue;
+                }
+                out.push(pts.into_iter().map(|(v, _)| v).collect());
+            }
+        }
+        out
+    }
+
     /// The carrier axis: mean centre and sign-aligned mean normal of the upper rims (else lower)
     /// of the tracks whose estimate is good enough for the projection prediction; `None` with
     /// fewer than three such tracks or without `stack_axis_sigma`.
@@ -847,6 +991,80 @@ impl Tracker {
             None => true,
         }
     }
+}
+
+/// The predicted points of every track in one kd-tree, with the track index of each point.
+type PredictionTree = Option<(ImmutableKdTree<f64, 2>, Vec<usize>)>;
+
+/// Whether a free-slot candidate of track `own` (points `v_j` with the lengths `δ_j` of their
+/// displacements from the track's prediction) is another track's slot in the image: over the
+/// candidate points (at least 3) that have a predicted point of track `m` within `δ_j`, the sum
+/// of the distances to `m`'s nearest predicted point is below half the sum of the distances to
+/// the own track's nearest predicted point (capped at `δ_j`). A track one pitch further on is
+/// as far from the candidate as the own track (ratio ≈ 1); a track in the slot is at its
+/// prediction error (ratio ≪ 1). This catches an occupied slot whose track's 3D estimate is
+/// still too poor (a young track, a partial view) for the test along the axis. The tree of the
+/// predicted points is built on first use.
+fn occupied_in_image(
+    pts: &[([f64; 2], f64)],
+    own: usize,
+    predictions: &[Prediction],
+    tree: &mut Option<PredictionTree>,
+) -> bool {
+    let built = tree.get_or_insert_with(|| {
+        let mut all = Vec::new();
+        let mut owner = Vec::new();
+        for (m, p) in predictions.iter().enumerate() {
+            all.extend_from_slice(&p.points);
+            owner.extend(std::iter::repeat_n(m, p.points.len()));
+        }
+        ImmutableKdTree::new_from_slice(&all)
+            .ok()
+            .map(|t| (t, owner))
+    });
+    let Some((tree, owner)) = built.as_ref() else {
+        return false;
+    };
+    const NEAREST: NonZeroUsize = NonZeroUsize::new(16).unwrap();
+    // Per other track `m`: (points of the candidate with `m` within `δ_j`, Σ dist_mj, Σ own_j)
+    // with `own_j = min(dist_own,j, δ_j)`, over those points only (a young track seen on a
+    // short arc occupies its slot where it was seen).
+    let mut acc: Vec<(usize, usize, f64, f64)> = Vec::new();
+    let mut nearest: Vec<(usize, f64)> = Vec::new();
+    for (v, d) in pts {
+        nearest.clear();
+        let found = tree
+            .query(v)
+            .nearest_n::<SquaredEuclidean<f64>>(NEAREST)
+            .within(d * d)
+            .execute();
+        for r in found {
+            let Some(&m) = owner.get(r.item as usize) else {
+                continue;
+            };
+            let dist = r.distance.sqrt();
+            match nearest.iter_mut().find(|e| e.0 == m) {
+                Some(e) => e.1 = e.1.min(dist),
+                None => nearest.push((m, dist)),
+            }
+        }
+        let own_j = nearest
+            .iter()
+            .find(|e| e.0 == own)
+            .map_or(*d, |e| e.1.min(*d));
+        for &(m, dist) in nearest.iter().filter(|e| e.0 != own) {
+            match acc.iter_mut().find(|e| e.0 == m) {
+                Some(e) => {
+                    e.1 += 1;
+                    e.2 += dist;
+                    e.3 += own_j;
+                }
+                None => acc.push((m, 1, dist, own_j)),
+            }
+        }
+    }
+    acc.iter()
+        .any(|&(_, n, dm, down)| n >= 3 && dm < 0.5 * down)
 }
 
 /// Number of rim-angle bins over the circle (10° each) recording where a rim was seen.

@@ -615,3 +615,76 @@ fn coverage_test_rejects_a_neighbour_touching_the_prediction() {
         .is_err()
     );
 }
+
+/// The free carrier slots of [`TrackerOptions::slot_pitch`]: wafer 4 enters in frame 4, wafer 5
+/// is missed until frame 6, when wafer 4 is missed and wafer 5 shows up one pitch (~20 px) away
+/// as a short arc. With the slot hypotheses wafer 5 starts a
+/// track of its own and wafer 4 gets its track back in frame 7; on the frames in which every
+/// wafer is seen, the free-slot columns (at the ends of the column) cause no extra track (the
+/// occupancy tests hold). (This clean scene does not provoke the switch without the slots —
+/// its neighbouring arcs stay outside the 5σ gate; the simulated sweeps of
+/// `benchmarks/tracking.py` do.)
+#[test]
+fn free_slots_keep_a_missed_wafer_from_taking_its_new_neighbour() {
+    let (k, pose, frame) = column_scene();
+    let f0 = frame(6);
+    assert!(
+        [4, 5].iter().all(|w| f0.iter().any(|e| e.wafer_id == *w))
+            && frame(7).iter().any(|e| e.wafer_id == 4)
+            && frame(5).iter().any(|e| e.wafer_id == 4),
+        "scene: wafers 4 and 5 must be in view in frames 5-7"
+    );
+    let run = |slot_pitch: Option<f64>, drop: bool, young: usize| {
+        let mut tracker = Tracker::new(TrackerOptions {
+            intrinsics: Some(k),
+            normal_prior: Some(Vector3::z()),
+            image_size: Some((1280.0, 720.0)),
+            slot_pitch,
+            ..TrackerOptions::default()
+        })
+        .unwrap();
+        let mut owner = std::collections::HashMap::new();
+        for f in 0..10 {
+            let edges: Vec<WaferEdge> = frame(f)
+                .into_iter()
+                .filter(|e| {
+                    !drop
+                        || (e.wafer_id != 5 || f >= 6)
+                            && (e.wafer_id != 4 || (f >= young && f != 6))
+                })
+                // Wafer 5 shows up as a short arc near the end of its major axis, where the
+                // rims of neighbouring wafers come close.
+                .map(|e| {
+                    if drop && f == 6 && e.wafer_id == 5 {
+                        edge(e.ellipse, 2.3, 2.8, 40, RimKind::Upper, 5)
+                    } else {
+                        e
+                    }
+                })
+                .collect();
+            tracker.update(&edges, Some(&pose(f))).unwrap();
+            for (e, t) in edges.iter().zip(tracker.edge_tracks()) {
+                owner.insert((f, e.wafer_id), t.unwrap());
+            }
+        }
+        let tracks = tracker.tracks().len() + tracker.retired().len();
+        (owner, tracks)
+    };
+    let (with, _) = run(Some(0.01), true, 4);
+    assert_ne!(with[&(6, 5)], with[&(5, 4)], "wafer 4's track took wafer 5");
+    assert_eq!(with[&(7, 4)], with[&(5, 4)], "wafer 4 lost its track");
+    assert_eq!(with[&(7, 5)], with[&(6, 5)], "wafer 5 lost its track");
+    // Every wafer seen in every frame: one track per wafer, with or without the slots.
+    for pitch in [None, Some(0.01)] {
+        let (owner, tracks) = run(pitch, false, 0);
+        let wafers: std::collections::HashSet<usize> = owner.keys().map(|k| k.1).collect();
+        let ids: std::collections::HashSet<u64> = owner.values().copied().collect();
+        assert_eq!(ids.len(), wafers.len(), "slot_pitch {pitch:?}: {owner:?}");
+        assert_eq!(tracks, wafers.len(), "slot_pitch {pitch:?}");
+    }
+    let bad = TrackerOptions {
+        slot_pitch: Some(-0.01),
+        ..TrackerOptions::default()
+    };
+    assert!(Tracker::new(bad).is_err());
+}

@@ -619,14 +619,21 @@ impl Calibration {
     /// free intrinsics, a `grid × grid` test grid.
     pub fn max_ere(&self, samples: usize, grid: usize, seed: u64) -> Result<MaxEre> {
         check_sampling(samples, grid)?;
+        self.max_ere_at(
+            samples,
+            &test_grid(self.camera.width(), self.camera.height(), grid),
+            seed,
+        )
+    }
+
+    /// [`Calibration::max_ere`] over explicit test `pixels` (e.g.
+    /// [`super::ere::test_grid_with_margin`]).
+    pub fn max_ere_at(&self, samples: usize, pixels: &[[f64; 2]], seed: u64) -> Result<MaxEre> {
+        check_sampling(samples, pixels.len())?;
         let l = covariance_sqrt(&self.covariance)?;
         let draws = standard_draws(samples, self.camera.params().len(), seed);
         let cams = sample_cameras(&self.camera, &l, &draws)?;
-        max_ere(
-            &self.camera,
-            &cams,
-            &test_grid(self.camera.width(), self.camera.height(), grid),
-        )
+        max_ere(&self.camera, &cams, pixels)
     }
 
     /// Per-pixel expected reprojection error map (see [`error_map`]).
@@ -665,6 +672,21 @@ impl Calibration {
         seed: u64,
     ) -> Result<Suggestion> {
         check_sampling(samples, grid)?;
+        let pixels = test_grid(self.camera.width(), self.camera.height(), grid);
+        self.suggest_next_view_at(target, candidates, samples, &pixels, seed)
+    }
+
+    /// [`Calibration::suggest_next_view`] with the Max ERE scored over explicit test `pixels`
+    /// (e.g. [`super::ere::test_grid_with_margin`]).
+    pub fn suggest_next_view_at(
+        &self,
+        target: &[[f64; 2]],
+        candidates: Option<&[Isometry3<f64>]>,
+        samples: usize,
+        pixels: &[[f64; 2]],
+        seed: u64,
+    ) -> Result<Suggestion> {
+        check_sampling(samples, pixels.len())?;
         if target.len() < super::MIN_POINTS {
             return Err(EstimateError::TooFewPoints {
                 view: usize::MAX,
@@ -684,7 +706,7 @@ impl Calibration {
             });
         }
         let n = self.camera.params().len();
-        let pixels = test_grid(self.camera.width(), self.camera.height(), grid);
+        let pixels = pixels.to_vec();
         let info = self.information();
         let draws = standard_draws(samples, n, seed);
         let current = super::guide::max_ere_from_information(&self.camera, &info, &draws, &pixels)

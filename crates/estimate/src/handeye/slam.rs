@@ -1214,7 +1214,9 @@ impl SlamMot {
     /// frames and a joint Gaussian prior on the calibration and every wafer seen so far
     /// (the previous window's posterior: its estimates and joint marginal covariance, i.e.
     /// marginalisation of the old frames, whose poses are functions of the calibration).
-    /// Returns the estimate after every window (Fig. 5.11). The conic factor is used.
+    /// A wafer first seen in a window enters it with the first window's prior widths
+    /// (`base_translation` on its centre, `base_rotation` on its tilts) around its current
+    /// estimate. Returns the estimate after every window (Fig. 5.11). The conic factor is used.
     pub fn solve_sliding_window(
         &self,
         initial: &SlamMotState,
@@ -1268,6 +1270,22 @@ impl SlamMot {
                 if wafer_blocks[k].is_none() {
                     let blk = p.add_block(state.wafers[k].as_slice(), Manifold::Euclidean(5))?;
                     wafer_blocks[k] = Some(blk);
+                }
+            }
+            // A wafer first seen in this window enters with the prior of the uncalibrated
+            // setup around its current estimate (centre ±σ_t, tilts ±σ_r, the base's prior
+            // widths): a few edge points of one short arc need not fix all five of its
+            // parameters, and without it such a window's posterior would not exist.
+            for (k, blk) in b.wafers.iter().enumerate() {
+                if let Some(blk) = blk
+                    && k != self.config.reference_wafer
+                    && !prior_wafers.contains(&k)
+                {
+                    let t2 = prior_sigmas.base_translation.powi(2);
+                    let r2 = prior_sigmas.base_rotation.powi(2);
+                    let c =
+                        DMatrix::from_diagonal(&DVector::from_column_slice(&[t2, t2, t2, r2, r2]));
+                    p.add_prior(*blk, state.wafers[k].as_slice(), &c)?;
                 }
             }
             // Joint prior over base, offsets and previously seen wafers.
@@ -1949,6 +1967,43 @@ pub(crate) mod tests {
             |c| c.estimate_offsets = vec![1, 3, 4],
             ["lift zero offset", "base pose"],
         );
+    }
+
+    #[test]
+    fn a_wafer_barely_seen_in_one_window_does_not_break_the_sliding_window() {
+        // Wafer 2 is seen only once, by three edge points (fewer than its five parameters):
+        // its window cannot fix it from the data, the entry prior keeps the window's
+        // posterior defined, and the batch reports the wafer as unobservable.
+        let sc = scene(1, 20, 0.3);
+        let mut obs: Vec<EdgeObservation> = sc
+            .observations
+            .iter()
+            .filter(|o| o.wafer != 2)
+            .cloned()
+            .collect();
+        let mut one = sc
+            .observations
+            .iter()
+            .find(|o| o.wafer == 2 && o.frame == 12)
+            .cloned()
+            .expect("wafer 2 is seen in frame 12");
+        one.points.truncate(3);
+        obs.push(one);
+        let slam = SlamMot::new(sc.config.clone(), sc.encoders.clone(), obs, 5).unwrap();
+        let start = perturbed(&sc.truth);
+        let hist = slam
+            .solve_sliding_window(&start, 5, &PriorSigmas::default())
+            .expect("the entry prior keeps every window's posterior defined");
+        assert_eq!(hist.len(), 4);
+        for h in &hist {
+            assert!(h.std.iter().all(|v| v.is_finite() && *v > 0.0));
+        }
+        // The window moved wafer 2 by no more than a few prior widths.
+        let moved = (hist[3].state.wafers[2] - start.wafers[2]).abs();
+        assert!(moved.fixed_rows::<3>(0).max() < 0.06, "{moved}");
+        let sol = slam.solve_batch(&hist[3].state).unwrap();
+        assert!(sol.uncertainty.covariance.is_none());
+        assert!(sol.uncertainty.unobservable.is_some());
     }
 
     #[test]

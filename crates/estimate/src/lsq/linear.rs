@@ -109,27 +109,15 @@ impl Pattern {
 
     /// Adds `ja_rowᵀ · jb` (the block (a, b) of JᵀJ from one residual: `ja` is m × da, `jb`
     /// is m × db) into `values` at `slot`.
-    pub fn add_product(
-        &self,
-        values: &mut [f64],
-        slot: usize,
-        ja: &DMatrix<f64>,
-        jb: &DMatrix<f64>,
-    ) {
+    pub fn add_product(&self, values: &mut [f64], slot: usize, ja: &[f64], jb: &[f64], m: usize) {
         let base = &self.slot_base[slot];
-        if self.slot_diag[slot] {
-            for (j, &p) in base.iter().enumerate() {
-                let cj = jb.column(j);
-                for i in j..ja.ncols() {
-                    values[p + i - j] += ja.column(i).dot(&cj);
-                }
-            }
-        } else {
-            for (j, &p) in base.iter().enumerate() {
-                let cj = jb.column(j);
-                for i in 0..ja.ncols() {
-                    values[p + i] += ja.column(i).dot(&cj);
-                }
+        let m = m.max(1);
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let diag = self.slot_diag[slot];
+        for ((j, &p), cj) in base.iter().enumerate().zip(jb.chunks_exact(m)) {
+            let i0 = if diag { j } else { 0 };
+            for (i, ci) in ja.chunks_exact(m).enumerate().skip(i0) {
+                values[p + i - if diag { j } else { 0 }] += dot(ci, cj);
             }
         }
     }

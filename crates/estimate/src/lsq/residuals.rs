@@ -158,8 +158,16 @@ impl Residual for ReprojectionResidual {
                 -k.fy * pc.y * iz * iz * s,
             );
             let dr = dpi * r;
-            if let Some(jp) = jac.get_mut(0) {
-                let jw = -dr * hat(&xw);
+            let jw = -dr * hat(&xw);
+            // The pre-sized 2 × 6 and 2 × 3 column-major Jacobians take [∂/∂ω | ∂/∂ρ] and
+            // ∂/∂X as whole columns (other shapes, e.g. a caller's own matrices, by entry).
+            if let Some(jp) = jac.get_mut(0).filter(|j| j.shape() == (2, 6))
+                && let Some((w, rho)) = jp.as_mut_slice().split_first_chunk_mut::<6>()
+                && let Some(rho) = rho.first_chunk_mut::<6>()
+            {
+                w.copy_from_slice(jw.as_slice());
+                rho.copy_from_slice(dr.as_slice());
+            } else if let Some(jp) = jac.get_mut(0) {
                 for c in 0..3 {
                     for rr in 0..2 {
                         jp[(rr, c)] = jw[(rr, c)];
@@ -167,7 +175,11 @@ impl Residual for ReprojectionResidual {
                     }
                 }
             }
-            if let Some(jx) = jac.get_mut(1) {
+            if let Some(jx) = jac.get_mut(1).filter(|j| j.shape() == (2, 3))
+                && let Some(x6) = jx.as_mut_slice().first_chunk_mut::<6>()
+            {
+                x6.copy_from_slice(dr.as_slice());
+            } else if let Some(jx) = jac.get_mut(1) {
                 for c in 0..3 {
                     for rr in 0..2 {
                         jx[(rr, c)] = dr[(rr, c)];

@@ -29,7 +29,7 @@ use rayon::prelude::*;
 
 use super::linear::{Cholesky, Pattern};
 use super::problem::Problem;
-use super::solver::{EvalBuf, Layout};
+use super::solver::{EvalBuf, Evals, Layout};
 use crate::{EstimateError, Result};
 
 /// Up to this many camera (non-eliminated) unknowns the reduced camera matrix S is dense.
@@ -57,25 +57,19 @@ struct PointBlock {
     gp: Vec<f64>,
     /// H_ap = J_aᵀ J_p per pair (d_a × d_p column-major).
     hcp: Vec<f64>,
-    /// Whether each entry of `res` touches exactly one free camera block (its camera terms
-    /// J_aᵀ J_a and J_aᵀ r are then accumulated per pair below, in point order).
-    res_single: Vec<bool>,
-    /// Offset of each pair's d_a × d_a block in `haa` and of its d_a vector in `ga`.
-    pair_sq_off: Vec<usize>,
-    /// Per pair: Σ J_aᵀ J_a over the single-camera residuals of the point (column-major).
-    haa: Vec<f64>,
-    /// Per pair: Σ J_aᵀ r over the same residuals (offset `pair_off[pair] / d_p`).
-    ga: Vec<f64>,
     /// Cholesky factor L of H_pp + μD_p (lower, column-major).
     l: Vec<f64>,
-    /// Y_a = H_ap L⁻ᵀ per pair (d_a × d_p column-major).
-    y: Vec<f64>,
+    /// Start of its Y_a = H_ap L⁻ᵀ blocks (d_a × d_p column-major, at `y_off + pair_off`)
+    /// in `SchurSystem::y`.
+    y_off: usize,
+    /// Per pair: offset of the copy of Y_a in the camera-major `SchurSystem::yc`.
+    yc_pair: Vec<usize>,
     /// z = L⁻¹ g_p.
     z: Vec<f64>,
     /// Step δ_p.
     dx: Vec<f64>,
-    /// Scratch row (d_p).
-    row: Vec<f64>,
+    /// L⁻¹ (lower, column-major).
+    linv: Vec<f64>,
 }
 
 /// A camera (kept) block.
@@ -86,11 +80,19 @@ struct CamBlock {
     off: usize,
     /// Tangent dimension.
     dim: usize,
-    /// Residuals touching it other than the single-camera residuals of a point (those are
-    /// summed per point–camera pair): `(residual, local index)`.
+    /// Residuals touching it and another camera block: `(residual, local index)` (their
+    /// camera–camera terms of S).
     res: Vec<(usize, usize)>,
+    /// Residuals touching it and no eliminated block: `(residual, local index)` (their terms
+    /// of H_bb and g_b; those of residuals with a point are summed in the point pass).
+    res_diag: Vec<(usize, usize)>,
     /// Points coupled to it: `(point, pair index in that point)`.
     pts: Vec<(usize, usize)>,
+    /// Offset of its accumulator (H_bb, d × d, then g_b, d) in each point chunk's slice of
+    /// `SchurSystem::cam_acc`.
+    acc_off: usize,
+    /// Start of its Y blocks (camera-major copy, in `pts` order) in `SchurSystem::yc`.
+    yc_off: usize,
     /// H_bb without the point terms' cross couplings: the diagonal block of JᵀJ (d × d).
     hbb: Vec<f64>,
     /// g_b = J_bᵀ r.
@@ -128,6 +130,30 @@ pub(crate) struct SchurSystem {
     s_bounds: Vec<usize>,
     /// Right-hand side / solution of the reduced system.
     rhs: Vec<f64>,
+    /// Y_ap = H_ap L_p⁻ᵀ of every point–camera pair, point-major (point p at `y_off`).
+    y: Vec<f64>,
+    /// Start of each point's Y blocks in `y`, plus the end.
+    y_bounds: Vec<usize>,
+    /// The same blocks camera-major (camera a's blocks contiguous, in point order), so that
+    /// forming S streams through memory.
+    yc: Vec<f64>,
+    /// Start of each camera's blocks in `yc`, plus the end.
+    yc_bounds: Vec<usize>,
+    /// Per column block b: `(a, start, end)` for every a ≥ b coupled to b through points, the
+    /// range of `shared` listing those points.
+    col_targets: Vec<Vec<(usize, usize, usize)>>,
+    /// `(offset of Y_ap, offset of Y_bp)` in `yc` for the points shared by a camera pair
+    /// (a, b), grouped per pair as listed in `col_targets`, in point order.
+    shared: Vec<(usize, usize)>,
+    /// Per point chunk of the assembly: the camera accumulators (H_bb, g_b of every camera,
+    /// `acc_len` values), summed over the chunks in order (deterministic for any thread count).
+    cam_acc: Vec<f64>,
+    /// Values per chunk in `cam_acc`.
+    acc_len: usize,
+    /// Points per chunk.
+    chunk_points: usize,
+    /// The common tangent dimension of the eliminated blocks, if they all have the same.
+    point_dim: Option<usize>,
     reduced: Reduced,
     /// Accumulated time (s) eliminating points and forming S and its right-hand side, and
     /// back-substituting the points.
@@ -137,7 +163,7 @@ pub(crate) struct SchurSystem {
 }
 
 /// Splits `s` into consecutive pieces starting at `bounds[i]` (bounds[0] = 0, last = len).
-fn split_pieces<'a>(mut s: &'a mut [f64], bounds: &[usize]) -> Vec<&'a mut [f64]> {
+pub(crate) fn split_pieces<'a>(mut s: &'a mut [f64], bounds: &[usize]) -> Vec<&'a mut [f64]> {
     let mut out = Vec::with_capacity(bounds.len().saturating_sub(1));
     for w in bounds.windows(2) {
         let (head, tail) = s.split_at_mut(w[1] - w[0]);
@@ -305,27 +331,24 @@ fn add_jtj(
 
 /// The common bundle-adjustment case on fixed-size arrays: a 2-D residual (a pixel), a 3-D
 /// point and 6-D (SE(3)) camera blocks. Accumulates exactly the terms of the generic loop in
-/// [`SchurSystem::assemble`] (H_pp, g_p, H_ap and, for single-camera residuals, J_aᵀJ_a and
-/// J_aᵀr) without slice bounds checks. Returns `false`, having changed nothing, when a block
+/// [`SchurSystem::assemble`] (H_pp, g_p and H_ap) without slice bounds checks. Returns `false`, having changed nothing, when a block
 /// does not have those sizes (the caller then runs the generic loop).
 #[inline(always)]
 fn accumulate_pixel_residual(
     pb: &mut PointBlock,
     o: usize,
-    buf: &EvalBuf,
+    buf: EvalBuf<'_>,
     kp: usize,
     cams: &[CamBlock],
+    acc: &mut [f64],
 ) -> bool {
-    let (Some(r), Some(jp)) = (
-        buf.r.first_chunk::<2>(),
-        buf.jac[kp].as_slice().first_chunk::<6>(),
-    ) else {
+    let (Some(r), Some(jp)) = (buf.r.first_chunk::<2>(), buf.jac(kp).first_chunk::<6>()) else {
         return false;
     };
     let pairs = &pb.res_cams[pb.res_cam_ptr[o]..pb.res_cam_ptr[o + 1]];
     if pairs
         .iter()
-        .any(|&(k, pair)| cams[pb.cams[pair]].dim != 6 || buf.jac[k].len() != 12)
+        .any(|&(k, pair)| cams[pb.cams[pair]].dim != 6 || buf.jac(k).len() != 12)
     {
         return false;
     }
@@ -336,9 +359,8 @@ fn accumulate_pixel_residual(
             pb.hpp[j * 3 + i] += jp[2 * i] * jp[2 * j] + jp[2 * i + 1] * jp[2 * j + 1];
         }
     }
-    let single = pb.res_single[o];
     for &(k, pair) in pairs {
-        let Some(ja) = buf.jac[k].as_slice().first_chunk::<12>() else {
+        let Some(ja) = buf.jac(k).first_chunk::<12>() else {
             continue;
         };
         let off = pb.pair_off[pair];
@@ -353,24 +375,72 @@ fn accumulate_pixel_residual(
                 }
             }
         }
-        if single {
-            let go = off / 3;
-            let so = pb.pair_sq_off[pair];
-            if let Some(ga) = pb.ga.get_mut(go..).and_then(|x| x.first_chunk_mut::<6>()) {
-                for j in 0..6 {
-                    ga[j] += ja[2 * j] * r[0] + ja[2 * j + 1] * r[1];
-                }
-            }
-            if let Some(haa) = pb.haa.get_mut(so..).and_then(|x| x.first_chunk_mut::<36>()) {
-                for j in 0..6 {
-                    for i in j..6 {
-                        haa[j * 6 + i] += ja[2 * i] * ja[2 * j] + ja[2 * i + 1] * ja[2 * j + 1];
-                    }
+        // The camera's J_aᵀJ_a (lower triangle) and J_aᵀr.
+        if let Some(a) = acc
+            .get_mut(cams[pb.cams[pair]].acc_off..)
+            .and_then(|x| x.first_chunk_mut::<42>())
+        {
+            for j in 0..6 {
+                a[36 + j] += ja[2 * j] * r[0] + ja[2 * j + 1] * r[1];
+                for i in j..6 {
+                    a[j * 6 + i] += ja[2 * i] * ja[2 * j] + ja[2 * i + 1] * ja[2 * j + 1];
                 }
             }
         }
     }
     true
+}
+
+/// One point's terms of the normal equations from its residuals (in residual order): H_pp,
+/// g_p and H_ap into the point block, and each camera's J_aᵀJ_a (lower triangle, d_a × d_a)
+/// and J_aᵀr into its slot of the chunk accumulator `acc`.
+#[inline(always)]
+fn accumulate_point(pb: &mut PointBlock, bufs: &Evals, cams: &[CamBlock], acc: &mut [f64]) {
+    let d = pb.dim;
+    pb.hpp.fill(0.0);
+    pb.gp.fill(0.0);
+    pb.hcp.fill(0.0);
+    for o in 0..pb.res.len() {
+        let (ri, kp) = pb.res[o];
+        let buf = bufs.get(ri);
+        let m = buf.r.len();
+        let jp = buf.jac(kp);
+        if m == 2 && d == 3 && accumulate_pixel_residual(pb, o, buf, kp, cams, acc) {
+            continue;
+        }
+        for j in 0..d {
+            let cj = &jp[j * m..(j + 1) * m];
+            pb.gp[j] += dot(cj, buf.r);
+            for i in j..d {
+                pb.hpp[j * d + i] += dot(&jp[i * m..(i + 1) * m], cj);
+            }
+        }
+        for &(k, pair) in &pb.res_cams[pb.res_cam_ptr[o]..pb.res_cam_ptr[o + 1]] {
+            let ja = buf.jac(k);
+            let cb = &cams[pb.cams[pair]];
+            let da = cb.dim;
+            let h = &mut pb.hcp[pb.pair_off[pair]..pb.pair_off[pair] + da * d];
+            for j in 0..d {
+                let cj = &jp[j * m..(j + 1) * m];
+                for i in 0..da {
+                    h[j * da + i] += dot(&ja[i * m..(i + 1) * m], cj);
+                }
+            }
+            let a = &mut acc[cb.acc_off..cb.acc_off + da * (da + 1)];
+            for j in 0..da {
+                let cj = &ja[j * m..(j + 1) * m];
+                a[da * da + j] += dot(cj, buf.r);
+                for i in j..da {
+                    a[j * da + i] += dot(&ja[i * m..(i + 1) * m], cj);
+                }
+            }
+        }
+    }
+    for j in 0..d {
+        for i in 0..j {
+            pb.hpp[j * d + i] = pb.hpp[i * d + j];
+        }
+    }
 }
 
 /// What the accumulation of one column block of S reads.
@@ -381,9 +451,20 @@ struct ColumnCtx<'a> {
     res_cam: &'a [(usize, usize)],
     reduced: &'a Reduced,
     nc: usize,
-    bufs: &'a [EvalBuf],
+    bufs: &'a Evals,
     mu: f64,
     damp: &'a [f64],
+    /// The point-major Y slab (see `SchurSystem::y`).
+    y: &'a [f64],
+    /// The camera-major Y slab (see `SchurSystem::yc`).
+    yc: &'a [f64],
+    /// `SchurSystem::col_targets`.
+    col_targets: &'a [Vec<(usize, usize, usize)>],
+    /// `SchurSystem::shared`.
+    shared: &'a [(usize, usize)],
+    /// The common tangent dimension of the eliminated blocks (None when they differ: S is
+    /// then accumulated point by point).
+    point_dim: Option<usize>,
 }
 
 /// The accumulation of column block `b` of S into its slice `sl`:
@@ -395,11 +476,62 @@ struct ColumnTask<'a, 's> {
     cb: &'a CamBlock,
 }
 
-impl pulp::WithSimd for ColumnTask<'_, '_> {
-    type Output = ();
+/// Σ_p Y_ap Y_bpᵀ (6 × 6, column-major, into `out`) over the shared points `list` of a camera
+/// pair for SE(3) cameras and 3-D points (Y blocks 6 × 3 column-major at the listed offsets of
+/// `y`): AVX2/FMA with the 6 × 6 sum held in registers (rows 0–3 and 4–5 of each column).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn sum_yyt_6x3_v3(simd: pulp::x86::V3, y: &[f64], list: &[(usize, usize)], out: &mut [f64; 36]) {
+    let zero = simd.splat_f64x4(0.0);
+    let mut lo = [zero; 6];
+    let mut hi = [zero; 6];
+    for &(oa, ob) in list {
+        let (Some(a), Some(b)) = (
+            y.get(oa..).and_then(|v| v.first_chunk::<18>()),
+            y.get(ob..).and_then(|v| v.first_chunk::<18>()),
+        ) else {
+            continue;
+        };
+        for k in 0..3 {
+            let c = 6 * k;
+            let al = pulp::f64x4(a[c], a[c + 1], a[c + 2], a[c + 3]);
+            let ah = pulp::f64x4(a[c + 4], a[c + 5], 0.0, 0.0);
+            for j in 0..6 {
+                let bj = simd.splat_f64x4(b[c + j]);
+                lo[j] = simd.mul_add_f64x4(al, bj, lo[j]);
+                hi[j] = simd.mul_add_f64x4(ah, bj, hi[j]);
+            }
+        }
+    }
+    for j in 0..6 {
+        let (l, h) = (lo[j], hi[j]);
+        out[6 * j..6 * j + 6].copy_from_slice(&[l.0, l.1, l.2, l.3, h.0, h.1]);
+    }
+}
 
+/// Σ_p Y_ap Y_bpᵀ (da × db, column-major, into `out`) over the shared points `list`
+/// (Y_ap: da × dp, Y_bp: db × dp column-major at the listed offsets of `y`).
+#[inline(always)]
+fn sum_yyt(y: &[f64], list: &[(usize, usize)], da: usize, db: usize, dp: usize, out: &mut [f64]) {
+    out.fill(0.0);
+    for &(oa, ob) in list {
+        let (ya, yb) = (&y[oa..oa + da * dp], &y[ob..ob + db * dp]);
+        for k in 0..dp {
+            let (ca, cb) = (&ya[k * da..(k + 1) * da], &yb[k * db..(k + 1) * db]);
+            for (j, &bj) in cb.iter().enumerate() {
+                for (o, &ai) in out[j * da..(j + 1) * da].iter_mut().zip(ca) {
+                    *o += ai * bj;
+                }
+            }
+        }
+    }
+}
+
+impl ColumnTask<'_, '_> {
+    /// Fills the column block; `kernel6` computes the 6 × 6 × 3 pair sums (SE(3) cameras,
+    /// 3-D points) when it is given.
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+    fn run<K: Fn(&[f64], &[(usize, usize)], &mut [f64; 36])>(self, kernel6: Option<K>) {
         let ColumnTask { ctx, sl, b, cb } = self;
         let (cams, points, nc) = (ctx.cams, ctx.points, ctx.nc);
         sl.fill(0.0);
@@ -441,37 +573,146 @@ impl pulp::WithSimd for ColumnTask<'_, '_> {
         }
         // Camera–camera couplings of residuals touching several cameras.
         for &(ri, kb) in &cb.res {
-            let buf = &ctx.bufs[ri];
+            let buf = ctx.bufs.get(ri);
             let m = buf.r.len();
-            let jb = buf.jac[kb].as_slice();
+            let jb = buf.jac(kb);
             for &(ka, a) in &ctx.res_cam[ctx.res_cam_ptr[ri]..ctx.res_cam_ptr[ri + 1]] {
                 if a <= b {
                     continue;
                 }
-                add_jtj(
-                    sl,
-                    locate(a),
-                    a == b,
-                    buf.jac[ka].as_slice(),
-                    cams[a].dim,
-                    jb,
-                    db,
-                    m,
-                );
+                add_jtj(sl, locate(a), a == b, buf.jac(ka), cams[a].dim, jb, db, m);
             }
         }
-        for &(pi, ib) in &cb.pts {
-            let pb = &points[pi];
-            let dp = pb.dim;
-            let yb = &pb.y[pb.pair_off[ib]..pb.pair_off[ib] + db * dp];
-            for ia in ib..pb.cams.len() {
-                let a = pb.cams[ia];
-                let da = cams[a].dim;
-                let ya = &pb.y[pb.pair_off[ia]..pb.pair_off[ia] + da * dp];
-                sub_yyt(sl, locate(a), a == b, ya, da, yb, db, dp);
+        // The point terms −Σ_p Y_ap Y_bpᵀ.
+        let Some(dp) = ctx.point_dim else {
+            for &(pi, ib) in &cb.pts {
+                let pb = &points[pi];
+                let dp = pb.dim;
+                let ob = pb.y_off + pb.pair_off[ib];
+                let yb = &ctx.y[ob..ob + db * dp];
+                for ia in ib..pb.cams.len() {
+                    let a = pb.cams[ia];
+                    let da = cams[a].dim;
+                    let oa = pb.y_off + pb.pair_off[ia];
+                    let ya = &ctx.y[oa..oa + da * dp];
+                    sub_yyt(sl, locate(a), a == b, ya, da, yb, db, dp);
+                }
+            }
+            return;
+        };
+        let mut acc6 = [0.0; 36];
+        let mut acc = Vec::new();
+        for &(a, start, end) in &ctx.col_targets[b] {
+            let list = &ctx.shared[start..end];
+            let da = cams[a].dim;
+            let sum: &[f64] = match &kernel6 {
+                Some(k) if da == 6 && db == 6 && dp == 3 => {
+                    k(ctx.yc, list, &mut acc6);
+                    &acc6
+                }
+                _ => {
+                    acc.resize(da * db, 0.0);
+                    sum_yyt(ctx.yc, list, da, db, dp, &mut acc);
+                    &acc
+                }
+            };
+            let loc = locate(a);
+            let lower = a == b && loc.lower_only();
+            for j in 0..db {
+                let p = loc.pos(j);
+                let i0 = if lower { j } else { 0 };
+                for i in i0..da {
+                    sl[p + i] -= sum[j * da + i];
+                }
             }
         }
     }
+}
+
+/// `ColumnTask::run` with the AVX2/FMA pair kernel (compiled with those features).
+#[cfg(target_arch = "x86_64")]
+struct ColumnTaskV3<'a, 's>(pulp::x86::V3, ColumnTask<'a, 's>);
+
+#[cfg(target_arch = "x86_64")]
+impl pulp::NullaryFnOnce for ColumnTaskV3<'_, '_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn call(self) {
+        let simd = self.0;
+        self.1.run(Some(
+            #[inline(always)]
+            |y: &[f64], list: &[(usize, usize)], out: &mut [f64; 36]| {
+                sum_yyt_6x3_v3(simd, y, list, out)
+            },
+        ));
+    }
+}
+
+impl ColumnTask<'_, '_> {
+    /// Runs the task with the fastest kernel the CPU supports.
+    fn dispatch(self) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(simd) = pulp::x86::V3::try_new() {
+            simd.vectorize(ColumnTaskV3(simd, self));
+            return;
+        }
+        self.run(None::<fn(&[f64], &[(usize, usize)], &mut [f64; 36])>);
+    }
+}
+
+/// For every column block b of S, the camera blocks a ≥ b coupled to it through points and,
+/// per such pair, the offsets of (Y_ap, Y_bp) in the camera-major Y slab for every shared point p (point
+/// order, so the sums are deterministic): S_ab −= Σ_p Y_ap Y_bpᵀ is then one register-resident
+/// accumulation per pair. Built by counting sort per column: O(Σ_p n_p²).
+#[allow(clippy::type_complexity)]
+fn shared_points(
+    cams: &[CamBlock],
+    points: &[PointBlock],
+) -> (Vec<Vec<(usize, usize, usize)>>, Vec<(usize, usize)>) {
+    let nc = cams.len();
+    let mut count = vec![0usize; nc];
+    let mut cursor = vec![0usize; nc];
+    let mut touched = Vec::new();
+    let mut targets = Vec::with_capacity(nc);
+    let total: usize = points
+        .iter()
+        .map(|pb| pb.cams.len() * (pb.cams.len() + 1) / 2)
+        .sum();
+    let mut shared = Vec::with_capacity(total);
+    for cb in cams {
+        for &(pi, ib) in &cb.pts {
+            for &a in &points[pi].cams[ib..] {
+                if count[a] == 0 {
+                    touched.push(a);
+                }
+                count[a] += 1;
+            }
+        }
+        touched.sort_unstable();
+        let mut t = Vec::with_capacity(touched.len());
+        let mut pos = shared.len();
+        for &a in &touched {
+            t.push((a, pos, pos + count[a]));
+            cursor[a] = pos;
+            pos += count[a];
+        }
+        shared.resize(pos, (0, 0));
+        for &(pi, ib) in &cb.pts {
+            let pb = &points[pi];
+            let ob = pb.yc_pair[ib];
+            for (ia, &a) in pb.cams.iter().enumerate().skip(ib) {
+                shared[cursor[a]] = (pb.yc_pair[ia], ob);
+                cursor[a] += 1;
+            }
+        }
+        for &a in &touched {
+            count[a] = 0;
+        }
+        touched.clear();
+        targets.push(t);
+    }
+    (targets, shared)
 }
 
 impl SchurSystem {
@@ -514,15 +755,12 @@ impl SchurSystem {
                     hpp: vec![0.0; dim * dim],
                     gp: vec![0.0; dim],
                     hcp: Vec::new(),
-                    res_single: Vec::new(),
-                    pair_sq_off: Vec::new(),
-                    haa: Vec::new(),
-                    ga: Vec::new(),
                     l: vec![0.0; dim * dim],
-                    y: Vec::new(),
+                    y_off: 0,
+                    yc_pair: Vec::new(),
                     z: vec![0.0; dim],
                     dx: vec![0.0; dim],
-                    row: vec![0.0; dim],
+                    linv: vec![0.0; dim * dim],
                 });
             } else {
                 cam_of[f] = cams.len();
@@ -531,7 +769,10 @@ impl SchurSystem {
                     off: nc,
                     dim,
                     res: Vec::new(),
+                    res_diag: Vec::new(),
                     pts: Vec::new(),
+                    acc_off: 0,
+                    yc_off: 0,
                     hbb: vec![0.0; dim * dim],
                     g: vec![0.0; dim],
                 });
@@ -555,10 +796,12 @@ impl SchurSystem {
                 }
             }
             let rc = &res_cam[res_cam_ptr[ri]..];
-            // Single-camera residuals of a point are summed per point–camera pair instead.
-            if point.is_none() || rc.len() > 1 {
-                for &(k, c) in rc {
+            for &(k, c) in rc {
+                if rc.len() > 1 {
                     cams[c].res.push((ri, k));
+                }
+                if point.is_none() {
+                    cams[c].res_diag.push((ri, k));
                 }
             }
             res_cam_ptr.push(res_cam.len());
@@ -574,6 +817,7 @@ impl SchurSystem {
                 }
             }
         }
+        let mut y_len = 0;
         for (pi, pb) in points.iter_mut().enumerate() {
             pb.cams.sort_unstable();
             pb.cams.dedup();
@@ -583,17 +827,9 @@ impl SchurSystem {
                 off += cams[c].dim * pb.dim;
             }
             pb.hcp = vec![0.0; off];
-            pb.y = vec![0.0; off];
-            let mut sq = 0;
-            for &c in &pb.cams {
-                pb.pair_sq_off.push(sq);
-                sq += cams[c].dim * cams[c].dim;
-            }
-            pb.haa = vec![0.0; sq];
-            pb.ga = vec![0.0; off / pb.dim.max(1)];
+            pb.y_off = y_len;
+            y_len += off;
             for &(ri, _) in &pb.res {
-                pb.res_single
-                    .push(res_cam_ptr[ri + 1] - res_cam_ptr[ri] == 1);
                 for &(k, c) in &res_cam[res_cam_ptr[ri]..res_cam_ptr[ri + 1]] {
                     // `cams` is sorted and contains c.
                     let pair = pb.cams.binary_search(&c).unwrap_or(0);
@@ -605,6 +841,46 @@ impl SchurSystem {
                 cams[c].pts.push((pi, i));
             }
         }
+        let y_bounds: Vec<usize> = points
+            .iter()
+            .map(|pb| pb.y_off)
+            .chain(std::iter::once(y_len))
+            .collect();
+        // Camera-major copy of Y and the per-chunk camera accumulators.
+        for pb in points.iter_mut() {
+            pb.yc_pair = vec![0; pb.cams.len()];
+        }
+        let (mut yc_len, mut acc_len) = (0, 0);
+        for cb in cams.iter_mut() {
+            cb.yc_off = yc_len;
+            cb.acc_off = acc_len;
+            acc_len += cb.dim * (cb.dim + 1);
+            for &(pi, ia) in &cb.pts {
+                points[pi].yc_pair[ia] = yc_len;
+                yc_len += cb.dim * points[pi].dim;
+            }
+        }
+        let yc_bounds: Vec<usize> = cams
+            .iter()
+            .map(|cb| cb.yc_off)
+            .chain(std::iter::once(yc_len))
+            .collect();
+        // At most 16 chunks (enough to balance the threads), fewer when the accumulators
+        // would pass 4 M values.
+        let n_chunks = 16
+            .min(points.len().max(1))
+            .min(((1 << 22) / acc_len.max(1)).max(1));
+        let chunk_points = points.len().div_ceil(n_chunks).max(1);
+        let n_chunks = points.len().div_ceil(chunk_points).max(1);
+        let point_dim = points
+            .first()
+            .map(|p| p.dim)
+            .filter(|&d| points.iter().all(|p| p.dim == d));
+        let (col_targets, shared) = if point_dim.is_some() {
+            shared_points(&cams, &points)
+        } else {
+            (Vec::new(), Vec::new())
+        };
         let reduced = if nc <= dense_limit {
             let req = faer::linalg::cholesky::llt::factor::cholesky_in_place_scratch::<f64>(
                 nc,
@@ -668,6 +944,16 @@ impl SchurSystem {
             s: vec![0.0; s_len],
             s_bounds,
             rhs: vec![0.0; nc],
+            y: vec![0.0; y_len],
+            y_bounds,
+            yc: vec![0.0; yc_len],
+            yc_bounds,
+            col_targets,
+            shared,
+            cam_acc: vec![0.0; n_chunks * acc_len],
+            acc_len,
+            chunk_points,
+            point_dim,
             reduced,
             time_reduce_s: 0.0,
             time_factor_s: 0.0,
@@ -682,85 +968,44 @@ impl SchurSystem {
 
     /// From evaluated (loss-weighted) residuals and Jacobians: H_pp, g_p and H_ap per point,
     /// g_c per camera, and the full-ordering gradient `g` and diagonal of JᵀJ `hdiag`.
-    pub fn assemble(&mut self, bufs: &[EvalBuf], g: &mut [f64], hdiag: &mut [f64]) {
+    pub fn assemble(&mut self, bufs: &Evals, g: &mut [f64], hdiag: &mut [f64]) {
         let cams = &self.cams;
-        // Per point, in residual order: H_pp, g_p, H_ap and the pair's J_aᵀJ_a, J_aᵀr.
-        self.points.par_iter_mut().for_each(|pb| {
-            let d = pb.dim;
-            pb.hpp.fill(0.0);
-            pb.gp.fill(0.0);
-            pb.hcp.fill(0.0);
-            pb.haa.fill(0.0);
-            pb.ga.fill(0.0);
-            for o in 0..pb.res.len() {
-                let (ri, kp) = pb.res[o];
-                let buf = &bufs[ri];
-                let m = buf.r.len();
-                let jp = buf.jac[kp].as_slice();
-                if m == 2 && d == 3 && accumulate_pixel_residual(pb, o, buf, kp, cams) {
-                    continue;
+        // Per point, in residual order: H_pp, g_p, H_ap; and the camera terms J_aᵀJ_a, J_aᵀr
+        // of those residuals into the accumulators of the point's chunk.
+        let acc_len = self.acc_len.max(1);
+        self.cam_acc.fill(0.0);
+        self.points
+            .par_chunks_mut(self.chunk_points)
+            .zip(self.cam_acc.par_chunks_mut(acc_len))
+            .for_each(|(chunk, acc)| {
+                for pb in chunk {
+                    accumulate_point(pb, bufs, cams, acc);
                 }
-                for j in 0..d {
-                    let cj = &jp[j * m..(j + 1) * m];
-                    pb.gp[j] += dot(cj, &buf.r);
-                    for i in j..d {
-                        pb.hpp[j * d + i] += dot(&jp[i * m..(i + 1) * m], cj);
-                    }
-                }
-                let single = pb.res_single[o];
-                for &(k, pair) in &pb.res_cams[pb.res_cam_ptr[o]..pb.res_cam_ptr[o + 1]] {
-                    let ja = buf.jac[k].as_slice();
-                    let da = cams[pb.cams[pair]].dim;
-                    let h = &mut pb.hcp[pb.pair_off[pair]..pb.pair_off[pair] + da * d];
-                    for j in 0..d {
-                        let cj = &jp[j * m..(j + 1) * m];
-                        for i in 0..da {
-                            h[j * da + i] += dot(&ja[i * m..(i + 1) * m], cj);
-                        }
-                    }
-                    if single {
-                        let go = pb.pair_off[pair] / d.max(1);
-                        let so = pb.pair_sq_off[pair];
-                        for j in 0..da {
-                            let cj = &ja[j * m..(j + 1) * m];
-                            pb.ga[go + j] += dot(cj, &buf.r);
-                            for i in j..da {
-                                pb.haa[so + j * da + i] += dot(&ja[i * m..(i + 1) * m], cj);
-                            }
-                        }
-                    }
-                }
-            }
-            for j in 0..d {
-                for i in 0..j {
-                    pb.hpp[j * d + i] = pb.hpp[i * d + j];
-                }
-            }
-        });
-        // Per camera: H_bb (lower triangle) and g_b from its pairs and its other residuals.
-        let points = &self.points;
+            });
+        // Per camera: H_bb (lower triangle) and g_b: the chunk sums, then the residuals
+        // without a point.
+        let (cam_acc, n_chunks) = (&self.cam_acc, self.cam_acc.len() / acc_len);
         self.cams.par_iter_mut().for_each(|cb| {
             let d = cb.dim;
             cb.hbb.fill(0.0);
             cb.g.fill(0.0);
-            for &(pi, ib) in &cb.pts {
-                let pb = &points[pi];
-                let go = pb.pair_off[ib] / pb.dim.max(1);
-                let so = pb.pair_sq_off[ib];
-                for (x, y) in cb.g.iter_mut().zip(&pb.ga[go..go + d]) {
+            for ch in 0..n_chunks {
+                let a =
+                    &cam_acc[ch * acc_len + cb.acc_off..ch * acc_len + cb.acc_off + d * (d + 1)];
+                for (x, y) in cb.hbb.iter_mut().zip(&a[..d * d]) {
                     *x += y;
                 }
-                for (x, y) in cb.hbb.iter_mut().zip(&pb.haa[so..so + d * d]) {
+                for (x, y) in cb.g.iter_mut().zip(&a[d * d..]) {
                     *x += y;
                 }
             }
-            for &(ri, k) in &cb.res {
-                let buf = &bufs[ri];
+            for &(ri, k) in &cb.res_diag {
+                let buf = bufs.get(ri);
                 let m = buf.r.len();
-                let jb = buf.jac[k].as_slice();
+                let jb = buf.jac(k);
                 for j in 0..d {
                     let cj = &jb[j * m..(j + 1) * m];
-                    cb.g[j] += dot(cj, &buf.r);
+                    cb.g[j] += dot(cj, buf.r);
                     for i in j..d {
                         cb.hbb[j * d + i] += dot(&jb[i * m..(i + 1) * m], cj);
                     }
@@ -788,7 +1033,7 @@ impl SchurSystem {
     /// column of the full ordering, when known).
     pub fn solve(
         &mut self,
-        bufs: &[EvalBuf],
+        bufs: &Evals,
         mu: f64,
         damp: &[f64],
         delta: &mut [f64],
@@ -796,10 +1041,12 @@ impl SchurSystem {
         // 1. Per point: L L ᵀ = H_pp + μD_p, z = L⁻¹ g_p, Y_a = H_ap L⁻ᵀ.
         let t0 = std::time::Instant::now();
         let cams = &self.cams;
+        let y_pieces = split_pieces(&mut self.y, &self.y_bounds);
         let failed = self
             .points
             .par_iter_mut()
-            .map(|pb| {
+            .zip(y_pieces)
+            .map(|(pb, y)| {
                 let d = pb.dim;
                 pb.l.copy_from_slice(&pb.hpp);
                 for j in 0..d {
@@ -810,17 +1057,25 @@ impl SchurSystem {
                 }
                 pb.z.copy_from_slice(&pb.gp);
                 forward(&pb.l, d, &mut pb.z);
-                // Row i of Y solves L yᵢᵀ = hᵢᵀ (row i of H_ap).
+                // L⁻¹ (lower, column-major), one triangular solve per column.
+                pb.linv.fill(0.0);
+                for (j, col) in pb.linv.chunks_exact_mut(d).enumerate() {
+                    col[j] = 1.0;
+                    forward(&pb.l, d, col);
+                }
+                // Y_a = H_ap L⁻ᵀ: column k of Y_a is Σ_{t ≤ k} (L⁻¹)_kt · column t of H_ap.
                 for (pair, &c) in pb.cams.iter().enumerate() {
                     let da = cams[c].dim;
                     let off = pb.pair_off[pair];
-                    for i in 0..da {
-                        for (k, v) in pb.row.iter_mut().enumerate() {
-                            *v = pb.hcp[off + k * da + i];
-                        }
-                        forward(&pb.l, d, &mut pb.row);
-                        for (k, v) in pb.row.iter().enumerate() {
-                            pb.y[off + k * da + i] = *v;
+                    let h = &pb.hcp[off..off + da * d];
+                    let ya = &mut y[off..off + da * d];
+                    for (k, yk) in ya.chunks_exact_mut(da).enumerate() {
+                        yk.fill(0.0);
+                        for (t, ht) in h.chunks_exact(da).enumerate().take(k + 1) {
+                            let s = pb.linv[t * d + k];
+                            for (o, &v) in yk.iter_mut().zip(ht) {
+                                *o += s * v;
+                            }
                         }
                     }
                 }
@@ -831,9 +1086,49 @@ impl SchurSystem {
             self.time_reduce_s += t0.elapsed().as_secs_f64();
             return Ok(Err(Some(col)));
         }
-        // 2. S column block by column block.
-        let nc = self.nc;
+        // 2. Per camera: the camera-major copy of its Y blocks (point order) and its entry of
+        // the reduced right-hand side −g_c + Σ_p Y_ap z_p.
         let points = &self.points;
+        let y = &self.y;
+        let gc = &self.gc;
+        let mut rhs_pieces: Vec<&mut [f64]> = Vec::with_capacity(cams.len());
+        let mut rest = self.rhs.as_mut_slice();
+        for cb in cams {
+            let (head, tail) = rest.split_at_mut(cb.dim);
+            rhs_pieces.push(head);
+            rest = tail;
+        }
+        split_pieces(&mut self.yc, &self.yc_bounds)
+            .into_par_iter()
+            .zip(rhs_pieces)
+            .zip(cams.par_iter())
+            .for_each(|((yc, rhs), cb)| {
+                let da = cb.dim;
+                for (r, &g) in rhs.iter_mut().zip(&gc[cb.off..cb.off + da]) {
+                    *r = -g;
+                }
+                let mut o = 0;
+                for &(pi, ia) in &cb.pts {
+                    let pb = &points[pi];
+                    let src = pb.y_off + pb.pair_off[ia];
+                    let ya = &y[src..src + da * pb.dim];
+                    match (
+                        yc.get_mut(o..).and_then(|v| v.first_chunk_mut::<18>()),
+                        ya.first_chunk::<18>(),
+                    ) {
+                        (Some(d), Some(src)) if ya.len() == 18 => *d = *src,
+                        _ => yc[o..o + ya.len()].copy_from_slice(ya),
+                    }
+                    o += ya.len();
+                    for (col, &zk) in ya.chunks_exact(da).zip(&pb.z) {
+                        for (r, &v) in rhs.iter_mut().zip(col) {
+                            *r += v * zk;
+                        }
+                    }
+                }
+            });
+        // 3. S column block by column block.
+        let nc = self.nc;
         let (res_cam_ptr, res_cam) = (&self.res_cam_ptr, &self.res_cam);
         let reduced = &self.reduced;
         let ctx = ColumnCtx {
@@ -846,38 +1141,25 @@ impl SchurSystem {
             bufs,
             mu,
             damp,
+            y: &self.y,
+            yc: &self.yc,
+            col_targets: &self.col_targets,
+            shared: &self.shared,
+            point_dim: self.point_dim,
         };
         let pieces = split_pieces(&mut self.s, &self.s_bounds);
         pieces
             .into_par_iter()
             .zip(cams.par_iter().enumerate())
             .for_each(|(sl, (b, cb))| {
-                // Compiled for the best instruction set available (AVX2 when present).
-                pulp::Arch::new().dispatch(ColumnTask {
+                ColumnTask {
                     ctx: &ctx,
                     sl,
                     b,
                     cb,
-                })
-            });
-        // 3. Reduced right-hand side −g_c + Σ_p Y_ap z_p.
-        for cb in cams {
-            for j in 0..cb.dim {
-                self.rhs[cb.off + j] = -self.gc[cb.off + j];
-            }
-            for &(pi, ia) in &cb.pts {
-                let pb = &points[pi];
-                let da = cb.dim;
-                let ya = &pb.y[pb.pair_off[ia]..pb.pair_off[ia] + da * pb.dim];
-                for i in 0..da {
-                    let mut acc = 0.0;
-                    for k in 0..pb.dim {
-                        acc += ya[k * da + i] * pb.z[k];
-                    }
-                    self.rhs[cb.off + i] += acc;
                 }
-            }
-        }
+                .dispatch()
+            });
         // 4. Cholesky of S and the camera step.
         let t1 = std::time::Instant::now();
         self.time_reduce_s += (t1 - t0).as_secs_f64();
@@ -924,6 +1206,7 @@ impl SchurSystem {
         let t2 = std::time::Instant::now();
         self.time_factor_s += (t2 - t1).as_secs_f64();
         let rhs = &self.rhs;
+        let y = &self.y;
         self.points.par_iter_mut().for_each(|pb| {
             let d = pb.dim;
             for k in 0..d {
@@ -932,7 +1215,8 @@ impl SchurSystem {
             for (pair, &c) in pb.cams.iter().enumerate() {
                 let cb = &cams[c];
                 let da = cb.dim;
-                let ya = &pb.y[pb.pair_off[pair]..pb.pair_off[pair] + da * d];
+                let o = pb.y_off + pb.pair_off[pair];
+                let ya = &y[o..o + da * d];
                 for k in 0..d {
                     let col = &ya[k * da..(k + 1) * da];
                     pb.dx[k] -= col
@@ -967,7 +1251,7 @@ mod tests {
 
     /// The full normal equations (JᵀJ + μD) δ = −g solved densely by the block-pattern
     /// assembly of the generic path, independent of the reduced system.
-    fn full_step(p: &Problem, bufs: &[EvalBuf], mu: f64) -> (Vec<f64>, Vec<f64>) {
+    fn full_step(p: &Problem, bufs: &Evals, mu: f64) -> (Vec<f64>, Vec<f64>) {
         let st = Structure::new(p);
         let mut h = vec![0.0; st.pattern.nnz()];
         let mut g = vec![0.0; st.n];
@@ -1030,22 +1314,92 @@ mod tests {
         p
     }
 
+    /// `mixed_problem` plus a 2-D camera-side block (a pixel offset shared by the
+    /// observations of cameras 2 and 5: S then has 2 × 6 and 2 × 2 blocks next to the 6 × 6
+    /// ones) and, with `odd_point`, an eliminated 2-D block seen by two cameras (the
+    /// eliminated blocks then differ in size and S is accumulated point by point).
+    fn mixed_dims_problem(odd_point: bool) -> Problem {
+        let mut p = mixed_problem();
+        let k = nalgebra::Matrix3::new(500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0);
+        use crate::lsq::{BlockId, Residual};
+        let offset = p.add_block(&[0.3, -0.2], Manifold::Euclidean(2)).unwrap();
+        let reproj = |obs: [f64; 2]| {
+            let r = crate::lsq::ReprojectionResidual::new(&k, obs, 1.0).unwrap();
+            crate::lsq::NumericDiff::new(
+                2,
+                vec![
+                    Manifold::Se3,
+                    Manifold::Euclidean(2),
+                    Manifold::Euclidean(3),
+                ],
+                move |q: &[&[f64]], out: &mut [f64]| {
+                    r.evaluate(&[q[0], q[2]], out, None)?;
+                    out[0] += q[1][0];
+                    out[1] += q[1][1];
+                    Ok(())
+                },
+            )
+        };
+        for (cam, pt) in [(2, 1), (5, 1), (2, 9), (5, 12), (5, 13)] {
+            let obs = [310.0 + pt as f64, 250.0 - cam as f64];
+            p.add_residual(
+                reproj(obs),
+                &[BlockId(cam), offset, BlockId(7 + pt)],
+                Loss::Trivial,
+            )
+            .unwrap();
+        }
+        if odd_point {
+            let q = p.add_block(&[0.5, 1.5], Manifold::Euclidean(2)).unwrap();
+            p.set_eliminate(q, Some(true)).unwrap();
+            for cam in [3, 6] {
+                let r = crate::lsq::NumericDiff::new(
+                    2,
+                    vec![Manifold::Se3, Manifold::Euclidean(2)],
+                    |v: &[&[f64]], out: &mut [f64]| {
+                        let t = crate::lsq::se3_from_params(v[0]);
+                        let x = t * nalgebra::Point3::new(v[1][0], v[1][1], 1.0);
+                        out[0] = x.x - 0.2;
+                        out[1] = x.y + 0.1;
+                        Ok(())
+                    },
+                );
+                p.add_residual(r, &[BlockId(cam), q], Loss::Trivial)
+                    .unwrap();
+            }
+        }
+        p
+    }
+
     #[test]
     fn reduced_camera_system_step_equals_the_full_solve() {
-        let p = mixed_problem();
-        let layout = Layout::new(&p);
-        assert!(SchurSystem::applicable(&p, &layout));
+        assert_reduced_step_equals_full_solve(&mixed_problem());
+    }
+
+    #[test]
+    fn reduced_camera_system_with_mixed_block_sizes_equals_the_full_solve() {
+        for odd_point in [false, true] {
+            let p = mixed_dims_problem(odd_point);
+            let sys = SchurSystem::new(&p, &Layout::new(&p), DENSE_CAMERA_LIMIT).unwrap();
+            assert_eq!(sys.point_dim.is_some(), !odd_point);
+            assert_reduced_step_equals_full_solve(&p);
+        }
+    }
+
+    fn assert_reduced_step_equals_full_solve(p: &Problem) {
+        let layout = Layout::new(p);
+        assert!(SchurSystem::applicable(p, &layout));
         let mut bufs = p.make_buffers();
         let values = p.values.clone();
         p.evaluate_all(&values, &mut bufs, true).unwrap();
         for limit in [DENSE_CAMERA_LIMIT, 0] {
-            let mut sys = SchurSystem::new(&p, &layout, limit).unwrap();
+            let mut sys = SchurSystem::new(p, &layout, limit).unwrap();
             assert_eq!(sys.is_dense(), limit > 0);
             let n = layout.n;
             let (mut g, mut hdiag) = (vec![0.0; n], vec![0.0; n]);
             sys.assemble(&bufs, &mut g, &mut hdiag);
             for mu in [1e-4, 0.3, 0.0] {
-                let (want, damp) = full_step(&p, &bufs, mu);
+                let (want, damp) = full_step(p, &bufs, mu);
                 // The same diagonal of JᵀJ as the generic assembly.
                 for (a, b) in hdiag.iter().zip(&damp) {
                     assert!((a.clamp(1e-6, 1e32) - b).abs() <= 1e-9 * b.abs().max(1.0));

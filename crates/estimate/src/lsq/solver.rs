@@ -197,12 +197,91 @@ pub struct Summary {
     pub time_schur_factor_s: f64,
 }
 
-/// Evaluation buffers of one residual block.
-pub(crate) struct EvalBuf {
-    pub r: Vec<f64>,
-    pub jac: Vec<DMatrix<f64>>,
-    /// ρ(‖r‖²) (unweighted cost contribution ×2).
-    pub rho: f64,
+/// Residuals this many at a time form one parallel evaluation task.
+const EVAL_CHUNK: usize = 64;
+
+/// Residual values and Jacobians of every residual block, each kind in one contiguous slab
+/// (allocated once per solve, filled in place by [`Problem::evaluate_all`]).
+pub(crate) struct Evals {
+    /// The residual vectors r_i, concatenated.
+    r: Vec<f64>,
+    /// Start of each residual in `r`, plus the end.
+    r_ptr: Vec<usize>,
+    /// The Jacobians ∂r_i/∂δ_k (m_i × d_k, column-major) of every (residual, block),
+    /// concatenated in residual order.
+    jac: Vec<f64>,
+    /// Start of each (residual, block) Jacobian in `jac`, plus the end.
+    jac_ptr: Vec<usize>,
+    /// Index in `jac_ptr` of each residual's first block, plus the end.
+    blk_ptr: Vec<usize>,
+    /// ρ(‖r_i‖²) (unweighted cost contribution ×2).
+    rho: Vec<f64>,
+    /// First residual of each evaluation task, plus the end.
+    chunks: Vec<usize>,
+    /// Start of each task's residuals in `r`, plus the end.
+    r_chunks: Vec<usize>,
+    /// Start of each task's Jacobians in `jac`, plus the end.
+    jac_chunks: Vec<usize>,
+}
+
+/// `dst = src` (equal lengths), inline for the Jacobian sizes of pixel residuals on SE(3) and
+/// 3-D blocks (a libc call per 12 numbers would cost more than the copy).
+#[inline(always)]
+pub(crate) fn copy_small(dst: &mut [f64], src: &[f64]) {
+    match (dst.first_chunk_mut::<12>(), src.first_chunk::<12>()) {
+        (Some(d), Some(s)) if src.len() == 12 => *d = *s,
+        _ => match (dst.first_chunk_mut::<6>(), src.first_chunk::<6>()) {
+            (Some(d), Some(s)) if src.len() == 6 => *d = *s,
+            _ => dst.copy_from_slice(src),
+        },
+    }
+}
+
+/// `s = 0`, inline for the sizes of [`copy_small`].
+#[inline(always)]
+fn zero_small(s: &mut [f64]) {
+    let n = s.len();
+    match s.first_chunk_mut::<12>() {
+        Some(c) if n == 12 => *c = [0.0; 12],
+        _ => match s.first_chunk_mut::<6>() {
+            Some(c) if n == 6 => *c = [0.0; 6],
+            _ => s.fill(0.0),
+        },
+    }
+}
+
+/// One evaluated residual block: its (loss-weighted) residual and Jacobians.
+#[derive(Clone, Copy)]
+pub(crate) struct EvalBuf<'a> {
+    /// The residual (m values).
+    pub r: &'a [f64],
+    jac: &'a [f64],
+    ptr: &'a [usize],
+}
+
+impl<'a> EvalBuf<'a> {
+    /// ∂r/∂δ_k w.r.t. the k-th block of the residual (m × d_k, column-major).
+    #[inline(always)]
+    pub fn jac(&self, k: usize) -> &'a [f64] {
+        &self.jac[self.ptr[k]..self.ptr[k + 1]]
+    }
+}
+
+impl Evals {
+    /// Residual block `i`.
+    #[inline(always)]
+    pub fn get(&self, i: usize) -> EvalBuf<'_> {
+        EvalBuf {
+            r: &self.r[self.r_ptr[i]..self.r_ptr[i + 1]],
+            jac: &self.jac,
+            ptr: &self.jac_ptr[self.blk_ptr[i]..=self.blk_ptr[i + 1]],
+        }
+    }
+
+    /// Total residual dimension.
+    pub fn residual_dim(&self) -> usize {
+        self.r.len()
+    }
 }
 
 /// The free blocks of a problem and the elimination candidates (no normal-matrix pattern).
@@ -454,7 +533,7 @@ impl Normal {
     }
 
     /// Gradient g = Jᵀr and diag(JᵀJ) (and whatever the step needs) from evaluated buffers.
-    fn assemble(&mut self, p: &Problem, bufs: &[EvalBuf], g: &mut [f64], hdiag: &mut [f64]) {
+    fn assemble(&mut self, p: &Problem, bufs: &Evals, g: &mut [f64], hdiag: &mut [f64]) {
         match self {
             Normal::Full { st, h, .. } => {
                 p.assemble(st, bufs, h, g);
@@ -470,7 +549,7 @@ impl Normal {
     /// numerically positive definite.
     fn step(
         &mut self,
-        bufs: &[EvalBuf],
+        bufs: &Evals,
         mu: f64,
         damp: &[f64],
         g: &[f64],
@@ -503,126 +582,185 @@ impl Problem {
     /// curvature term 2ρ″ Jᵀr rᵀJ dropped (it would make the normal matrix indefinite for
     /// the provided losses, whose ρ″ ≤ 0; Triggs et al., "Bundle adjustment — a modern
     /// synthesis", Sec. 4.3). Returns the cost ½ Σ ρ(‖r‖²), or the first non-finite value.
-    pub(crate) fn evaluate_all(
-        &self,
-        values: &[f64],
-        bufs: &mut [EvalBuf],
-        jac: bool,
-    ) -> Result<f64> {
+    pub(crate) fn evaluate_all(&self, values: &[f64], bufs: &mut Evals, jac: bool) -> Result<f64> {
         let blocks = &self.blocks;
-        // The first failing residual (lowest index) wins, independently of the scheduling.
-        let failure = self
-            .residuals
-            .par_iter()
-            .zip(bufs.par_iter_mut())
+        let Evals {
+            r,
+            r_ptr,
+            jac: jslab,
+            jac_ptr,
+            blk_ptr,
+            rho,
+            chunks,
+            r_chunks,
+            jac_chunks,
+        } = bufs;
+        let (r_ptr, jac_ptr, blk_ptr, chunks) = (&*r_ptr, &*jac_ptr, &*blk_ptr, &*chunks);
+        let r_pieces = super::schur::split_pieces(r, r_chunks);
+        let j_pieces = super::schur::split_pieces(jslab, jac_chunks);
+        // The first failing residual (lowest index) wins, independently of the scheduling:
+        // tasks are contiguous residual ranges and each stops at its first failure.
+        let failure = r_pieces
+            .into_par_iter()
+            .zip(j_pieces)
+            .zip(rho.par_chunks_mut(EVAL_CHUNK))
             .enumerate()
-            .with_min_len(64)
-            .map(|(i, (res, buf))| -> Result<()> {
-                let slice = |b: &super::problem::BlockId| -> &[f64] {
-                    let blk = &blocks[b.0];
-                    &values[blk.offset..blk.offset + blk.manifold.ambient_dim()]
-                };
-                // Parameter slices on the stack for up to 8 blocks (no allocation).
-                let mut small: [&[f64]; 8] = [&[]; 8];
-                let heap: Vec<&[f64]>;
-                let params: &[&[f64]] = if res.blocks.len() <= small.len() {
-                    for (s, b) in small.iter_mut().zip(&res.blocks) {
-                        *s = slice(b);
-                    }
-                    &small[..res.blocks.len()]
-                } else {
-                    heap = res.blocks.iter().map(slice).collect();
-                    &heap
-                };
-                let out = if jac {
-                    buf.jac.iter_mut().for_each(|j| j.fill(0.0));
-                    res.residual
-                        .evaluate(params, &mut buf.r, Some(&mut buf.jac))
-                } else {
-                    res.residual.evaluate(params, &mut buf.r, None)
-                };
-                out?;
-                if buf.r.iter().any(|v| !v.is_finite())
-                    && let Some((index, &value)) =
-                        buf.r.iter().enumerate().find(|(_, v)| !v.is_finite())
-                {
-                    return Err(EstimateError::NonFiniteResidual {
-                        residual: i,
-                        index,
-                        value,
-                        context: String::new(),
-                    });
-                }
-                let s: f64 = buf.r.iter().map(|v| v * v).sum();
-                let [rho, d1] = res.loss.evaluate(s);
-                buf.rho = rho;
-                if jac {
-                    for (k, j) in buf.jac.iter_mut().enumerate() {
-                        if !j.as_slice().iter().all(|v| v.is_finite())
+            .map_init(
+                Vec::<DMatrix<f64>>::new,
+                |scratch, (c, ((rc, jc), rhoc))| -> Result<()> {
+                    let (i0, i1) = (chunks[c], chunks[c + 1]);
+                    let (r0, j0) = (r_ptr[i0], jac_ptr[blk_ptr[i0]]);
+                    for i in i0..i1 {
+                        let res = &self.residuals[i];
+                        let buf_r = &mut rc[r_ptr[i] - r0..r_ptr[i + 1] - r0];
+                        let m = buf_r.len();
+                        let slice = |b: &super::problem::BlockId| -> &[f64] {
+                            let blk = &blocks[b.0];
+                            &values[blk.offset..blk.offset + blk.manifold.ambient_dim()]
+                        };
+                        // Parameter slices on the stack for up to 8 blocks (no allocation).
+                        let mut small: [&[f64]; 8] = [&[]; 8];
+                        let heap: Vec<&[f64]>;
+                        let params: &[&[f64]] = if res.blocks.len() <= small.len() {
+                            for (s, b) in small.iter_mut().zip(&res.blocks) {
+                                *s = slice(b);
+                            }
+                            &small[..res.blocks.len()]
+                        } else {
+                            heap = res.blocks.iter().map(slice).collect();
+                            &heap
+                        };
+                        let nb = res.blocks.len();
+                        if jac {
+                            // The trait's DMatrix Jacobians live in per-task scratch,
+                            // reshaped only when the block sizes change.
+                            if scratch.len() < nb {
+                                scratch.resize(nb, DMatrix::zeros(0, 0));
+                            }
+                            for (j, b) in scratch.iter_mut().zip(&res.blocks) {
+                                let d = blocks[b.0].manifold.tangent_dim();
+                                if j.shape() == (m, d) {
+                                    zero_small(j.as_mut_slice());
+                                } else {
+                                    *j = DMatrix::zeros(m, d);
+                                }
+                            }
+                            res.residual
+                                .evaluate(params, buf_r, Some(&mut scratch[..nb]))?;
+                        } else {
+                            res.residual.evaluate(params, buf_r, None)?;
+                        }
+                        if buf_r.iter().any(|v| !v.is_finite())
                             && let Some((index, &value)) =
-                                j.iter().enumerate().find(|(_, v)| !v.is_finite())
+                                buf_r.iter().enumerate().find(|(_, v)| !v.is_finite())
                         {
                             return Err(EstimateError::NonFiniteResidual {
                                 residual: i,
                                 index,
                                 value,
-                                context: format!(
-                                    " in its Jacobian w.r.t. block {}",
-                                    res.blocks[k].0
-                                ),
+                                context: String::new(),
                             });
                         }
+                        let s: f64 = buf_r.iter().map(|v| v * v).sum();
+                        let [rho_i, d1] = res.loss.evaluate(s);
+                        rhoc[i - i0] = rho_i;
+                        if jac {
+                            let js =
+                                &mut jc[jac_ptr[blk_ptr[i]] - j0..jac_ptr[blk_ptr[i + 1]] - j0];
+                            let mut o = 0;
+                            for (k, j) in scratch[..nb].iter().enumerate() {
+                                let src = j.as_slice();
+                                if !src.iter().all(|v| v.is_finite())
+                                    && let Some((index, &value)) =
+                                        src.iter().enumerate().find(|(_, v)| !v.is_finite())
+                                {
+                                    return Err(EstimateError::NonFiniteResidual {
+                                        residual: i,
+                                        index,
+                                        value,
+                                        context: format!(
+                                            " in its Jacobian w.r.t. block {}",
+                                            res.blocks[k].0
+                                        ),
+                                    });
+                                }
+                                copy_small(&mut js[o..o + src.len()], src);
+                                o += src.len();
+                            }
+                            if d1 != 1.0 {
+                                let w = d1.max(0.0).sqrt();
+                                buf_r.iter_mut().for_each(|v| *v *= w);
+                                js.iter_mut().for_each(|v| *v *= w);
+                            }
+                        }
                     }
-                    if d1 != 1.0 {
-                        let w = d1.max(0.0).sqrt();
-                        buf.r.iter_mut().for_each(|v| *v *= w);
-                        buf.jac.iter_mut().for_each(|j| *j *= w);
-                    }
-                }
-                Ok(())
-            })
+                    Ok(())
+                },
+            )
             .find_map_first(|r| r.err());
         if let Some(e) = failure {
             return Err(e);
         }
-        Ok(0.5 * bufs.iter().map(|b| b.rho).sum::<f64>())
+        Ok(0.5 * rho.iter().sum::<f64>())
     }
 
-    pub(crate) fn make_buffers(&self) -> Vec<EvalBuf> {
-        self.residuals
-            .iter()
-            .map(|r| {
-                let m = r.residual.dim();
-                EvalBuf {
-                    r: vec![0.0; m],
-                    jac: r
-                        .blocks
-                        .iter()
-                        .map(|b| DMatrix::zeros(m, self.blocks[b.0].manifold.tangent_dim()))
-                        .collect(),
-                    rho: 0.0,
-                }
-            })
-            .collect()
+    /// Evaluation storage for every residual block (see [`Evals`]).
+    pub(crate) fn make_buffers(&self) -> Evals {
+        let nres = self.residuals.len();
+        let mut r_ptr = Vec::with_capacity(nres + 1);
+        let mut blk_ptr = Vec::with_capacity(nres + 1);
+        let mut jac_ptr = Vec::with_capacity(2 * nres + 1);
+        let (mut nr, mut nj) = (0, 0);
+        for res in &self.residuals {
+            let m = res.residual.dim();
+            r_ptr.push(nr);
+            blk_ptr.push(jac_ptr.len());
+            for b in &res.blocks {
+                jac_ptr.push(nj);
+                nj += m * self.blocks[b.0].manifold.tangent_dim();
+            }
+            nr += m;
+        }
+        r_ptr.push(nr);
+        blk_ptr.push(jac_ptr.len());
+        jac_ptr.push(nj);
+        let chunks: Vec<usize> = (0..nres)
+            .step_by(EVAL_CHUNK)
+            .chain(std::iter::once(nres))
+            .collect();
+        let r_chunks = chunks.iter().map(|&i| r_ptr[i]).collect();
+        let jac_chunks = chunks.iter().map(|&i| jac_ptr[blk_ptr[i]]).collect();
+        Evals {
+            r: vec![0.0; nr],
+            r_ptr,
+            jac: vec![0.0; nj],
+            jac_ptr,
+            blk_ptr,
+            rho: vec![0.0; nres],
+            chunks,
+            r_chunks,
+            jac_chunks,
+        }
     }
 
     /// Assembles JᵀJ (lower CSC values of `st.pattern`) and g = Jᵀr from evaluated buffers.
-    pub(crate) fn assemble(&self, st: &Structure, bufs: &[EvalBuf], h: &mut [f64], g: &mut [f64]) {
+    pub(crate) fn assemble(&self, st: &Structure, bufs: &Evals, h: &mut [f64], g: &mut [f64]) {
         h.iter_mut().for_each(|v| *v = 0.0);
         g.iter_mut().for_each(|v| *v = 0.0);
-        for ((res, buf), pairs) in self.residuals.iter().zip(bufs).zip(&st.res_pairs) {
+        for (i, (res, pairs)) in self.residuals.iter().zip(&st.res_pairs).enumerate() {
+            let buf = bufs.get(i);
+            let m = buf.r.len().max(1);
             for (k, b) in res.blocks.iter().enumerate() {
                 if let Some(f) = st.free_index[b.0] {
                     let off = st.col_offset[f];
-                    let j = &buf.jac[k];
-                    for c in 0..j.ncols() {
-                        let col = j.column(c);
-                        g[off + c] += col.iter().zip(&buf.r).map(|(a, b)| a * b).sum::<f64>();
+                    for (c, col) in buf.jac(k).chunks_exact(m).enumerate() {
+                        g[off + c] += col.iter().zip(buf.r).map(|(a, b)| a * b).sum::<f64>();
                     }
                 }
             }
             for &(ka, kb, slot) in pairs {
-                st.pattern.add_product(h, slot, &buf.jac[ka], &buf.jac[kb]);
+                st.pattern
+                    .add_product(h, slot, buf.jac(ka), buf.jac(kb), buf.r.len());
             }
         }
     }
@@ -650,7 +788,7 @@ impl Problem {
         options.validate()?;
         let layout = Layout::new(self);
         let mut bufs = self.make_buffers();
-        let num_residuals: usize = bufs.iter().map(|b| b.r.len()).sum();
+        let num_residuals = bufs.residual_dim();
         let mut values = self.values.clone();
         let t_setup = t0.elapsed().as_secs_f64();
         let te = Instant::now();

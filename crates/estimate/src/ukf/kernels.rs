@@ -6,8 +6,26 @@
 //! of an `r × c` matrix is at `i + j·r`.
 
 /// Above this size (every dimension) products go to nalgebra's `gemm`, which hands them to
-/// `matrixmultiply` (packed, SIMD kernels chosen at run time); below it the plain loops win.
-const BLOCKED_MIN: usize = 6;
+/// `matrixmultiply` (packed, SIMD kernels chosen at run time); below it the plain loops win
+/// (measured on the 9-state filter: the packing costs more than the 9 × 9 × 19 product).
+const BLOCKED_MIN: usize = 17;
+
+/// Calls the `#[inline(always)]` kernel body `$f` with its leading dimension argument replaced
+/// by a literal for the small sizes of the common models (2, 3, 4, 6, 9), so that each of
+/// those calls is compiled for a fixed size (unrolled, vectorised, no bounds checks); any
+/// other size runs the same body with the size at run time.
+macro_rules! fixed_dim {
+    ($n:expr, $f:ident($($arg:expr),* $(,)?)) => {
+        match $n {
+            2 => $f(2, $($arg),*),
+            3 => $f(3, $($arg),*),
+            4 => $f(4, $($arg),*),
+            6 => $f(6, $($arg),*),
+            9 => $f(9, $($arg),*),
+            n => $f(n, $($arg),*),
+        }
+    };
+}
 
 /// `out = a · b` (`m × k` times `k × n`), through `matrixmultiply` when every dimension is
 /// at least [`BLOCKED_MIN`].
@@ -69,6 +87,11 @@ pub(crate) fn weighted_gram_auto(
 /// [`weighted_gram`] for few rows: one accumulation over the columns per entry of the lower
 /// triangle (the per-column loops of [`weighted_gram`] would be shorter than their overhead).
 pub(crate) fn weighted_gram_small(r: usize, a: &[f64], w: &[f64], out: &mut [f64]) {
+    fixed_dim!(r, weighted_gram_small_body(a, w, out))
+}
+
+#[inline(always)]
+fn weighted_gram_small_body(r: usize, a: &[f64], w: &[f64], out: &mut [f64]) {
     let out = &mut out[..r * r];
     for j in 0..r {
         for i in j..r {
@@ -84,6 +107,11 @@ pub(crate) fn weighted_gram_small(r: usize, a: &[f64], w: &[f64], out: &mut [f64
 
 /// `out = a · b` for `a` (`m × k`) and `b` (`k × n`) with plain loops.
 pub(crate) fn gemm(m: usize, k: usize, n: usize, a: &[f64], b: &[f64], out: &mut [f64]) {
+    fixed_dim!(m, gemm_body(k, n, a, b, out))
+}
+
+#[inline(always)]
+fn gemm_body(m: usize, k: usize, n: usize, a: &[f64], b: &[f64], out: &mut [f64]) {
     let a = &a[..m * k];
     let b = &b[..k * n];
     for (oj, bj) in out[..m * n]
@@ -101,6 +129,11 @@ pub(crate) fn gemm(m: usize, k: usize, n: usize, a: &[f64], b: &[f64], out: &mut
 
 /// `out[:, j] = a[:, j] − v` for every column of `a` (`r × c`).
 pub(crate) fn sub_columns(r: usize, a: &[f64], v: &[f64], out: &mut [f64]) {
+    fixed_dim!(r, sub_columns_body(a, v, out))
+}
+
+#[inline(always)]
+fn sub_columns_body(r: usize, a: &[f64], v: &[f64], out: &mut [f64]) {
     let v = &v[..r];
     for (o, x) in out.chunks_exact_mut(r.max(1)).zip(a.chunks_exact(r.max(1))) {
         for ((oi, &xi), &vi) in o.iter_mut().zip(x).zip(v) {
@@ -111,6 +144,11 @@ pub(crate) fn sub_columns(r: usize, a: &[f64], v: &[f64], out: &mut [f64]) {
 
 /// `out[:, j] = v + a[:, j]` for every column of `a` (`r × c`).
 pub(crate) fn add_columns(r: usize, v: &[f64], a: &[f64], out: &mut [f64]) {
+    fixed_dim!(r, add_columns_body(v, a, out))
+}
+
+#[inline(always)]
+fn add_columns_body(r: usize, v: &[f64], a: &[f64], out: &mut [f64]) {
     let v = &v[..r];
     for (o, x) in out.chunks_exact_mut(r.max(1)).zip(a.chunks_exact(r.max(1))) {
         for ((oi, &xi), &vi) in o.iter_mut().zip(x).zip(v) {
@@ -121,6 +159,11 @@ pub(crate) fn add_columns(r: usize, v: &[f64], a: &[f64], out: &mut [f64]) {
 
 /// `out = a · w` (weighted sum of the columns of `a`, `r × c`).
 pub(crate) fn weighted_sum(r: usize, a: &[f64], w: &[f64], out: &mut [f64]) {
+    fixed_dim!(r, weighted_sum_body(a, w, out))
+}
+
+#[inline(always)]
+fn weighted_sum_body(r: usize, a: &[f64], w: &[f64], out: &mut [f64]) {
     let out = &mut out[..r];
     out.fill(0.0);
     for (x, &wk) in a.chunks_exact(r.max(1)).zip(w) {
@@ -140,6 +183,11 @@ pub(crate) fn weighted_outer(
     b: &[f64],
     out: &mut [f64],
 ) {
+    fixed_dim!(ra, weighted_outer_body(rb, a, w, b, out))
+}
+
+#[inline(always)]
+fn weighted_outer_body(ra: usize, rb: usize, a: &[f64], w: &[f64], b: &[f64], out: &mut [f64]) {
     let out = &mut out[..ra * rb];
     out.fill(0.0);
     for ((ak, bk), &wk) in a
@@ -159,6 +207,11 @@ pub(crate) fn weighted_outer(
 /// `out = Σₖ wₖ aₖ aₖᵀ` (`r × r`): the lower triangle accumulated, then mirrored, so the
 /// result is exactly symmetric.
 pub(crate) fn weighted_gram(r: usize, a: &[f64], w: &[f64], out: &mut [f64]) {
+    fixed_dim!(r, weighted_gram_body(a, w, out))
+}
+
+#[inline(always)]
+fn weighted_gram_body(r: usize, a: &[f64], w: &[f64], out: &mut [f64]) {
     let out = &mut out[..r * r];
     out.fill(0.0);
     for (ak, &wk) in a.chunks_exact(r.max(1)).zip(w) {
@@ -176,6 +229,11 @@ pub(crate) fn weighted_gram(r: usize, a: &[f64], w: &[f64], out: &mut [f64]) {
 /// the result is exactly symmetric), for `a`, `b` of shape `r × c`. With `a = K` and
 /// `b = Pxz` this is the covariance update `P⁻ − K S Kᵀ` (as `K S = Pxz`).
 pub(crate) fn sub_lower_abt(r: usize, c: usize, a: &[f64], b: &[f64], p: &mut [f64]) {
+    fixed_dim!(r, sub_lower_abt_body(c, a, b, p))
+}
+
+#[inline(always)]
+fn sub_lower_abt_body(r: usize, c: usize, a: &[f64], b: &[f64], p: &mut [f64]) {
     let p = &mut p[..r * r];
     let a = &a[..r * c];
     let b = &b[..r * c];
@@ -203,6 +261,11 @@ pub(crate) fn mirror_lower(r: usize, m: &mut [f64]) {
 /// read) into `l` (upper triangle zeroed). `false` unless positive definite (NaN included).
 /// Left-looking, column by column, so every inner loop runs over a contiguous column.
 pub(crate) fn cholesky(n: usize, a: &[f64], l: &mut [f64]) -> bool {
+    fixed_dim!(n, cholesky_body(a, l))
+}
+
+#[inline(always)]
+fn cholesky_body(n: usize, a: &[f64], l: &mut [f64]) -> bool {
     let l = &mut l[..n * n];
     for j in 0..n {
         let (done, rest) = l.split_at_mut(j * n);
@@ -260,6 +323,12 @@ pub(crate) fn all_finite(a: &[f64]) -> bool {
 /// `out[i + j m] = at[:, i] · b[:, j]` for `at` (`k × m`, the transpose of the left factor)
 /// and `b` (`k × n`): contiguous dot products, faster than [`gemm`] when `m` is small.
 pub(crate) fn gemm_tn(m: usize, k: usize, n: usize, at: &[f64], b: &[f64], out: &mut [f64]) {
+    // Specialised on the length k of the dot products.
+    fixed_dim!(k, gemm_tn_body(m, n, at, b, out))
+}
+
+#[inline(always)]
+fn gemm_tn_body(k: usize, m: usize, n: usize, at: &[f64], b: &[f64], out: &mut [f64]) {
     let at = &at[..k * m];
     for (oj, bj) in out[..m * n]
         .chunks_exact_mut(m.max(1))
@@ -273,6 +342,11 @@ pub(crate) fn gemm_tn(m: usize, k: usize, n: usize, at: &[f64], b: &[f64], out: 
 
 /// Solves `L X = B` in place for lower-triangular `L` (`n × n`) and `B` (`n × c`).
 pub(crate) fn solve_lower(n: usize, l: &[f64], b: &mut [f64]) {
+    fixed_dim!(n, solve_lower_body(l, b))
+}
+
+#[inline(always)]
+fn solve_lower_body(n: usize, l: &[f64], b: &mut [f64]) {
     let l = &l[..n * n];
     for x in b.chunks_exact_mut(n.max(1)) {
         for (j, lj) in l.chunks_exact(n).enumerate() {
@@ -287,6 +361,11 @@ pub(crate) fn solve_lower(n: usize, l: &[f64], b: &mut [f64]) {
 
 /// Solves `Lᵀ X = B` in place for lower-triangular `L` (`n × n`) and `B` (`n × c`).
 pub(crate) fn solve_lower_transposed(n: usize, l: &[f64], b: &mut [f64]) {
+    fixed_dim!(n, solve_lower_transposed_body(l, b))
+}
+
+#[inline(always)]
+fn solve_lower_transposed_body(n: usize, l: &[f64], b: &mut [f64]) {
     let l = &l[..n * n];
     for x in b.chunks_exact_mut(n.max(1)) {
         for (j, lj) in l.chunks_exact(n).enumerate().rev() {
