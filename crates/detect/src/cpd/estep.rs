@@ -35,8 +35,8 @@
 //! - for large sets (above 10⁷ pairs) whenever its estimated cost is under half of the exact
 //!   strategy's, the fast Gauss transform of the `fgt` module: separable tensor Chebyshev
 //!   interpolation of the kernel, over the whole bounding box at large σ or piecewise on boxes
-//!   a few σ wide (interacting with neighbours up to 7.7σ away) in the middle range, in
-//!   `O((N + M) p^D)` plus the node-grid products; kernel values to ~1e−12.
+//!   a few σ wide (interacting with neighbours up to 7.1σ away) in the middle range, in
+//!   `O((N + M) p^D)` plus the node-grid products; kernel values to ~1e−10.
 
 // Loops over the D ≤ 3 coordinates index several arrays at once; ranges read clearest.
 #![allow(clippy::needless_range_loop)]
@@ -126,7 +126,7 @@ pub enum EStep {
     Dense,
     /// Grid truncation whenever σ allows a grid (to ε = 1e−8 of each row's largest term).
     Truncated,
-    /// The fast Gauss transform of the `fgt` module (kernel values to ~1e−12) whenever σ
+    /// The fast Gauss transform of the `fgt` module (kernel values to ~1e−10) whenever σ
     /// allows it (at most 72 interpolation nodes per box and axis, a node grid of at most
     /// 2²² values), dense otherwise.
     FastGauss,

@@ -244,6 +244,58 @@ pub(crate) fn mul(a: &DMatrix<f64>, transpose_a: bool, b: &DMatrix<f64>) -> DMat
     }
 }
 
+/// `Qᵀ d(w) Q` (K × K, symmetric) for an M × K matrix `Q` and weights `w ≥ 0`: blocks of
+/// [`MUL_ROWS`] rows, each scaled by `√w` and multiplied into the lower triangle only (half the
+/// multiply–adds of a general product), partial sums added in a fixed order, then mirrored.
+pub(crate) fn weighted_gram(q: &DMatrix<f64>, w: &[f64]) -> DMatrix<f64> {
+    use faer::linalg::matmul::triangular::{BlockStructure, matmul};
+    use faer::{Accum, MatMut, MatRef, Par};
+    let (m, k) = (q.nrows(), q.ncols());
+    let blocks = m.div_ceil(MUL_ROWS);
+    let parts: Vec<DMatrix<f64>> = (0..blocks)
+        .into_par_iter()
+        .map(|b| {
+            let r0 = b * MUL_ROWS;
+            let len = MUL_ROWS.min(m - r0);
+            let mut s = DMatrix::<f64>::zeros(len, k);
+            for j in 0..k {
+                let src = &q.column(j);
+                for i in 0..len {
+                    s[(i, j)] = src[r0 + i] * w[r0 + i].max(0.0).sqrt();
+                }
+            }
+            let fs = MatRef::from_column_major_slice(s.as_slice(), len, k);
+            let mut part = DMatrix::zeros(k, k);
+            matmul(
+                MatMut::from_column_major_slice_mut(part.as_mut_slice(), k, k),
+                BlockStructure::TriangularLower,
+                Accum::Replace,
+                fs.transpose(),
+                BlockStructure::Rectangular,
+                fs,
+                BlockStructure::Rectangular,
+                1.0,
+                Par::Seq,
+            );
+            part
+        })
+        .collect();
+    let mut out = DMatrix::zeros(k, k);
+    for part in &parts {
+        for j in 0..k {
+            for i in j..k {
+                out[(i, j)] += part[(i, j)];
+            }
+        }
+    }
+    for j in 0..k {
+        for i in 0..j {
+            out[(i, j)] = out[(j, i)];
+        }
+    }
+    out
+}
+
 /// Top-`k` eigenpairs of `G` (eigenvalues in decreasing order): `(Q (M × k'), λ (k'))` with
 /// `k' ≤ k` when `G` has numerical rank below `k` (coincident points).
 pub(crate) fn low_rank_kernel<const D: usize>(
@@ -435,5 +487,24 @@ mod tests {
         let v = DMatrix::from_fn(150, 3, |i, j| ((i * 7 + j * 3) % 11) as f64 - 5.0);
         let a = kernel_times(&y, 0.5 / 0.49, &v);
         assert!((a - &g * &v).amax() < 1e-10);
+    }
+
+    #[test]
+    fn weighted_gram_matches_the_dense_product() {
+        // Several row blocks plus a partial one, and a zero weight.
+        let m = 2 * MUL_ROWS + 37;
+        let mut rng = Pcg64::seed_from_u64(9);
+        let q = DMatrix::from_fn(m, 13, |_, _| rng.random::<f64>() - 0.5);
+        let mut w: Vec<f64> = (0..m).map(|_| rng.random::<f64>() * 2.0).collect();
+        w[5] = 0.0;
+        let dq = DMatrix::from_fn(m, 13, |i, j| w[i] * q[(i, j)]);
+        let dense = q.transpose() * dq;
+        let g = weighted_gram(&q, &w);
+        assert!(
+            (&g - &dense).amax() < 1e-10 * dense.amax(),
+            "{}",
+            (&g - &dense).amax()
+        );
+        assert_eq!(g, g.transpose());
     }
 }

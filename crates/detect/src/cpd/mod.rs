@@ -884,11 +884,7 @@ fn solve_woodbury(
 ) -> Result<DMatrix<f64>> {
     let k = lambda.len();
     // Qᵀ D Q + λσ² Λ⁻¹ (K × K, SPD).
-    let mut dq = q.clone();
-    for (mut row, p) in dq.row_iter_mut().zip(p1) {
-        row *= *p;
-    }
-    let mut inner = lowrank::mul(q, true, &dq);
+    let mut inner = lowrank::weighted_gram(q, p1);
     for i in 0..k {
         inner[(i, i)] += lam_s2 / lambda[i];
     }
@@ -898,5 +894,10 @@ fn solve_woodbury(
         });
     };
     let z = chol.solve(&lowrank::mul(q, true, f));
-    Ok((f - lowrank::mul(&dq, false, &z)) / lam_s2)
+    // D Q z = d(P1)·(Q z).
+    let mut dqz = lowrank::mul(q, false, &z);
+    for (mut row, p) in dqz.row_iter_mut().zip(p1) {
+        row *= *p;
+    }
+    Ok((f - dqz) / lam_s2)
 }
