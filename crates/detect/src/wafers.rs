@@ -484,18 +484,7 @@ fn drop_inconsistent_arcs(seg: &mut Segment, arcs: &[Arc], params: &DetectParams
         let mut worst: Option<(f64, LeftOut)> = None;
         for (slot, &k) in seg.arcs.iter().enumerate() {
             let Some(arc) = arcs.get(k) else { return };
-            let kept: Vec<usize> = seg
-                .arcs
-                .iter()
-                .enumerate()
-                .filter(|&(s, _)| s != slot)
-                .map(|(_, &k)| k)
-                .collect();
-            let points: Vec<Vector2<f64>> = kept
-                .iter()
-                .filter_map(|&k| arcs.get(k))
-                .flat_map(|a| a.points.iter().copied())
-                .collect();
+            let (kept, points) = without_arc(seg, arcs, slot);
             let Ok(fit) = crate::ellipse::fit_ellipse_geometric(
                 &points,
                 Some(e),
@@ -506,9 +495,7 @@ fn drop_inconsistent_arcs(seg: &mut Segment, arcs: &[Arc], params: &DetectParams
             if !(seg.fit.residual_mean > ratio * fit.residual_mean) {
                 continue;
             }
-            let mut d = fit.ellipse.orthogonal_distances(&arc.points);
-            d.iter_mut().for_each(|x| *x = x.abs());
-            let m = median(&mut d);
+            let m = median_abs_distance(&fit.ellipse, &arc.points);
             if m > limit && worst.as_ref().is_none_or(|w| m > w.0) {
                 worst = Some((m, (kept, points, fit)));
             }
@@ -520,6 +507,30 @@ fn drop_inconsistent_arcs(seg: &mut Segment, arcs: &[Arc], params: &DetectParams
         seg.points = points;
         seg.fit = fit;
     }
+}
+
+/// The arc indices of `seg` without the one in position `slot`, and their edge points.
+fn without_arc(seg: &Segment, arcs: &[Arc], slot: usize) -> (Vec<usize>, Vec<Vector2<f64>>) {
+    let kept: Vec<usize> = seg
+        .arcs
+        .iter()
+        .enumerate()
+        .filter(|&(s, _)| s != slot)
+        .map(|(_, &k)| k)
+        .collect();
+    let points = kept
+        .iter()
+        .filter_map(|&k| arcs.get(k))
+        .flat_map(|a| a.points.iter().copied())
+        .collect();
+    (kept, points)
+}
+
+/// Median absolute orthogonal distance of `points` to `e`.
+fn median_abs_distance(e: &Ellipse, points: &[Vector2<f64>]) -> f64 {
+    let mut d = e.orthogonal_distances(points);
+    d.iter_mut().for_each(|x| *x = x.abs());
+    median(&mut d)
 }
 
 /// Drops, worst first, the arcs of `seg` whose median orthogonal distance to the segment's
@@ -536,9 +547,7 @@ fn drop_outlier_arcs(seg: &mut Segment, arcs: &[Arc], params: &DetectParams) {
         let mut worst: Option<(usize, f64)> = None;
         for (slot, &k) in seg.arcs.iter().enumerate() {
             let Some(arc) = arcs.get(k) else { return };
-            let mut d = e.orthogonal_distances(&arc.points);
-            d.iter_mut().for_each(|x| *x = x.abs());
-            let m = median(&mut d);
+            let m = median_abs_distance(&e, &arc.points);
             if worst.is_none_or(|(_, w)| m > w) {
                 worst = Some((slot, m));
             }
@@ -547,18 +556,7 @@ fn drop_outlier_arcs(seg: &mut Segment, arcs: &[Arc], params: &DetectParams) {
         if !(m > limit) {
             return;
         }
-        let kept: Vec<usize> = seg
-            .arcs
-            .iter()
-            .enumerate()
-            .filter(|&(s, _)| s != slot)
-            .map(|(_, &k)| k)
-            .collect();
-        let points: Vec<Vector2<f64>> = kept
-            .iter()
-            .filter_map(|&k| arcs.get(k))
-            .flat_map(|a| a.points.iter().copied())
-            .collect();
+        let (kept, points) = without_arc(seg, arcs, slot);
         let Ok(fit) = crate::ellipse::fit_ellipse_geometric(
             &points,
             Some(e),

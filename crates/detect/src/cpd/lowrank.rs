@@ -377,14 +377,7 @@ fn low_rank_impl<const D: usize>(
         let ctc = mul(&cmat, true, &cmat);
         let ctc = (&ctc + ctc.transpose()) * 0.5;
         let eig = SymmetricEigen::new(ctc);
-        let mut order: Vec<usize> = (0..eig.eigenvalues.len()).collect();
-        order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-        let lmax = eig.eigenvalues.max().max(0.0);
-        let order: Vec<usize> = order
-            .into_iter()
-            .filter(|&i| eig.eigenvalues[i] > 1e-12 * lmax)
-            .take(k)
-            .collect();
+        let order = leading_eigenpairs(&eig, k);
         let mut vs = DMatrix::zeros(eig.eigenvectors.nrows(), order.len());
         let mut lam = DVector::zeros(order.len());
         for (c, &i) in order.iter().enumerate() {
@@ -409,17 +402,23 @@ fn low_rank_impl<const D: usize>(
     ritz(&basis, h, k)
 }
 
-/// Top-k Ritz pairs of the symmetric `h` on `basis`.
-fn ritz(basis: &DMatrix<f64>, h: DMatrix<f64>, k: usize) -> (DMatrix<f64>, DVector<f64>) {
-    let eig = SymmetricEigen::new(h);
+/// Indices of the (at most) `k` largest eigenvalues of `eig`, largest first, keeping only those
+/// above 1e-12 of the largest (the numerically non-zero part of a PSD spectrum).
+fn leading_eigenpairs(eig: &SymmetricEigen<f64, nalgebra::Dyn>, k: usize) -> Vec<usize> {
     let mut order: Vec<usize> = (0..eig.eigenvalues.len()).collect();
     order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
     let lmax = eig.eigenvalues.max().max(0.0);
-    let order: Vec<usize> = order
+    order
         .into_iter()
         .filter(|&i| eig.eigenvalues[i] > 1e-12 * lmax)
         .take(k)
-        .collect();
+        .collect()
+}
+
+/// Top-k Ritz pairs of the symmetric `h` on `basis`.
+fn ritz(basis: &DMatrix<f64>, h: DMatrix<f64>, k: usize) -> (DMatrix<f64>, DVector<f64>) {
+    let eig = SymmetricEigen::new(h);
+    let order = leading_eigenpairs(&eig, k);
     let mut v = DMatrix::zeros(eig.eigenvectors.nrows(), order.len());
     let mut lam = DVector::zeros(order.len());
     for (c, &i) in order.iter().enumerate() {
