@@ -504,6 +504,32 @@ impl<const D: usize> Plan<D> {
         out
     }
 
+    /// `Σ_n inv_n k(t_m, x_n)` and `Σ_n inv_n x_n k(t_m, x_n)` at every target `t_m` through one
+    /// spread/transform/interpolate pass with `K ≥ 1 + D` weights per source.
+    fn weighted_moments<const K: usize>(
+        &self,
+        x: &[[f64; D]],
+        inv: &[f64],
+        t: &[[f64; D]],
+        arch: pulp::Arch,
+    ) -> (Vec<f64>, Vec<[f64; D]>) {
+        let w = |i: usize, w: &mut [f64; K]| {
+            w[0] = inv[i];
+            for d in 0..D.min(K - 1) {
+                w[1 + d] = inv[i] * x[i][d];
+            }
+        };
+        let mut g = self.spread::<K>(x, &w, arch);
+        self.transform::<K>(&mut g);
+        let v = self.interpolate::<K>(&g, t, arch);
+        let p1: Vec<f64> = v.iter().map(|a| a[0]).collect();
+        let px: Vec<[f64; D]> = v
+            .iter()
+            .map(|a| std::array::from_fn(|d| a[1 + d]))
+            .collect();
+        (p1, px)
+    }
+
     /// The E-step sums (see the module docs); `None` when more than 5 % of the rows need an
     /// exact evaluation (the transform does not pay off).
     pub fn estep(
@@ -538,42 +564,11 @@ impl<const D: usize> Plan<D> {
             .map(|i| if is_exact[i] { 0.0 } else { 1.0 / (s[i] + c) })
             .collect();
         let mut pt1: Vec<f64> = (0..n).map(|i| s[i] * inv[i]).collect();
-        let (p1, mut px) = match D {
-            2 => {
-                let w = |i: usize, w: &mut [f64; 3]| {
-                    w[0] = inv[i];
-                    w[1] = inv[i] * x[i][0];
-                    w[2] = inv[i] * x[i][1];
-                };
-                let mut g = self.spread::<3>(x, &w, arch);
-                self.transform::<3>(&mut g);
-                let v = self.interpolate::<3>(&g, t, arch);
-                let p1: Vec<f64> = v.iter().map(|a| a[0]).collect();
-                let px: Vec<[f64; D]> = v
-                    .iter()
-                    .map(|a| std::array::from_fn(|d| a[1 + d]))
-                    .collect();
-                (p1, px)
-            }
-            _ => {
-                let w = |i: usize, w: &mut [f64; 4]| {
-                    w[0] = inv[i];
-                    for d in 0..D.min(3) {
-                        w[1 + d] = inv[i] * x[i][d];
-                    }
-                };
-                let mut g = self.spread::<4>(x, &w, arch);
-                self.transform::<4>(&mut g);
-                let v = self.interpolate::<4>(&g, t, arch);
-                let p1: Vec<f64> = v.iter().map(|a| a[0]).collect();
-                let px: Vec<[f64; D]> = v
-                    .iter()
-                    .map(|a| std::array::from_fn(|d| a[1 + d]))
-                    .collect();
-                (p1, px)
-            }
+        // K = 1 + D weights (P1 and the D columns of PX); D = 2 runs at K = 3, else K = 4.
+        let (mut p1, mut px) = match D {
+            2 => self.weighted_moments::<3>(x, &inv, t, arch),
+            _ => self.weighted_moments::<4>(x, &inv, t, arch),
         };
-        let mut p1 = p1;
         // Rows far from every source: exact, relative to the nearest source.
         let mut k = vec![0.0; m];
         for &i in &exact {

@@ -816,12 +816,7 @@ impl SlamMot {
                 }
             }
             if let Some((nominal_base, nominal_offsets, sig)) = &fc.calibration_prior {
-                let mut c = DMatrix::zeros(6, 6);
-                for i in 0..3 {
-                    c[(i, i)] = sig.base_rotation.powi(2);
-                    c[(3 + i, 3 + i)] = sig.base_translation.powi(2);
-                }
-                p.add_prior(base, &se3_to_params(nominal_base), &c)?;
+                p.add_prior(base, &se3_to_params(nominal_base), &sig.pose_covariance())?;
                 for (i, &j) in self.config.estimate_offsets.iter().enumerate() {
                     let c1 = DMatrix::from_element(1, 1, sig.offset.powi(2));
                     p.add_prior(offsets[i], &[nominal_offsets[j]], &c1)?;
@@ -1238,20 +1233,15 @@ impl SlamMot {
         let n_links = self.config.estimate_links.len();
         let n_cal = 6 + n_off + n_mount + n_links;
         let mut prior_cov = DMatrix::<f64>::zeros(n_cal, n_cal);
-        for i in 0..3 {
-            prior_cov[(i, i)] = prior_sigmas.base_rotation.powi(2);
-            prior_cov[(3 + i, 3 + i)] = prior_sigmas.base_translation.powi(2);
-        }
+        let pose_cov = prior_sigmas.pose_covariance();
+        prior_cov.view_mut((0, 0), (6, 6)).copy_from(&pose_cov);
         for i in 0..n_off {
             prior_cov[(6 + i, 6 + i)] = prior_sigmas.offset.powi(2);
         }
-        for i in 0..n_mount {
-            let s = if i < 3 {
-                prior_sigmas.base_rotation
-            } else {
-                prior_sigmas.base_translation
-            };
-            prior_cov[(6 + n_off + i, 6 + n_off + i)] = s * s;
+        if n_mount > 0 {
+            prior_cov
+                .view_mut((6 + n_off, 6 + n_off), (6, 6))
+                .copy_from(&pose_cov);
         }
         for i in 0..n_links {
             let k = 6 + n_off + n_mount + i;
@@ -1281,11 +1271,11 @@ impl SlamMot {
                     && k != self.config.reference_wafer
                     && !prior_wafers.contains(&k)
                 {
-                    let t2 = prior_sigmas.base_translation.powi(2);
-                    let r2 = prior_sigmas.base_rotation.powi(2);
-                    let c =
-                        DMatrix::from_diagonal(&DVector::from_column_slice(&[t2, t2, t2, r2, r2]));
-                    p.add_prior(*blk, state.wafers[k].as_slice(), &c)?;
+                    p.add_prior(
+                        *blk,
+                        state.wafers[k].as_slice(),
+                        &prior_sigmas.wafer_covariance(),
+                    )?;
                 }
             }
             // Joint prior over base, offsets and previously seen wafers.
@@ -1389,6 +1379,22 @@ pub struct PriorSigmas {
     pub base_translation: f64,
     /// Joint offsets (rad).
     pub offset: f64,
+}
+
+impl PriorSigmas {
+    /// Diagonal covariance of an SE(3) pose (base or camera mount) with these widths, in the
+    /// tangent ordering `[ω; ρ]`: `base_rotation²` ×3, then `base_translation²` ×3.
+    pub fn pose_covariance(&self) -> DMatrix<f64> {
+        let (r2, t2) = (self.base_rotation.powi(2), self.base_translation.powi(2));
+        DMatrix::from_diagonal(&DVector::from_column_slice(&[r2, r2, r2, t2, t2, t2]))
+    }
+
+    /// Diagonal covariance of a wafer pose `[centre (3); tilts (2)]` with the base's widths:
+    /// `base_translation²` on the centre, `base_rotation²` on the tilts.
+    pub fn wafer_covariance(&self) -> DMatrix<f64> {
+        let (r2, t2) = (self.base_rotation.powi(2), self.base_translation.powi(2));
+        DMatrix::from_diagonal(&DVector::from_column_slice(&[t2, t2, t2, r2, r2]))
+    }
 }
 
 impl Default for PriorSigmas {
