@@ -45,6 +45,12 @@ def main() -> None:
         help="instead: signed normal offset of the detected edge points from the true rims",
     )
     ap.add_argument(
+        "--noise-model",
+        action="store_true",
+        help="instead: RMS edge-point offset from the true rims per rim and predicted band width "
+        "(the table behind pipeline.BAND_NOISE_UPPER/LOWER)",
+    )
+    ap.add_argument(
         "--ukf",
         action="store_true",
         help="instead: UKF diagnosis (exact / white-noise / drifting odometry, noise scaled by 1, 0.1, 0.01)",
@@ -55,6 +61,9 @@ def main() -> None:
         return
     if args.bias:
         edge_bias(args.seeds, args.frames)
+        return
+    if args.noise_model:
+        noise_model(args.seeds, args.frames)
         return
     fronts = ("simulated", "detect") if args.frontend == "both" else (args.frontend,)
     rows = []
@@ -185,39 +194,147 @@ def edge_bias(seeds: list[int], frames: int) -> None:
                 )
 
 
+def noise_model(seeds: list[int], frames: int) -> None:
+    """RMS normal offset of the points the pipeline feeds the solver from the true rims, by band width.
+
+    Runs the detect front end without the band filter and without band weights
+    (``min_band_px=0``, ``band_weights=False``) and takes the points of the final solve; each
+    point's signed Sampson distance to its true rim conic (simulator camera and wafer poses) is
+    binned by rim and by the band width predicted from the truth
+    (:func:`autoteach.pipeline.band_width`). Prints the RMS per bin and its ratio to the RMS of
+    upper-rim points on bands of at least 3 px: the relative noise of
+    ``pipeline.BAND_NOISE_UPPER`` / ``BAND_NOISE_LOWER``.
+    """
+    import numpy as np
+
+    from autoteach.pipeline import _pinhole_k, band_width
+
+    rows = []
+    for seed in seeds:
+        s = simulate_session(seed=seed, frames=frames, render=True)
+        r = autoteach(s, frontend="detect", seed=seed, min_band_px=0.0, band_weights=False)
+        k, rad, h = _pinhole_k(s.camera), s.config.wafer_radius, s.config.wafer_thickness
+        true_slots = [int(v) for v in s.wafer_slots]
+        c0 = np.diag([1.0, 1.0, -rad * rad])
+        o = r.observations
+        for i, (f, w, rim) in enumerate(zip(o["frames"], o["wafers"], o["rims"], strict=True)):
+            slot = int(r.wafer_slots[w])
+            if slot not in true_slots:
+                continue
+            t_wo = np.asarray(s.wafer_poses[true_slots.index(slot)], dtype=np.float64)
+            t_cw = np.linalg.inv(s.camera_poses[f])
+            rim_t = []
+            for kind in (rim, 1 - rim):
+                t = t_wo.copy()
+                t[:3, 3] += t[:3, 2] * ((0.5 if kind == 0 else -0.5) * h)
+                rim_t.append(t_cw @ t)
+            hi = np.linalg.inv(k @ rim_t[0][:3, [0, 1, 3]])
+            c = hi.T @ c0 @ hi
+            t_other = rim_t[1]
+            p = o["points"][o["start"][i] : o["start"][i + 1]]
+            ph = np.column_stack([p, np.ones(len(p))])
+            cp = ph @ c.T
+            d = np.einsum("ij,ij->i", ph, cp) / (2.0 * np.hypot(cp[:, 0], cp[:, 1]))
+            b = band_width(p, hi, t_other, c, k, rad)
+            rows.extend(zip([rim] * len(p), d, b, strict=True))
+    a = np.array(rows)
+    ref = a[(a[:, 0] == 0) & (a[:, 2] >= 3.0), 1]
+    r0 = float(np.sqrt(np.mean(ref**2)))
+    print(f"noise model: {len(a)} points, seeds {seeds}; reference RMS (upper rim, band >= 3 px) {r0:.4f} px")
+    edges = (0.0, 1.0, 1.5, 2.0, 2.25, 2.5, 2.75, 3.0, 3.25, 3.5, 4.0, 99.0)
+    for rim in (0, 1):
+        for lo, hi_ in zip(edges[:-1], edges[1:], strict=True):
+            m = (a[:, 0] == rim) & (a[:, 2] >= lo) & (a[:, 2] < hi_)
+            if m.sum() >= 50:
+                rms = float(np.sqrt(np.mean(a[m, 1] ** 2)))
+                print(
+                    f"noise model {('upper', 'lower')[rim]} band {lo:.2f}-{hi_:.2f} px: n {m.sum():6d} "
+                    f"mean {a[m, 1].mean():+.4f} rms {rms:.4f} ratio {rms / r0:.2f}"
+                )
+
+
 def ukf_diagnosis(seeds: list[int], frames: int) -> None:
-    """Final UKF offset errors and σ (θ1, θ2, θ4) per odometry model: what limits eq. (5.1)–(5.2)."""
+    """UKF offsets (θ1, θ2, θ4) against their Cramér–Rao bound and the batch estimate (eqs. (5.1)–(5.2)).
+
+    For each seed and trajectory (the default session and a teaching motion that turns the arm:
+    yaw ±30°, x 25 cm, y ±30 cm) and each odometry — the simulator's drifting visual odometry
+    (world-frame increments, :func:`autoteach.sim.simulate_odometry`) and a SLAM with a map
+    (relative poses, :func:`autoteach.sim.odometry.simulate_slam`) — prints the bound
+    (:func:`~autoteach.sim.odometry.offset_information`), the batch generalised-least-squares
+    estimate over the whole session (:func:`~autoteach.sim.odometry.batch_offsets`: the best any
+    filter can do) and the UKF's final offsets and σ, with the noise matched to the odometry and
+    (drifting odometry) with the seed's eq. (5.2) noise.
+    """
     import math
 
     import numpy as np
 
     from autoteach import _core
+    from autoteach.geometry import WaferRobot
     from autoteach.pipeline import _robot_array
-    from autoteach.sim.odometry import OdometryConfig, simulate_odometry, true_increments
+    from autoteach.sim import SimConfig, TrajectoryConfig
+    from autoteach.sim.odometry import (
+        OdometryConfig,
+        SlamConfig,
+        batch_offsets,
+        offset_information,
+        simulate_odometry,
+        simulate_slam,
+    )
 
-    for seed in seeds:
-        s = simulate_session(seed=seed, frames=frames, render=False)
-        robot, base = _robot_array(s.config.robot), np.array(s.config.base_pose)
-        enc = np.ascontiguousarray(s.joints_encoder)
-        true = np.asarray(s.calibration.joint_offsets)[[0, 1, 3]]
-        cases = [("exact", true_increments(s.camera_poses), OdometryConfig(1e-7, 1e-8, 0.0, 0.0))]
-        for k in (1.0, 0.1, 0.01):
-            white = OdometryConfig(1e-4 * k, math.radians(0.01) * k, 0.0, 0.0)
-            drift = OdometryConfig(1e-4 * k, math.radians(0.01) * k, 5e-6 * k, math.radians(0.0005) * k)
-            cases.append((f"white x{k:g}", simulate_odometry(s.camera_poses, seed, white), white))
-            cases.append((f"drift x{k:g}", simulate_odometry(s.camera_poses, seed, drift), drift))
-        # The pipeline's default odometry with the tuned noise levels printed in eq. (5.2)
-        # (w_T 30/30/1.5 mm, w_E 0.2°, v_T 2/2/0.5 mm, v_E 1°, v_θ 0.05° per frame).
-        cases.append(("drift x1 / eq.(5.2) noise", simulate_odometry(s.camera_poses, seed), None))
-        for name, inc, cfg in cases:
-            noise = None if cfg is None else cfg.ukf_noise()
-            r = _core.handeye_ukf(robot, base, enc, np.ascontiguousarray(inc), noise)
-            err = np.degrees(np.asarray(r["offsets"])[-1] - true)
-            sd = np.degrees(np.asarray(r["offset_std"])[-1])
-            print(
-                f"seed {seed} UKF odometry {name:<26} error [deg] {np.array2string(err, precision=4)} "
-                f"σ [deg] {np.array2string(sd, precision=4)} max|e|/σ {np.max(np.abs(err) / sd):.2f}"
-            )
+    teach = TrajectoryConfig(yaw_max=math.radians(30.0), x_range=(-0.60, -0.35), y_range=(-0.15, 0.15))
+    fmt = lambda v: "[" + " ".join(f"{x:7.4f}" if math.isfinite(x) else "    n/a" for x in v) + "]"  # noqa: E731
+    worst: dict[str, float] = {}
+    for traj_name, cfg in (("default", SimConfig()), ("teach", SimConfig(trajectory=teach))):
+        for seed in seeds:
+            s = simulate_session(seed=seed, frames=frames, render=False, config=cfg)
+            robot_arr, base = _robot_array(s.config.robot), np.array(s.config.base_pose)
+            robot = WaferRobot(params=s.config.robot, base=base)
+            enc = np.ascontiguousarray(s.joints_encoder)
+            sn = np.array(s.config.encoder_noise)
+            true = np.asarray(s.calibration.joint_offsets)[[0, 1, 3]]
+            slam = SlamConfig()
+            vo = OdometryConfig()
+            cases = [
+                ("VO drift, matched", simulate_odometry(s.camera_poses, seed), vo, "world", vo.ukf_noise(), None),
+                ("VO drift, eq.(5.2)", simulate_odometry(s.camera_poses, seed), vo, "world", None, None),
+                ("SLAM map", simulate_slam(s.camera_poses, seed, slam), slam, "camera", slam.ukf_noise(sn), slam),
+            ]
+            for name, inc, ocfg, frame, noise, slam_cfg in cases:
+                t0 = time.perf_counter()
+                info = offset_information(robot, enc, true, ocfg, sn, frame)
+                est, _, bad = batch_offsets(robot, enc, inc, ocfg, sn, frame)
+                t_batch = time.perf_counter() - t0
+                t0 = time.perf_counter()
+                r = _core.handeye_ukf(
+                    robot_arr,
+                    base,
+                    enc,
+                    np.ascontiguousarray(inc),
+                    noise,
+                    odometry=None if slam_cfg is None else slam_cfg.ukf_odometry(),
+                )
+                t_ukf = time.perf_counter() - t0
+                crb = np.degrees(info.crb_std)
+                ok = np.isfinite(crb)
+                e_b = np.where(ok, np.degrees(est - true), math.nan)
+                e_u = np.where(ok, np.degrees(np.asarray(r["offsets"])[-1] - true), math.nan)
+                sd_u = np.degrees(np.asarray(r["offset_std"])[-1])
+                key = f"{traj_name} / {name}"
+                worst[key] = max(worst.get(key, 0.0), float(np.nanmax(np.abs(e_u))))
+                worst[key + " CRB"] = max(worst.get(key + " CRB", 0.0), float(np.max(crb[ok])))
+                print(
+                    f"seed {seed} {traj_name:<7} {name:<19} CRB {fmt(crb)} batch err {fmt(e_b)} "
+                    f"UKF err {fmt(e_u)} σ {fmt(np.where(ok, sd_u, math.nan))} "
+                    f"max|e|/σ {np.nanmax(np.abs(e_u) / sd_u):.2f} unobservable {list(bad) or '-'} "
+                    f"[batch {t_batch:.1f} s, UKF {t_ukf * 1e3:.0f} ms]",
+                    flush=True,
+                )
+    for key in sorted(k for k in worst if not k.endswith(" CRB")):
+        print(
+            f"summary UKF {key}: worst offset error {worst[key]:.4f} deg, worst CRB {worst[key + ' CRB']:.4f} deg "
+            f"(seeds {seeds}, {frames} frames; observable offsets only)"
+        )
 
 
 if __name__ == "__main__":

@@ -64,6 +64,40 @@ def test_odometry_round_trip_and_drift():
     assert err[-1] > err[3] > 0.0
 
 
+def test_slam_mot_point_sigma_scale_is_validated_and_used():
+    s = simulate_session(seed=1, frames=12, render=False)
+    from autoteach.pipeline import _pinhole_k, simulated_frontend
+
+    obs = simulated_frontend(s, seed=1)
+    args = (
+        _pinhole_k(s.camera),
+        _robot_array(s.config.robot),
+        s.config.wafer_radius,
+        s.config.wafer_thickness,
+        np.ascontiguousarray(s.joints_encoder),
+        obs.frames,
+        obs.wafers,
+        obs.rims,
+        obs.start,
+        np.ascontiguousarray(obs.points),
+        np.linalg.inv(np.asarray(s.wafer_poses[0])) @ np.array(s.config.base_pose),
+        np.zeros(5),
+        np.array([[0, 0, (sl - s.wafer_slots[0]) * s.config.slot_pitch, 0, 0] for sl in s.wafer_slots], float),
+    )
+    n = len(obs.points)
+    for bad in (np.ones(n + 1), np.zeros(n), np.full(n, np.nan)):
+        with pytest.raises(InvalidInputError, match="point_sigma_scale"):
+            _core.handeye_slam_mot(*args, pixel_sigma=0.3, point_sigma_scale=bad)
+    # A uniform factor 2 is the same problem as a pixel σ twice as large: same estimate, same
+    # covariance; any other factor changes the covariance.
+    a = _core.handeye_slam_mot(*args, pixel_sigma=0.3, point_sigma_scale=np.full(n, 2.0), huber=None)
+    b = _core.handeye_slam_mot(*args, pixel_sigma=0.6, huber=None)
+    np.testing.assert_allclose(a["base_pose"], b["base_pose"], atol=1e-9)
+    np.testing.assert_allclose(a["covariance"], b["covariance"], rtol=1e-6, atol=1e-18)
+    c = _core.handeye_slam_mot(*args, pixel_sigma=0.6, point_sigma_scale=np.full(n, 1.5), huber=None)
+    assert c["covariance"][3, 3] > 2.0 * b["covariance"][3, 3]
+
+
 def test_slam_mot_rejects_inconsistent_observations():
     p = _robot_array(RobotParams())
     enc = np.zeros((3, 5))

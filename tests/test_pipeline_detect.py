@@ -212,6 +212,50 @@ def test_narrow_band_edge_points_are_the_biased_ones(session, detections):
     assert kept.stats["rims_associated"] == len(obs)
 
 
+def test_band_weights_follow_the_detector_noise(session, detections):
+    # The per-point σ factors of ``band_weights`` (pipeline.band_sigma_scale, measured on other
+    # sessions) against this session's truth: points given a larger σ stray farther from the
+    # true rim, and once divided by their factor the two groups are alike.
+    k, cfg = _k(session), session.config
+    wafers = np.stack([wafer_params_of(p) for p in session.wafer_poses])
+    obs = pipeline.gate_detections(
+        detections,
+        session.camera_poses,
+        wafers,
+        np.asarray(session.wafer_slots),
+        k=k,
+        radius=cfg.wafer_radius,
+        thickness=cfg.wafer_thickness,
+        gate_px=1.0,
+        band_weights=True,
+    )
+    assert obs.sigma_scale is not None and obs.sigma_scale.shape == (len(obs.points),)
+    assert np.all(obs.sigma_scale >= 1.0)
+    off = []
+    for i, (f, w, rim) in enumerate(zip(obs.frames, obs.wafers, obs.rims, strict=True)):
+        p = obs.points[obs.start[i] : obs.start[i + 1]]
+        conic = pipeline.rim_conic(k, session.camera_poses[f], wafers[w], rim, cfg.wafer_radius, cfg.wafer_thickness)
+        off.append(pipeline.conic_distance(p, conic))
+    off, s = np.concatenate(off), obs.sigma_scale
+    low, high = s < 1.2, s >= 1.6
+    assert low.sum() > 1000 and high.sum() > 300
+    rms = lambda m, x: float(np.sqrt(np.mean(x[m] ** 2)))  # noqa: E731
+    assert rms(high, off) > 1.5 * rms(low, off)
+    assert 0.6 < rms(high, off / s) / rms(low, off / s) < 1.6
+    # Without band weights no factors are produced.
+    plain = pipeline.gate_detections(
+        detections,
+        session.camera_poses,
+        wafers,
+        np.asarray(session.wafer_slots),
+        k=k,
+        radius=cfg.wafer_radius,
+        thickness=cfg.wafer_thickness,
+        gate_px=1.0,
+    )
+    assert plain.sigma_scale is None
+
+
 def wafer_pose_rims(w: np.ndarray, rim: int, thickness: float) -> tuple[np.ndarray, np.ndarray]:
     """World frames of a wafer's rim ``rim`` and of its other rim."""
     out = []

@@ -487,3 +487,150 @@ def test_indefinite_covariance_is_reported_or_repaired():
         assert r.P[1, 1] == pytest.approx(1.1, rel=1e-12)
         r.update(np.array([0.2]))
         assert np.all(np.linalg.eigvalsh(r.P) > 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# The auto-teaching UKF (000_3b1454b2b2194811.txt eqs. (5.1)–(5.2)): what the odometry can tell
+# about the joint zero offsets (Cramér–Rao bound) and whether the filter reaches it.
+# ---------------------------------------------------------------------------------------------
+
+#: A teaching motion that turns the arm (yaw ±30°, 25 × 30 cm): the offsets' signal in the camera
+#: motion grows with the change of the arm's configuration.
+TEACH = dict(yaw_max=math.radians(30.0), x_range=(-0.60, -0.35), y_range=(-0.15, 0.15))
+
+
+def _session(frames, seed=0, teach=True):
+    from autoteach.geometry import WaferRobot
+    from autoteach.sim import SimConfig, TrajectoryConfig, simulate_session
+
+    cfg = SimConfig(trajectory=TrajectoryConfig(**TEACH)) if teach else SimConfig()
+    s = simulate_session(seed=seed, frames=frames, render=False, config=cfg)
+    robot = WaferRobot(params=s.config.robot, base=np.array(s.config.base_pose))
+    return s, robot, np.asarray(s.calibration.joint_offsets)[[0, 1, 3]]
+
+
+def test_offset_fisher_information_matches_finite_differences():
+    """I = Jᵀ Σ⁻¹ J with the closed-form J (joint twists) against J by central differences of FK."""
+    from autoteach.sim.odometry import OdometryConfig, SlamConfig, offset_information, predicted_increments
+
+    s, robot, true = _session(40, seed=1)
+    enc = np.asarray(s.joints_encoder)
+    for frame, cfg in (("world", OdometryConfig()), ("camera", OdometryConfig()), ("camera", SlamConfig())):
+        info = offset_information(robot, enc, true, cfg, s.config.encoder_noise, frame)
+        h = 1e-6
+        jfd = np.zeros_like(info.jacobian)
+        for j in range(3):
+            d = np.zeros(3)
+            d[j] = h
+            diff = predicted_increments(robot, enc, true + d, frame) - predicted_increments(robot, enc, true - d, frame)
+            jfd[:, j] = (diff / (2 * h)).T.reshape(-1)
+        chol = np.linalg.cholesky(info.covariance)
+        wj = np.linalg.solve(chol, jfd)
+        fisher_fd = wj.T @ wj
+        scale = np.abs(info.fisher).max()
+        assert np.abs(fisher_fd - info.fisher).max() < 1e-6 * scale, (frame, fisher_fd, info.fisher)
+        # All joint axes are parallel: the rotation increments do not depend on the offsets.
+        n = len(enc) - 1
+        assert np.abs(jfd[3 * n :]).max() < 1e-7
+        if frame == "camera":
+            # θ1 turns the whole trajectory rigidly about the base z axis: invisible in relative motion.
+            assert np.abs(jfd[:, 0]).max() < 1e-7
+            assert info.unobservable == ("joint1",) and math.isinf(info.crb_std[0])
+        else:
+            assert info.unobservable == () and np.all(np.isfinite(info.crb_std))
+
+
+def test_offset_bound_matches_the_spread_of_the_batch_estimate():
+    """The CRB (from the modelled covariance) against the spread of the batch estimate over 24 SLAM noise draws."""
+    from autoteach.sim.odometry import SlamConfig, batch_offsets, offset_information, simulate_slam
+
+    s, robot, true = _session(80, seed=2)
+    enc = np.asarray(s.joints_encoder)
+    cfg = SlamConfig(map_translation=1e-4)
+    info = offset_information(robot, enc, true, cfg, s.config.encoder_noise, "camera")
+    errs = []
+    for k in range(24):
+        inc = simulate_slam(s.camera_poses, 100 + k, cfg)
+        est_k, _, bad = batch_offsets(robot, enc, inc, cfg, s.config.encoder_noise, "camera", 3, info)
+        assert bad == ("joint1",)
+        errs.append(est_k[1:] - true[1:])
+    spread = np.sqrt(np.mean(np.square(errs), axis=0))  # RMS about the truth (the estimator is unbiased)
+    ratio = spread / info.crb_std[1:]
+    # 24 draws: the RMS of a unit normal lies in [0.67, 1.33] with probability > 99 %.
+    assert np.all((ratio > 0.6) & (ratio < 1.4)), (ratio, np.degrees(info.crb_std))
+
+
+def test_ukf_with_slam_odometry_reaches_the_bound_and_converges():
+    """UKF (SLAM increments, state augmented by the SLAM's error) against simulator truth and the CRB."""
+    from autoteach import _core
+    from autoteach.pipeline import _robot_array
+    from autoteach.sim.odometry import SlamConfig, batch_offsets, offset_information, simulate_slam
+
+    s, robot, true = _session(200, seed=0)
+    enc = np.ascontiguousarray(s.joints_encoder)
+    cfg = SlamConfig()
+    inc = simulate_slam(s.camera_poses, 0, cfg)
+    run = _core.handeye_ukf(
+        _robot_array(s.config.robot),
+        np.array(s.config.base_pose),
+        enc,
+        np.ascontiguousarray(inc),
+        cfg.ukf_noise(s.config.encoder_noise),
+        odometry=cfg.ukf_odometry(),
+    )
+    info = offset_information(robot, enc, true, cfg, s.config.encoder_noise, "camera")
+    est_b, _, _ = batch_offsets(robot, enc, inc, cfg, s.config.encoder_noise, "camera")
+    err = run["offsets"][-1] - true
+    sd = run["offset_std"][-1]
+    crb = info.crb_std
+    # θ2, θ4: inside 3σ, within 0.02°, σ near the bound, and next to the batch estimate.
+    assert np.all(np.abs(err[1:]) < 3 * sd[1:]), (np.degrees(err), np.degrees(sd))
+    assert np.all(np.abs(err[1:]) < math.radians(0.02)), np.degrees(err)
+    assert np.all(sd[1:] < 1.5 * crb[1:]), (np.degrees(sd), np.degrees(crb))
+    assert np.all(sd[1:] > 0.9 * crb[1:]), (np.degrees(sd), np.degrees(crb))
+    assert np.all(np.abs(run["offsets"][-1][1:] - est_b[1:]) < crb[1:]), (
+        np.degrees(run["offsets"][-1]),
+        np.degrees(est_b),
+    )
+    # θ1 is unobservable from relative motion: not estimated, reported with its prior (2°).
+    assert list(run["observable"]) == [False, True, True]
+    assert abs(run["offsets"][-1][0]) < 1e-6 and sd[0] == 0.035
+    # Convergence over frames: σ shrinks from the prior.
+    assert np.all(run["offset_std"][0][1:] > 10 * sd[1:])
+
+
+def test_ukf_slam_odometry_bad_values_raise():
+    from autoteach import _core
+    from autoteach.pipeline import _robot_array
+    from autoteach.sim import SimConfig
+
+    p = _robot_array(SimConfig().robot)
+    enc = np.tile([0.2, 1.4, 0.3, -1.5, 0.1], (3, 1))
+    inc = np.zeros((2, 6))
+    with pytest.raises(InvalidInputError, match="4 values"):
+        _core.handeye_ukf(p, np.eye(4), enc, inc, odometry=[1e-4, 1e-4, 0.0])
+    with pytest.raises(InvalidInputError, match="map_step"):
+        _core.handeye_ukf(p, np.eye(4), enc, inc, odometry=[1e-4, 1e-4, 0.0, 1.0])
+    with pytest.raises(InvalidInputError, match="loc_t"):
+        _core.handeye_ukf(p, np.eye(4), enc, inc, odometry=[0.0, 1e-4, 0.0, 0.5])
+
+
+def test_pipeline_ukf_slam_odometry_reports_joint1_unobservable():
+    """autoteach(..., ukf_odometry="slam"): SLAM increments, θ1 unobservable, θ2/θ4 errors against the truth."""
+    from autoteach.pipeline import autoteach
+    from autoteach.sim import simulate_session
+
+    s = simulate_session(seed=3, frames=60, render=False)
+    true = np.asarray(s.calibration.joint_offsets)[[0, 1, 3]]
+    vo = autoteach(s, frontend="simulated", seed=3, window=0)
+    assert vo.ukf["observable"] == [True, True, True] and vo.offset_status["joint1"] == "ukf"
+    slam = autoteach(s, frontend="simulated", seed=3, window=0, ukf_odometry="slam")
+    assert slam.ukf["observable"] == [False, True, True]
+    assert slam.offset_status["joint1"].startswith("unobservable")
+    err = np.abs(slam.ukf["offsets"][-1] - true)[1:]
+    assert slam.ukf["errors"]["joint_offset_deg"] == pytest.approx(np.degrees(err.max()))
+    assert np.all(err < 3 * slam.ukf["offset_std"][-1][1:])
+    # The dead-reckoned SLAM trajectory starts at the uncalibrated forward kinematics.
+    np.testing.assert_allclose(slam.ukf["odometry_poses"][0], slam.ukf["encoder_poses"][0])
+    with pytest.raises(InvalidInputError, match="ukf_odometry"):
+        autoteach(s, frontend="simulated", window=0, ukf_odometry="map")

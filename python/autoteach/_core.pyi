@@ -1004,11 +1004,14 @@ def handeye_slam_mot(
     estimate_mount: bool = False,
     estimate_links: list[int] = [],
     free_camera: tuple[list[float], NDArray[np.float64] | None, list[float]] | None = None,
+    point_sigma_scale: NDArray[np.float64] | None = None,
 ) -> dict[str, object]:
     """SLAM-MOT calibration (000_3b1454b2b2194811.txt §5.3): batch (and sliding-window) solve with covariances.
 
     ``free_camera = (motion_sigma (6), odometry (F-1, 4, 4) or None, odometry_sigma (6))`` switches to
     per-frame camera poses tied by the robot motion factor of eqs. (5.10)–(5.12).
+    ``point_sigma_scale`` (one factor per point, > 0): point ``i`` has the standard deviation
+    ``pixel_sigma · point_sigma_scale[i]`` (eq. (5.5) per point).
     """
 
 def handeye_ukf(
@@ -1018,8 +1021,14 @@ def handeye_ukf(
     increments: NDArray[np.float64],
     noise: list[float] | None = None,
     offset_std0: float = 0.035,
+    odometry: list[float] | None = None,
 ) -> dict[str, object]:
-    """UKF fusion of visual odometry and encoders, eqs. (5.1)–(5.2); offsets of joint1, joint2, joint4."""
+    """UKF fusion of visual odometry and encoders, eqs. (5.1)–(5.2); offsets of joint1, joint2, joint4.
+
+    ``odometry``: ``None`` for world-frame increments with white errors, or ``[loc_t, loc_r, map_t,
+    map_step]`` for the relative poses of a SLAM with a map (state augmented by its error; joint1
+    then unobservable, ``observable`` in the result).
+    """
 
 def handeye_resolution(
     k: NDArray[np.float64],

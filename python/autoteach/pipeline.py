@@ -15,8 +15,12 @@ blade-1 wrist offset (joint3) never affects an image; the shoulder offset (joint
 of the base and the lift offset exactly a z shift of the base (all joint axes are vertical and the
 shoulder axis passes through the base origin). SLAM-MOT therefore estimates the *effective* base
 pose ``T_wb·Rz(−δ1)·Tz(−δh)``, the elbow (joint2) and blade-2 wrist (joint4) zero offsets and the
-wafers; the others are reported as unobservable, never as numbers. The UKF, whose visual-odometry
-translation increments are expressed in the world frame of the known base, also estimates δ1.
+wafers; the others are reported as unobservable, never as numbers. The UKF with
+``ukf_odometry="vo"`` (the default) takes visual-odometry translation increments expressed in the
+world frame of the known base, which is what makes δ1 visible to it (a real odometry does not
+know its initial heading); with ``ukf_odometry="slam"`` (relative poses of a SLAM with a map, the
+seed's ORB-SLAM2) δ1 is invisible to relative motion and reported unobservable, and δ2, δ4 reach
+their Cramér–Rao bound (``autoteach.sim.odometry.offset_information``).
 
 Errors against ground truth are computed in the true reference-wafer frame after aligning the
 estimate's yaw gauge to the truth (a rotation about the reference normal), so the base rotation
@@ -263,6 +267,9 @@ class Observations:
     n_wafers: int
     slots: np.ndarray
     stats: dict[str, Any] = field(default_factory=dict)
+    #: Per-point factors of the edge-point standard deviation (aligned with ``points``) or
+    #: ``None`` (every point has the solver's ``pixel_sigma``).
+    sigma_scale: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -426,6 +433,7 @@ def detect_frontend(
     min_points: int = 12,
     min_track_frames: int = 5,
     slot_gate_px: float = 15.0,
+    slot_births: bool = True,
     progress: bool = False,
 ) -> Observations:
     """Edge observations from detections (ch. 3) and tracking (ch. 4), with slots from the nominal chain.
@@ -437,14 +445,21 @@ def detect_frontend(
     carrier slot: the slot height (``(s − 1)·pitch`` above slot 1, carrier centre = median of the
     tracks' 3D circle centres) whose rim conics, projected through the nominal chain, explain its
     edge points best (mean distance truncated at ``slot_gate_px``). Tracks of one slot are one
-    wafer (a wafer lost and re-acquired gets a new track id). The statistics of the front end are
-    in :attr:`Observations.stats`.
+    wafer (a wafer lost and re-acquired gets a new track id). With ``slot_births`` the tracker
+    gets the carrier pitch (``WaferTracker(slot_pitch=pitch)``): the free slots next to each
+    3D-estimated track are birth hypotheses of its assignment, so a track whose own wafer is
+    missed in a frame does not take over the untracked neighbour one pitch away. The statistics
+    of the front end are in :attr:`Observations.stats`.
     """
     from autoteach.track import WaferTracker
 
     cam = session.camera
     tracker = WaferTracker(
-        intrinsics=k, image_size=(cam.width, cam.height), wafer_radius=radius, normal_prior=(0.0, 0.0, 1.0)
+        intrinsics=k,
+        image_size=(cam.width, cam.height),
+        wafer_radius=radius,
+        normal_prior=(0.0, 0.0, 1.0),
+        slot_pitch=pitch if slot_births else None,
     )
     for f, edges in enumerate(detections):
         tracker.update(edges, camera_poses[f])
@@ -533,6 +548,10 @@ def _drop_sparse_wafers(obs: Observations, min_frames: int) -> Observations:
     start = np.concatenate([[0], np.cumsum([len(p) for p in pts])]).astype(int).tolist()
     stats["rims_used"] = len(keep)
     stats["frames_used"] = len({obs.frames[i] for i in keep})
+    scale = None
+    if obs.sigma_scale is not None:
+        parts = [obs.sigma_scale[obs.start[i] : obs.start[i + 1]] for i in keep]
+        scale = np.concatenate(parts) if parts else np.zeros(0)
     return Observations(
         [obs.frames[i] for i in keep],
         [obs.wafers[i] for i in keep],
@@ -542,7 +561,36 @@ def _drop_sparse_wafers(obs: Observations, min_frames: int) -> Observations:
         obs.n_wafers,
         obs.slots,
         stats,
+        scale,
     )
+
+
+#: Edge-point noise of the detector against the predicted side-band width (pixels), per rim:
+#: RMS normal offset of the detected points from the true rim, relative to that of upper-rim
+#: points on bands of at least 3 px (0.061 px), at the centres of the bins 0–1, 1–1.5, then
+#: 0.25 px wide to 3.5, and 3.5–4 px. Measured on the simulated sessions of seeds 0–4 (200
+#: frames, 367 k gated points; ``python benchmarks/autoteach_sessions.py --noise-model --seeds
+#: 0 1 2 3 4``); seeds 5–7 were not used. Where the band narrows its two blurred edges
+#: merge and the band-profile fit of the detector is biased along the edge; the lower rim,
+#: the band's far edge, is the worse one from 3 px down.
+BAND_NOISE_WIDTH_PX: tuple[float, ...] = (0.5, 1.25, 1.625, 1.875, 2.125, 2.375, 2.625, 2.875, 3.125, 3.375, 3.75)
+#: Relative noise of the upper rim at :data:`BAND_NOISE_WIDTH_PX` (clamped below at 1).
+BAND_NOISE_UPPER: tuple[float, ...] = (4.1, 2.75, 2.9, 2.75, 2.05, 1.55, 1.15, 1.05, 1.1, 1.0, 0.8)
+#: Relative noise of the lower rim at :data:`BAND_NOISE_WIDTH_PX` (clamped below at 1).
+BAND_NOISE_LOWER: tuple[float, ...] = (6.5, 4.65, 2.75, 2.7, 2.7, 2.65, 1.8, 1.8, 1.45, 1.45, 0.85)
+
+
+def band_sigma_scale(band: np.ndarray, rim: int) -> np.ndarray:
+    """Per-point factor of the edge-point standard deviation from the predicted band width.
+
+    A heteroscedastic version of eq. (5.5)'s ``Ω^z = 1/σ²``: ``σ_i = σ·s(b_i)`` with ``s`` the
+    detector's measured relative edge noise at band width ``b_i`` (:data:`BAND_NOISE_UPPER` /
+    :data:`BAND_NOISE_LOWER`, linear in between, constant beyond the ends, never below 1 so
+    that the best points keep the solver's ``σ``). ``rim`` 0 is the upper, 1 the lower rim.
+    """
+    table = BAND_NOISE_UPPER if rim == 0 else BAND_NOISE_LOWER
+    s = np.interp(np.asarray(band, dtype=np.float64), BAND_NOISE_WIDTH_PX, table)
+    return np.maximum(s, 1.0)
 
 
 def band_width(
@@ -587,6 +635,7 @@ def gate_detections(
     points_per_rim: int = 24,
     min_points: int = 12,
     min_band_px: float = 0.0,
+    band_weights: bool = False,
 ) -> Observations:
     """Associate every detected edge with the projected prior, discarding outliers.
 
@@ -606,9 +655,13 @@ def gate_detections(
     visible arc its two edges blur into one and the detector's edge points are biased and
     noisier (measured against the simulator's truth, see ``docs/benchmarks.md``): those
     points carry a correlated error that the per-point noise model of eq. (5.5) lacks.
+
+    ``band_weights`` gives every kept point a standard-deviation factor from the predicted band
+    width (:func:`band_sigma_scale`; :attr:`Observations.sigma_scale`), so that the narrow-band
+    points count for what they are worth instead of all or nothing.
     """
     n_w = len(wafers)
-    best: dict[tuple[int, int, int], tuple[int, np.ndarray]] = {}
+    best: dict[tuple[int, int, int], tuple[int, np.ndarray, np.ndarray | None]] = {}
     n_edges = n_rejected = n_narrow = 0
     associated: set[tuple[int, int, int]] = set()
     # Rim frames (world) of every finite wafer, both rims, and 72 samples of each rim circle.
@@ -662,20 +715,26 @@ def gate_detections(
                 n_rejected += 1
                 continue
             associated.add((f, w, rim))
-            if min_band_px > 0.0 and q is not None:
+            scale = None
+            if (min_band_px > 0.0 or band_weights) and q is not None:
                 r = ids.index((w, rim))
-                narrow = band_width(q, hi[r], t_co[r ^ 1], conics[r], k, radius) < min_band_px
+                band = band_width(q, hi[r], t_co[r ^ 1], conics[r], k, radius)
+                narrow = band < min_band_px
                 n_narrow += int(narrow.sum())
                 q = q[~narrow]
                 n_in = len(q)
+                if band_weights:
+                    scale = band_sigma_scale(band[~narrow], rim)
                 if n_in < min_points:
                     n_rejected += 1
                     continue
             key = (f, w, rim)
             if key not in best or n_in > best[key][0]:
-                best[key] = (n_in, q)
-    frames, wafer_idx, rims, start, pts = [], [], [], [0], []
-    for (f, w, rim), (_, q) in sorted(best.items()):
+                best[key] = (n_in, q, scale)
+    frames, wafer_idx, rims, start, pts, scales = [], [], [], [0], [], []
+    for (f, w, rim), (_, q, scale) in sorted(best.items()):
+        if scale is not None:
+            scales.append(_subsample(scale, points_per_rim))
         q = _subsample(q, points_per_rim)
         frames.append(f)
         wafer_idx.append(w)
@@ -690,6 +749,7 @@ def gate_detections(
         np.concatenate(pts) if pts else np.zeros((0, 2)),
         n_w,
         np.asarray(slots, dtype=np.int64),
+        sigma_scale=np.concatenate(scales) if band_weights and scales else None,
     )
     obs.stats = {
         "edges": n_edges,
@@ -824,6 +884,7 @@ def autoteach(
     odometry_start: np.ndarray | None = None,
     use_ukf: bool = True,
     ukf_noise: Any = None,
+    ukf_odometry: str = "vo",
     baseline: bool = False,
     huber: float | None = 3.0,
     encoder_sigma: tuple[float, float, float, float] | None = None,
@@ -833,6 +894,8 @@ def autoteach(
     reset_tilts: bool = True,
     gate_px: tuple[float, ...] = (3.0, 1.5, 1.0),
     min_band_px: float = 2.5,
+    band_weights: bool = True,
+    slot_births: bool = True,
     camera_mode: str = "chain",
     motion_sigma: tuple[float, ...] = (2e-5, 2e-5, 2e-5, 2e-5, 2e-5, 2e-5),
     estimate_mount: bool = False,
@@ -875,6 +938,12 @@ def autoteach(
         ukf_noise: ``"seed"`` for the noise levels of eq. (5.2), 16 standard deviations (see
             ``autoteach._core.handeye_ukf``), or ``None``: matched to the simulated odometry when
             the pipeline simulates it, else eq. (5.2).
+        ukf_odometry: ``"vo"``: the odometry increments are world-frame, with white errors
+            (eq. (5.1) literally; simulated: the drifting visual odometry); ``"slam"``: they are
+            relative poses of a SLAM with a map (:class:`autoteach.sim.odometry.SlamConfig`;
+            simulated sessions without ``odometry`` get :func:`~autoteach.sim.odometry.simulate_slam`),
+            and the UKF models the SLAM's bounded error. Relative poses cannot see θ1 (it turns
+            the whole trajectory about the base z axis): the UKF then reports it unobservable.
         baseline: also solve with point reprojection and nearest-point association.
         huber: Huber threshold on whitened residuals (``None``: none).
         encoder_sigma: encoder noise of joint1, joint2, joint4, lift modelled per frame (default:
@@ -892,6 +961,12 @@ def autoteach(
         min_band_px: detect front end: edge points where the predicted side-face band of the
             wafer is narrower than this (pixels) are not used (see :func:`gate_detections`;
             0 keeps them).
+        band_weights: detect front end: in the last gate every kept point gets a standard
+            deviation ``σ·s(b)`` from the predicted side-band width ``b`` at the point
+            (:func:`band_sigma_scale`, the detector's measured edge noise) instead of the
+            common ``σ``.
+        slot_births: detect front end: give the tracker the carrier pitch so that free slots
+            next to a track are birth hypotheses (see :func:`detect_frontend`).
         camera_mode: ``"chain"`` (camera poses through the kinematic chain, eq. (5.9)) or
             ``"free"`` (a pose variable per frame tied to the robot by the relative motion
             factor of eqs. (5.10)–(5.12) and to the visual odometry by relative-pose factors
@@ -975,6 +1050,7 @@ def autoteach(
             n_slots=cfg.n_slots if cfg is not None else 26,
             points_per_rim=points_per_rim,
             min_track_frames=min_track_frames,
+            slot_births=slot_births,
             progress=progress,
         )
     timings["frontend_s"] = time.perf_counter() - t0
@@ -1017,29 +1093,52 @@ def autoteach(
     increments, odo_start, odo_sigma = _odometry(session, odometry, odometry_sigma, seed)
     if use_ukf:
         t0 = time.perf_counter()
-        noise = None if ukf_noise == "seed" else ukf_noise
-        if odometry is None and ukf_noise is None and increments is not None:
-            from autoteach.sim.odometry import OdometryConfig
+        from autoteach.sim.odometry import (
+            OdometryConfig,
+            SlamConfig,
+            integrate_odometry,
+            integrate_relative,
+            simulate_slam,
+        )
 
+        if ukf_odometry not in ("vo", "slam"):
+            raise InvalidInputError(f"ukf_odometry must be 'vo' or 'slam', got {ukf_odometry!r}")
+        noise = None if ukf_noise == "seed" else ukf_noise
+        ukf_inc = increments
+        slam = SlamConfig() if ukf_odometry == "slam" else None
+        if slam is not None:
+            if odometry is None and session.camera_poses is not None:
+                ukf_inc = simulate_slam(session.camera_poses, seed, slam)
+            if ukf_noise is None:
+                noise = slam.ukf_noise(cfg.encoder_noise if cfg is not None else (2e-5,) * 4 + (5e-6,))
+        elif odometry is None and ukf_noise is None and increments is not None:
             noise = OdometryConfig().ukf_noise()
-        if increments is not None:
+        if ukf_inc is not None:
             base_w = np.array(cfg.base_pose, dtype=np.float64) if cfg is not None else nominal_base
-            run = _core.handeye_ukf(robot_arr, base_w, enc, np.ascontiguousarray(increments, dtype=np.float64), noise)
+            run = _core.handeye_ukf(
+                robot_arr,
+                base_w,
+                enc,
+                np.ascontiguousarray(ukf_inc, dtype=np.float64),
+                noise,
+                odometry=None if slam is None else slam.ukf_odometry(),
+            )
             from autoteach.geometry import WaferRobot
-            from autoteach.sim.odometry import integrate_odometry
 
             robot = WaferRobot(params=params, base=base_w)
             encoder_poses = np.asarray(robot.camera_pose(enc), dtype=np.float64)
+            chain = integrate_odometry if slam is None else integrate_relative
             ukf_out = {
                 "poses": np.asarray(run["poses"]),
                 "offsets": np.asarray(run["offsets"]),
                 "offset_std": np.asarray(run["offset_std"]),
+                "observable": [bool(v) for v in run["observable"]],
                 "encoder_poses": encoder_poses,
-                "odometry_poses": integrate_odometry(encoder_poses[0], increments),
+                "odometry_poses": chain(encoder_poses[0], ukf_inc),
             }
             if session.calibration is not None:
                 true = np.asarray(session.calibration.joint_offsets)[[0, 1, 3]]
-                err = np.abs(ukf_out["offsets"][-1] - true)
+                err = np.abs(ukf_out["offsets"][-1] - true)[ukf_out["observable"]]
                 ukf_out["errors"] = {"joint_offset_deg": float(np.degrees(err.max()))}
                 ukf_out["true_offsets"] = true
         timings["ukf_s"] = time.perf_counter() - t0
@@ -1134,6 +1233,7 @@ def autoteach(
                     gate_px=gate,
                     points_per_rim=points_per_rim,
                     min_band_px=min_band_px if gi == len(gate_px) - 1 else 0.0,
+                    band_weights=band_weights and gi == len(gate_px) - 1,
                 )
                 if len(cand_obs) == 0:
                     break
@@ -1159,9 +1259,19 @@ def autoteach(
             )
         _, obs, args = best
         obs = _drop_sparse_wafers(obs, min_wafer_frames)
+        # The solve gets exactly the kept observations (a wafer with too few views is reported
+        # as not estimated and does not enter the solve).
+        args = (*args[:5], obs.frames, obs.wafers, obs.rims, obs.start, np.ascontiguousarray(obs.points), *args[10:])
         frontend_stats["gated"] = dict(obs.stats)
         seen = sorted(set(obs.wafers))
-    sol = _core.handeye_slam_mot(*args, factor="conic", window=int(window), init_heights=heights, **common)
+    sol = _core.handeye_slam_mot(
+        *args,
+        factor="conic",
+        window=int(window),
+        init_heights=heights,
+        point_sigma_scale=obs.sigma_scale,
+        **common,
+    )
     timings["slam_mot_s"] = time.perf_counter() - t0
     stages.update()
 
@@ -1199,7 +1309,7 @@ def autoteach(
         if j in est_idx:
             status[name] = "estimated"
             joint_offsets[j] = offsets_hat[j]
-        elif ukf_out is not None and j in (0, 1, 3):
+        elif ukf_out is not None and j in (0, 1, 3) and ukf_out["observable"][(0, 1, 3).index(j)]:
             status[name] = "ukf"
             joint_offsets[j] = ukf_out["offsets"][-1][(0, 1, 3).index(j)]
             offsets_std[j] = ukf_out["offset_std"][-1][(0, 1, 3).index(j)]
@@ -1266,7 +1376,12 @@ def autoteach(
         t0 = time.perf_counter()
         chain_only = {k: v for k, v in common.items() if k != "free_camera"}
         base_sol = _core.handeye_slam_mot(
-            *args, factor="point", window=0, init_heights=(-0.02, max(z_top, 0.05), 0.001), **chain_only
+            *args,
+            factor="point",
+            window=0,
+            init_heights=(-0.02, max(z_top, 0.05), 0.001),
+            point_sigma_scale=obs.sigma_scale,
+            **chain_only,
         )
         b = {
             "base_pose": np.asarray(base_sol["base_pose"]),

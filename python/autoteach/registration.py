@@ -176,8 +176,10 @@ def cpd_rigid(
         sigma2: Initial σ²; ``None`` for ``Σ‖x − y‖²/(D N M)``.
         e_step: ``"dense"`` evaluates every pair; ``"truncated"`` only pairs within ~8.6 σ
             (grid, relative error below 1e-8 per row); ``"fast_gauss"`` uses a Chebyshev fast
-            Gauss transform (kernel values to ~1e-12) when σ allows it; ``"auto"`` truncates
-            when it pays off and, above 10⁷ pairs, uses the fast Gauss transform at large σ.
+            Gauss transform (kernel values to ~1e-11) when σ allows it; ``"auto"`` truncates
+            when it pays off and, above 10⁶ pairs, uses the fast Gauss transform when it is
+            cheaper. Full-rank :func:`cpd_nonrigid` also applies its kernel ``G`` by the fast
+            Gauss transform when cheaper, except with ``"dense"`` (stored exact ``G``).
         return_P: Also return the ``(M, N)`` posterior matrix of the last E-step.
 
     Returns:

@@ -193,11 +193,19 @@ def _plot_convergence(plt: Any, r: AutoTeachResult, session: Any) -> Any:
     axes[1, 0].legend(fontsize=8)
     if r.ukf is not None:
         o = np.degrees(np.asarray(r.ukf["offsets"]))
+        sd = np.degrees(np.asarray(r.ukf["offset_std"])) if "offset_std" in r.ukf else None
+        observable = r.ukf.get("observable", [True] * o.shape[1])
         for i, name in enumerate(("joint1", "joint2", "joint4")):
-            axes[1, 1].plot(o[:, i], label=name)
+            if not observable[i]:
+                continue  # relative motion cannot see it (reported unobservable, not drawn)
+            (line,) = axes[1, 1].plot(o[:, i], label=name)
+            if sd is not None:
+                x = np.arange(len(o))
+                lo, hi = o[:, i] - 3.0 * sd[:, i], o[:, i] + 3.0 * sd[:, i]
+                axes[1, 1].fill_between(x, lo, hi, color=line.get_color(), alpha=0.15, lw=0)
             if "true_offsets" in r.ukf:
                 axes[1, 1].axhline(math.degrees(r.ukf["true_offsets"][i]), ls=":", c="k", lw=0.8)
-        axes[1, 1].set_title("UKF joint offsets over frames [deg]")
+        axes[1, 1].set_title("UKF joint offsets over frames [deg] (band: ±3σ)")
         axes[1, 1].legend(fontsize=8)
     for ax in axes.flat:
         ax.set_xlabel("frame")

@@ -1,36 +1,154 @@
 //! Whole-image wafer-rim detection on a rendered 1280×720 carrier image (target wafer in slot 5,
-//! disturbance wafer 2 slots above), single-threaded, and its stages.
+//! disturbance wafer 2 slots above), and its stages.
 //!
-//! Run: `cargo bench -p autoteach-detect --bench wafer_detect -- --warm-up-time 1 --measurement-time 3`.
+//! Run: `cargo bench -p autoteach-detect --bench wafer_detect -- --warm-up-time 1 --measurement-time 3`
+//! (prefix `RAYON_NUM_THREADS=1` for single-threaded figures).
+//!
+//! Per-stage profile: with `AUTOTEACH_DETECT_PROFILE=1` the bench first renders 10 scenes like
+//! `benchmarks/wafer_detection.py` (target in slot 5, disturbance 1–20 slots above, camera
+//! 0.42–0.55 m away, random lighting; fixed seed) and prints the median milliseconds per image of
+//! each stage over 4 repeats: Canny, linking, arc splitting, Algorithm 1, Algorithm 2, the
+//! validation and rim pairing of `detect_wafers` (total without band refinement minus the
+//! stages before it) and the band refinement (total minus total without it). With
+//! `AUTOTEACH_DETECT_PROFILE=only` it prints the profile and skips the criterion benches.
 
-use autoteach_detect::assembly::{AssemblyParams, assemble};
+use autoteach_detect::assembly::{AssemblyParams, assemble, merge_arcs, merge_segments};
 use autoteach_detect::edges::{
-    ArcParams, CannyParams, GrayView, LinkParams, canny, detect_arcs, link_edges,
+    ArcParams, CannyParams, GrayView, LinkParams, canny, detect_arcs, link_edges, split_arcs,
 };
 use autoteach_detect::wafers::{DetectParams, detect_wafers};
 use autoteach_geometry::camera::Camera;
 use autoteach_geometry::render::{self, Carrier, RenderOptions, Scene};
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
 use std::hint::black_box;
+use std::time::Instant;
+
+fn camera() -> Camera {
+    Camera::pinhole(1000.0, 1000.0, 639.5, 359.5, 1280, 720).expect("camera")
+}
+
+/// Camera at `(x, y, z)` looking along +x (image x = −y, image y = −z), yawed about z and
+/// pitched down (as `camera_pose` of `benchmarks/wafer_detection.py`).
+fn camera_pose(x: f64, y: f64, z: f64, yaw: f64, down: f64) -> Isometry3<f64> {
+    let axes = Matrix3::from_columns(&[-Vector3::y(), -Vector3::z(), Vector3::x()]);
+    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw)
+        * Rotation3::from_matrix_unchecked(axes)
+        * Rotation3::from_axis_angle(&Vector3::x_axis(), -down);
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_rotation_matrix(&r),
+    )
+}
 
 fn image() -> (Vec<u8>, usize, usize) {
     let carrier = Carrier::default();
     let scene = Scene::new(vec![carrier.slot_pose(5), carrier.slot_pose(7)]);
-    let camera = Camera::pinhole(1000.0, 1000.0, 639.5, 359.5, 1280, 720).expect("camera");
-    let axes = Matrix3::from_columns(&[-Vector3::y(), -Vector3::z(), Vector3::x()]);
-    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), 0.03)
-        * Rotation3::from_matrix_unchecked(axes)
-        * Rotation3::from_axis_angle(&Vector3::x_axis(), -0.14);
-    let t_wc = Isometry3::from_parts(
-        Translation3::new(-0.48, 0.02, 0.09),
-        UnitQuaternion::from_rotation_matrix(&r),
-    );
-    let img = render::render(&scene, &camera, &t_wc, &RenderOptions::default()).expect("render");
+    let t_wc = camera_pose(-0.48, 0.02, 0.09, 0.03, 0.14);
+    let img = render::render(&scene, &camera(), &t_wc, &RenderOptions::default()).expect("render");
     (img.data, img.width, img.height)
 }
 
+/// Ten scenes of the robustness test (fixed seed).
+fn scenes() -> Vec<Vec<u8>> {
+    let carrier = Carrier::default();
+    let mut rng = Pcg64::seed_from_u64(3);
+    (0..10)
+        .map(|i| {
+            let k = 1 + (2 * i) % 20;
+            let scene = Scene::new(vec![carrier.slot_pose(5), carrier.slot_pose(5 + k)]);
+            let z0 = 4.0 * carrier.pitch;
+            let t_wc = camera_pose(
+                rng.random_range(-0.55..-0.42),
+                rng.random_range(-0.05..0.05),
+                z0 + rng.random_range(0.02..0.07),
+                rng.random_range(-3f64..3.0).to_radians(),
+                rng.random_range(5f64..10.0).to_radians(),
+            );
+            let opts = RenderOptions {
+                gain: rng.random_range(0.5..1.5),
+                gradient: [rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3)],
+                seed: rng.random(),
+                ..RenderOptions::default()
+            };
+            render::render(&scene, &camera(), &t_wc, &opts)
+                .expect("render")
+                .data
+        })
+        .collect()
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Milliseconds of one call.
+fn ms<R>(f: impl FnOnce() -> R) -> (f64, R) {
+    let t = Instant::now();
+    let r = f();
+    (1e3 * t.elapsed().as_secs_f64(), r)
+}
+
+/// The per-stage profile (see the module documentation).
+fn stage_profile() {
+    let images = scenes();
+    let p = DetectParams::default();
+    let no_band = DetectParams {
+        band_refinement: false,
+        ..p
+    };
+    let names = [
+        "canny",
+        "link_edges",
+        "split_arcs",
+        "merge_arcs (Alg. 1)",
+        "merge_segments (Alg. 2)",
+        "validation + pairing",
+        "band refinement",
+        "detect_wafers total",
+    ];
+    let mut t: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
+    let mut rims = 0;
+    for _ in 0..4 {
+        rims = 0;
+        for data in &images {
+            let view = GrayView::new(data, 1280, 720).expect("image");
+            let (t0, map) = ms(|| canny(&view, &p.canny).expect("canny"));
+            let (t1, chains) = ms(|| link_edges(&map, &p.link).expect("link"));
+            let (t2, arcs) = ms(|| split_arcs(&map, &chains, &p.arcs).expect("split"));
+            let (t3, (s0, v0)) = ms(|| merge_arcs(&arcs, &p.assembly).expect("alg 1"));
+            let (t4, _) = ms(|| merge_segments(&arcs, s0, v0, &p.assembly).expect("alg 2"));
+            let (t5, _) = ms(|| detect_wafers(&view, &no_band).expect("detect"));
+            let (t6, found) = ms(|| detect_wafers(&view, &p).expect("detect"));
+            rims += found.len();
+            let before = t0 + t1 + t2 + t3 + t4;
+            for (k, v) in [t0, t1, t2, t3, t4, t5 - before, t6 - t5, t6]
+                .into_iter()
+                .enumerate()
+            {
+                t[k].push(v);
+            }
+        }
+    }
+    println!(
+        "stage profile: 10 scenes x 4 repeats, {} rayon thread(s), {rims} rims per pass; median ms per image",
+        rayon::current_num_threads()
+    );
+    for (name, v) in names.iter().zip(&mut t) {
+        println!("  {name:<26} {:>8.2}", median(v));
+    }
+}
+
 fn bench(c: &mut Criterion) {
+    if let Ok(v) = std::env::var("AUTOTEACH_DETECT_PROFILE") {
+        stage_profile();
+        if v == "only" {
+            return;
+        }
+    }
     let (data, w, h) = image();
     let view = GrayView::new(&data, w, h).expect("image");
     let params = DetectParams::default();
@@ -44,6 +162,10 @@ fn bench(c: &mut Criterion) {
     let map = canny(&view, &CannyParams::default()).expect("canny");
     c.bench_function("link_edges 1280x720", |b| {
         b.iter(|| link_edges(black_box(&map), &LinkParams::default()))
+    });
+    let chains = link_edges(&map, &LinkParams::default()).expect("link");
+    c.bench_function("split_arcs 1280x720", |b| {
+        b.iter(|| split_arcs(black_box(&map), &chains, &ArcParams::default()))
     });
     let arcs = detect_arcs(
         &view,

@@ -27,7 +27,7 @@ use nalgebra::{DMatrix, Vector2};
 
 use crate::assignment::solve_assignment_with_unassigned;
 use crate::edges::{Arc, Quadrant};
-use crate::ellipse::{EllipseFit, GeometricFitOptions, fit_ellipse_direct, fit_ellipse_geometric};
+use crate::ellipse::{EllipseFit, GeometricFitOptions, fit_screened};
 use crate::{DetectError, Result};
 
 /// Options of the assembly.
@@ -184,14 +184,17 @@ fn gap(a: &Part<'_>, b: &Part<'_>) -> f64 {
     d
 }
 
-/// Angular extent `(start, length)` (eccentric angle on `e`, length in `[0, 2π)`) of an ordered
-/// run of points, unwrapped along the run.
-fn extent(e: &Ellipse, points: &[Vector2<f64>]) -> (f64, f64) {
-    let mut t_prev = e.parameter_of(&points[0]);
+/// Angular extent `(start, length)` (eccentric angle, length in `[0, 2π)`) of an ordered run
+/// of points given by their eccentric angles `ts` on the fitted ellipse, unwrapped along the
+/// run.
+fn extent(ts: &[f64]) -> (f64, f64) {
+    let Some(&first) = ts.first() else {
+        return (0.0, 0.0);
+    };
+    let mut t_prev = first;
     let mut acc = 0.0;
     let (mut lo, mut hi) = (0.0f64, 0.0f64);
-    for p in &points[1..] {
-        let t = e.parameter_of(p);
+    for &t in &ts[1..] {
         let mut d = t - t_prev;
         d -= TAU * (d / TAU).round();
         acc += d;
@@ -199,28 +202,29 @@ fn extent(e: &Ellipse, points: &[Vector2<f64>]) -> (f64, f64) {
         hi = hi.max(acc);
         t_prev = t;
     }
-    let start = e.parameter_of(&points[0]) + lo;
+    let start = first + lo;
     (start.rem_euclid(TAU), (hi - lo).min(TAU))
 }
 
-/// Fraction of `points` strictly inside the angular extent `(start, len)` on `e` (with a
-/// margin of 1 % of the extent).
-fn inside_fraction(e: &Ellipse, points: &[Vector2<f64>], (start, len): (f64, f64)) -> f64 {
+/// Fraction of the points with eccentric angles `ts` strictly inside the angular extent
+/// `(start, len)` (with a margin of 1 % of the extent).
+fn inside_fraction(ts: &[f64], (start, len): (f64, f64)) -> f64 {
     let margin = 0.01 * len;
-    let n = points
+    let n = ts
         .iter()
-        .filter(|p| {
-            let d = (e.parameter_of(p) - start).rem_euclid(TAU);
+        .filter(|&&t| {
+            let d = (t - start).rem_euclid(TAU);
             d > margin && d < len - margin
         })
         .count();
-    n as f64 / points.len().max(1) as f64
+    n as f64 / ts.len().max(1) as f64
 }
 
-/// Whether two parts overlap when projected onto `e` (the first rejection condition of §3.2).
-fn overlap(e: &Ellipse, a: &[Vector2<f64>], b: &[Vector2<f64>], max_overlap: f64) -> bool {
-    inside_fraction(e, b, extent(e, a)) > max_overlap
-        || inside_fraction(e, a, extent(e, b)) > max_overlap
+/// Whether two parts overlap when projected onto the fitted ellipse (the first rejection
+/// condition of §3.2), from the eccentric angles of their points' foot points on it (`ta`,
+/// `tb`: the same as [`Ellipse::parameter_of`] of each point).
+fn overlap(ta: &[f64], tb: &[f64], max_overlap: f64) -> bool {
+    inside_fraction(tb, extent(ta)) > max_overlap || inside_fraction(ta, extent(tb)) > max_overlap
 }
 
 /// Fits the union of two parts and applies the combination rule; the fit if accepted.
@@ -253,22 +257,21 @@ fn combine(a: &Part<'_>, b: &Part<'_>, params: &AssemblyParams) -> Option<(Ellip
     let mut pts = Vec::with_capacity(a.points.len() + b.points.len());
     pts.extend_from_slice(a.points);
     pts.extend_from_slice(b.points);
-    let direct = fit_ellipse_direct(&pts).ok()?;
-    // The algebraic fit is biased on partial arcs, but a combination it fits worse than a few
-    // times the threshold is not an ellipse.
-    if !(direct.residual_mean < 4.0 * params.residual_threshold) {
-        return None;
-    }
     let opts = GeometricFitOptions {
         max_iterations: params.fit_iterations,
         ..GeometricFitOptions::default()
     };
-    let fit = fit_ellipse_geometric(&pts, Some(direct.ellipse), &opts).ok()?;
+    // The direct (algebraic) fit screens first: it is biased on partial arcs, but a
+    // combination it fits worse than a few times the threshold is not an ellipse. The
+    // geometric fit then starts from it (one preparation of the points for both).
+    let (fit, angles) = fit_screened(&pts, 4.0 * params.residual_threshold, &opts).ok()??;
     let r = fit.residual_mean;
     if !(r < params.residual_threshold) || !(fit.ellipse.a <= params.max_semi_major) {
         return None;
     }
-    if overlap(&fit.ellipse, a.points, b.points, params.max_overlap) {
+    let ts: Vec<f64> = angles.iter().map(|&(s, c)| s.atan2(c)).collect();
+    let (ta, tb) = ts.split_at(a.points.len());
+    if overlap(ta, tb, params.max_overlap) {
         return None;
     }
     Some((fit, r))
@@ -399,6 +402,12 @@ pub fn merge_segments(
     params: &AssemblyParams,
 ) -> Result<(Vec<Segment>, Vec<usize>)> {
     params.validate()?;
+    // Combination results by (arcs of the segment, arcs of the other part, whether that part is
+    // a segment): a pair that is unchanged from one iteration to the next gives the same result
+    // (the parts' points, ends and ellipses follow from their arcs), so it is not refitted.
+    type Key = (Vec<usize>, Vec<usize>, bool);
+    let mut cache: std::collections::HashMap<Key, Option<(EllipseFit, f64)>> =
+        std::collections::HashMap::new();
     for _ in 0..params.max_iterations {
         let ns = segments.len();
         // Parts 0..ns are segments, ns.. the remaining arcs.
@@ -427,7 +436,21 @@ pub fn merge_segments(
         let mut parent: Vec<usize> = (0..n).collect();
         for i in 0..ns {
             for j in i + 1..n {
-                if let Some(f) = combine(&parts[i], &parts[j], params) {
+                let other = if j < ns {
+                    segments[j].arcs.clone()
+                } else {
+                    vec![rest[j - ns]]
+                };
+                let key = (segments[i].arcs.clone(), other, j < ns);
+                let result = match cache.get(&key) {
+                    Some(r) => r.clone(),
+                    None => {
+                        let r = combine(&parts[i], &parts[j], params);
+                        cache.insert(key, r.clone());
+                        r
+                    }
+                };
+                if let Some(f) = result {
                     fits.insert((i, j), f);
                     let (ri, rj) = (root(&mut parent, i), root(&mut parent, j));
                     parent[ri] = rj;

@@ -252,39 +252,158 @@ fn gaussian_blur(img: &mut [f32], w: usize, h: usize, sigma: f64) {
     }
 }
 
+/// Sobel gradients of one row, normalised by 1/8 (grey levels per pixel): `gx`, `gy` and the
+/// squared magnitude `mag` at columns `1..w − 1` from the grey rows above (`r0`), at (`r1`)
+/// and below (`r2`); zero in the first and last column.
+#[inline]
+fn sobel_row(
+    (r0, r1, r2): (&[f32], &[f32], &[f32]),
+    gx: &mut [f32],
+    gy: &mut [f32],
+    mag: &mut [f32],
+) {
+    let w = r1.len();
+    for out in [&mut *gx, &mut *gy, &mut *mag] {
+        out[0] = 0.0;
+        out[w - 1] = 0.0;
+    }
+    // Straight-line code over equal-length slices: compiles to vector code.
+    let n = w - 2;
+    let (a, b, c) = (&r0[..n], &r0[1..n + 1], &r0[2..n + 2]);
+    let (d, f) = (&r1[..n], &r1[2..n + 2]);
+    let (g, hh, i) = (&r2[..n], &r2[1..n + 1], &r2[2..n + 2]);
+    let (ox, oy, om) = (&mut gx[1..n + 1], &mut gy[1..n + 1], &mut mag[1..n + 1]);
+    for x in 0..n {
+        let sx = ((c[x] - a[x]) + 2.0 * (f[x] - d[x]) + (i[x] - g[x])) * 0.125;
+        let sy = ((g[x] - a[x]) + 2.0 * (hh[x] - b[x]) + (i[x] - c[x])) * 0.125;
+        ox[x] = sx;
+        oy[x] = sy;
+        om[x] = sx * sx + sy * sy;
+    }
+}
+
 /// Sobel gradients normalised by 1/8 (grey levels per pixel), zero on the one-pixel border.
-/// Returns `(gx, gy)`.
+/// Returns `(gx, gy)` (whole images; [`canny`] streams the same rows instead).
+#[cfg(test)]
 pub(crate) fn sobel(img: &[f32], w: usize, h: usize) -> (Vec<f32>, Vec<f32>) {
     let mut gx = vec![0.0f32; w * h];
     let mut gy = vec![0.0f32; w * h];
     if w < 3 || h < 3 {
         return (gx, gy);
     }
-    // Rows in parallel (rayon); each output row reads three input rows.
-    gx.par_chunks_mut(w)
-        .zip(gy.par_chunks_mut(w))
-        .enumerate()
-        .filter(|(y, _)| *y >= 1 && *y + 1 < h)
-        .for_each(|(y, (ox, oy))| {
-            let (r0, r1, r2) = (
-                &img[(y - 1) * w..y * w],
-                &img[y * w..(y + 1) * w],
-                &img[(y + 1) * w..(y + 2) * w],
-            );
-            for x in 1..w - 1 {
-                let a = r0[x - 1];
-                let b = r0[x];
-                let c = r0[x + 1];
-                let d = r1[x - 1];
-                let f = r1[x + 1];
-                let g = r2[x - 1];
-                let hh = r2[x];
-                let i = r2[x + 1];
-                ox[x] = ((c - a) + 2.0 * (f - d) + (i - g)) * 0.125;
-                oy[x] = ((g - a) + 2.0 * (hh - b) + (i - c)) * 0.125;
-            }
-        });
+    let mut mag = vec![0.0f32; w];
+    for y in 1..h - 1 {
+        let rows = (
+            &img[(y - 1) * w..y * w],
+            &img[y * w..(y + 1) * w],
+            &img[(y + 1) * w..(y + 2) * w],
+        );
+        let (ox, oy) = (&mut gx[y * w..(y + 1) * w], &mut gy[y * w..(y + 1) * w]);
+        sobel_row(rows, ox, oy, &mut mag);
+    }
     (gx, gy)
+}
+
+/// A pixel that survived non-maximum suppression.
+#[derive(Debug, Clone, Copy)]
+struct Survivor {
+    /// Pixel index `v·width + u`.
+    k: u32,
+    gx: f32,
+    gy: f32,
+    /// Sub-pixel offset of the maximum along the search direction.
+    offset: f32,
+}
+
+/// Rows per parallel work item of [`canny`]'s fused pass.
+const CANNY_ROWS: usize = 48;
+
+/// Sobel gradients and non-maximum suppression (with the parabolic refinement) of rows
+/// `y0..y1` (clipped to the suppression range `2..h − 2`), streamed through three-row rings:
+/// `grey(r, out)` writes grey row `r`. Writes the state (1 candidate, 2 strong) of each
+/// survivor into `state` (the rows `y0..y1`) and returns the survivors in raster order.
+#[allow(clippy::too_many_arguments)]
+fn suppress_rows(
+    grey: &(dyn Fn(usize, &mut [f32]) + Sync),
+    w: usize,
+    h: usize,
+    y0: usize,
+    y1: usize,
+    (low, high): (f32, f32),
+    state: &mut [u8],
+) -> Vec<Survivor> {
+    let mut out = Vec::new();
+    let (ys, ye) = (y0.max(2), y1.min(h.saturating_sub(2)));
+    if ys >= ye || w < 5 {
+        return out;
+    }
+    let mut g = vec![0.0f32; 3 * w];
+    let mut gx = vec![0.0f32; 3 * w];
+    let mut gy = vec![0.0f32; 3 * w];
+    let mut mag = vec![0.0f32; 3 * w];
+    let slot = |r: usize| (r % 3) * w..(r % 3 + 1) * w;
+    grey(ys - 2, &mut g[slot(ys - 2)]);
+    grey(ys - 1, &mut g[slot(ys - 1)]);
+    for r in ys - 1..=ye {
+        // Gradient row r from grey rows r − 1, r, r + 1 (r + 1 ≤ h − 1).
+        grey(r + 1, &mut g[slot(r + 1)]);
+        sobel_row(
+            (&g[slot(r - 1)], &g[slot(r)], &g[slot(r + 1)]),
+            &mut gx[slot(r)],
+            &mut gy[slot(r)],
+            &mut mag[slot(r)],
+        );
+        if r < ys + 1 {
+            continue;
+        }
+        // Suppression of row y = r − 1 (magnitude rows y − 1, y, y + 1 are in the ring).
+        let y = r - 1;
+        let (mu, mc, md) = (&mag[slot(y - 1)], &mag[slot(y)], &mag[slot(y + 1)]);
+        let (gxr, gyr) = (&gx[slot(y)], &gy[slot(y)]);
+        let srow = &mut state[(y - y0) * w..(y - y0 + 1) * w];
+        // Most pixels are under the low threshold: skip blocks of 16 with one vectorised
+        // count before the per-pixel test.
+        let blocks = (2..w - 2).step_by(16).map(|x0| x0..(x0 + 16).min(w - 2));
+        for x in blocks
+            .filter(|r| {
+                mc[r.clone()]
+                    .iter()
+                    .map(|&m| u32::from(m >= low))
+                    .sum::<u32>()
+                    > 0
+            })
+            .flatten()
+        {
+            let m = mc[x];
+            if !(m >= low) || m == 0.0 {
+                continue;
+            }
+            let horizontal = gxr[x].abs() >= gyr[x].abs();
+            let (ma, mb) = if horizontal {
+                (mc[x - 1], mc[x + 1])
+            } else {
+                (mu[x], md[x])
+            };
+            // Strict on one side, non-strict on the other (von Gioi & Randall 2017).
+            if m > ma && m >= mb {
+                srow[x] = if m >= high { 2 } else { 1 };
+                let (ma, m, mb) = (ma.sqrt(), m.sqrt(), mb.sqrt());
+                let den = ma - 2.0 * m + mb;
+                let offset = if den < 0.0 {
+                    (0.5 * (ma - mb) / den).clamp(-0.5, 0.5)
+                } else {
+                    0.0
+                };
+                out.push(Survivor {
+                    k: (y * w + x) as u32,
+                    gx: gxr[x],
+                    gy: gyr[x],
+                    offset,
+                });
+            }
+        }
+    }
+    out
 }
 
 /// Canny edge detection with sub-pixel edge positions (000_3b1454b2b2194811.txt §3.1, the
@@ -293,98 +412,92 @@ pub(crate) fn sobel(img: &[f32], w: usize, h: usize) -> (Vec<f32>, Vec<f32>) {
 /// the gradient direction) with the Devernay parabolic refinement, and hysteresis with
 /// 8-connectivity. See the module documentation.
 ///
+/// Implementation: one fused pass per block of rows (rayon) converts the grey rows, takes the
+/// Sobel gradients and suppresses non-maxima through three-row ring buffers (no whole-image
+/// gradient or magnitude buffers), keeping only the survivors; hysteresis then grows from the
+/// strong survivors over a one-byte state image. The squared magnitudes are compared (monotone
+/// in the magnitude); square roots are taken only for the parabolic refinement of the maxima.
+///
 /// # Errors
 /// [`DetectError::InvalidParameter`] for bad thresholds or blur.
 pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<EdgeMap> {
     params.validate()?;
     let (w, h) = (image.width, image.height);
-    let mut img: Vec<f32> = image.data.par_iter().map(|p| p.grey()).collect();
-    if params.blur_sigma > 0.0 {
-        gaussian_blur(&mut img, w, h, params.blur_sigma);
-    }
-    let (gx, gy) = sobel(&img, w, h);
     let low = params.low as f32;
     let high = params.high as f32;
-    // Squared magnitudes: monotone in the magnitude, so the suppression can compare them; the
-    // square roots are taken only for the parabolic refinement of the maxima.
-    let mag: Vec<f32> = gx
-        .par_iter()
-        .zip(gy.par_iter())
-        .map(|(a, b)| a * a + b * b)
-        .collect();
-    let (low, high) = (low * low, high * high);
-    // Non-maximum suppression (rows in parallel); `state`: 0 none, 1 candidate (≥ low),
-    // 2 strong (≥ high).
+    let thresholds = (low * low, high * high);
+    let blurred: Option<Vec<f32>> = (params.blur_sigma > 0.0).then(|| {
+        let mut img: Vec<f32> = image.data.par_iter().map(|p| p.grey()).collect();
+        gaussian_blur(&mut img, w, h, params.blur_sigma);
+        img
+    });
+    let data = image.data;
+    let grey = |y: usize, out: &mut [f32]| match &blurred {
+        Some(b) => out.copy_from_slice(&b[y * w..(y + 1) * w]),
+        None => {
+            for (o, p) in out.iter_mut().zip(&data[y * w..(y + 1) * w]) {
+                *o = p.grey();
+            }
+        }
+    };
+    // `state`: 0 none, 1 candidate (≥ low), 2 strong (≥ high), 3 kept by the hysteresis.
     let mut state = vec![0u8; w * h];
-    let mut offset = vec![0.0f32; w * h];
-    if w >= 5 && h >= 5 {
-        state
-            .par_chunks_mut(w)
-            .zip(offset.par_chunks_mut(w))
-            .enumerate()
-            .filter(|(y, _)| *y >= 2 && *y + 2 < h)
-            .for_each(|(y, (srow, orow))| {
-                for x in 2..w - 2 {
-                    let k = y * w + x;
-                    let m = mag[k];
-                    if !(m >= low) || m == 0.0 {
-                        continue;
-                    }
-                    let horizontal = gx[k].abs() >= gy[k].abs();
-                    let (ma, mb) = if horizontal {
-                        (mag[k - 1], mag[k + 1])
-                    } else {
-                        (mag[k - w], mag[k + w])
-                    };
-                    // Strict on one side, non-strict on the other (von Gioi & Randall 2017).
-                    if m > ma && m >= mb {
-                        srow[x] = if m >= high { 2 } else { 1 };
-                        let (ma, m, mb) = (ma.sqrt(), m.sqrt(), mb.sqrt());
-                        let den = ma - 2.0 * m + mb;
-                        orow[x] = if den < 0.0 {
-                            (0.5 * (ma - mb) / den).clamp(-0.5, 0.5)
-                        } else {
-                            0.0
-                        };
-                    }
-                }
-            });
-    }
-    // Hysteresis: grow from strong pixels through 8-connected candidates.
-    let mut keep = vec![false; w * h];
+    let survivors: Vec<Vec<Survivor>> = state
+        .par_chunks_mut(w * CANNY_ROWS)
+        .enumerate()
+        .map(|(c, rows)| {
+            let y0 = c * CANNY_ROWS;
+            let y1 = (y0 + CANNY_ROWS).min(h);
+            suppress_rows(&grey, w, h, y0, y1, thresholds, rows)
+        })
+        .collect();
+    // Hysteresis: grow from strong pixels through 8-connected candidates. Survivors lie in
+    // rows and columns 2..n − 2, so every neighbour index is inside the image.
     let mut stack = Vec::new();
-    for k in 0..w * h {
-        if state[k] == 2 && !keep[k] {
-            keep[k] = true;
-            stack.push(k);
-            while let Some(p) = stack.pop() {
-                let (px, py) = (p % w, p / w);
-                for dy in [-1isize, 0, 1] {
-                    for dx in [-1isize, 0, 1] {
-                        let (qx, qy) = (px as isize + dx, py as isize + dy);
-                        if qx < 0 || qy < 0 || qx >= w as isize || qy >= h as isize {
-                            continue;
-                        }
-                        let q = qy as usize * w + qx as usize;
-                        if state[q] != 0 && !keep[q] {
-                            keep[q] = true;
-                            stack.push(q);
-                        }
-                    }
+    let offsets = [
+        -(w as isize) - 1,
+        -(w as isize),
+        -(w as isize) + 1,
+        -1,
+        1,
+        w as isize - 1,
+        w as isize,
+        w as isize + 1,
+    ];
+    for s in survivors.iter().flatten() {
+        let k = s.k as usize;
+        if state[k] != 2 {
+            continue;
+        }
+        state[k] = 3;
+        stack.push(k);
+        while let Some(p) = stack.pop() {
+            for d in offsets {
+                let q = p.wrapping_add_signed(d);
+                if let Some(v) = state.get_mut(q)
+                    && (*v == 1 || *v == 2)
+                {
+                    *v = 3;
+                    stack.push(q);
                 }
             }
         }
     }
-    let mut edgels = Vec::new();
+    let kept = survivors
+        .iter()
+        .flatten()
+        .filter(|s| state[s.k as usize] == 3)
+        .count();
+    let mut edgels = Vec::with_capacity(kept);
     let mut index = vec![NONE; w * h];
-    for k in 0..w * h {
-        if !keep[k] {
+    for s in survivors.iter().flatten() {
+        let k = s.k as usize;
+        if state[k] != 3 {
             continue;
         }
         let (x, y) = (k % w, k / w);
-        let horizontal = gx[k].abs() >= gy[k].abs();
-        let o = f64::from(offset[k]);
-        let pos = if horizontal {
+        let o = f64::from(s.offset);
+        let pos = if s.gx.abs() >= s.gy.abs() {
             Vector2::new(x as f64 + o, y as f64)
         } else {
             Vector2::new(x as f64, y as f64 + o)
@@ -392,7 +505,7 @@ pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<
         index[k] = edgels.len() as u32;
         edgels.push(Edgel {
             pos,
-            grad: Vector2::new(f64::from(gx[k]), f64::from(gy[k])),
+            grad: Vector2::new(f64::from(s.gx), f64::from(s.gy)),
             px: x as u32,
             py: y as u32,
         });
@@ -845,6 +958,193 @@ mod tests {
             }
         }
         img
+    }
+
+    /// The whole-image implementation of `canny` of session 4 (Sobel, magnitude, state and
+    /// offset images, hysteresis over all pixels): the reference of the fused pass.
+    fn canny_reference<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<EdgeMap> {
+        params.validate()?;
+        let (w, h) = (image.width, image.height);
+        let mut img: Vec<f32> = image.data.par_iter().map(|p| p.grey()).collect();
+        if params.blur_sigma > 0.0 {
+            gaussian_blur(&mut img, w, h, params.blur_sigma);
+        }
+        let (gx, gy) = sobel(&img, w, h);
+        let low = params.low as f32;
+        let high = params.high as f32;
+        // Squared magnitudes: monotone in the magnitude, so the suppression can compare them; the
+        // square roots are taken only for the parabolic refinement of the maxima.
+        let mag: Vec<f32> = gx
+            .par_iter()
+            .zip(gy.par_iter())
+            .map(|(a, b)| a * a + b * b)
+            .collect();
+        let (low, high) = (low * low, high * high);
+        // Non-maximum suppression (rows in parallel); `state`: 0 none, 1 candidate (≥ low),
+        // 2 strong (≥ high).
+        let mut state = vec![0u8; w * h];
+        let mut offset = vec![0.0f32; w * h];
+        if w >= 5 && h >= 5 {
+            state
+                .par_chunks_mut(w)
+                .zip(offset.par_chunks_mut(w))
+                .enumerate()
+                .filter(|(y, _)| *y >= 2 && *y + 2 < h)
+                .for_each(|(y, (srow, orow))| {
+                    for x in 2..w - 2 {
+                        let k = y * w + x;
+                        let m = mag[k];
+                        if !(m >= low) || m == 0.0 {
+                            continue;
+                        }
+                        let horizontal = gx[k].abs() >= gy[k].abs();
+                        let (ma, mb) = if horizontal {
+                            (mag[k - 1], mag[k + 1])
+                        } else {
+                            (mag[k - w], mag[k + w])
+                        };
+                        // Strict on one side, non-strict on the other (von Gioi & Randall 2017).
+                        if m > ma && m >= mb {
+                            srow[x] = if m >= high { 2 } else { 1 };
+                            let (ma, m, mb) = (ma.sqrt(), m.sqrt(), mb.sqrt());
+                            let den = ma - 2.0 * m + mb;
+                            orow[x] = if den < 0.0 {
+                                (0.5 * (ma - mb) / den).clamp(-0.5, 0.5)
+                            } else {
+                                0.0
+                            };
+                        }
+                    }
+                });
+        }
+        // Hysteresis: grow from strong pixels through 8-connected candidates.
+        let mut keep = vec![false; w * h];
+        let mut stack = Vec::new();
+        for k in 0..w * h {
+            if state[k] == 2 && !keep[k] {
+                keep[k] = true;
+                stack.push(k);
+                while let Some(p) = stack.pop() {
+                    let (px, py) = (p % w, p / w);
+                    for dy in [-1isize, 0, 1] {
+                        for dx in [-1isize, 0, 1] {
+                            let (qx, qy) = (px as isize + dx, py as isize + dy);
+                            if qx < 0 || qy < 0 || qx >= w as isize || qy >= h as isize {
+                                continue;
+                            }
+                            let q = qy as usize * w + qx as usize;
+                            if state[q] != 0 && !keep[q] {
+                                keep[q] = true;
+                                stack.push(q);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let mut edgels = Vec::new();
+        let mut index = vec![NONE; w * h];
+        for k in 0..w * h {
+            if !keep[k] {
+                continue;
+            }
+            let (x, y) = (k % w, k / w);
+            let horizontal = gx[k].abs() >= gy[k].abs();
+            let o = f64::from(offset[k]);
+            let pos = if horizontal {
+                Vector2::new(x as f64 + o, y as f64)
+            } else {
+                Vector2::new(x as f64, y as f64 + o)
+            };
+            index[k] = edgels.len() as u32;
+            edgels.push(Edgel {
+                pos,
+                grad: Vector2::new(f64::from(gx[k]), f64::from(gy[k])),
+                px: x as u32,
+                py: y as u32,
+            });
+        }
+        Ok(EdgeMap {
+            width: w,
+            height: h,
+            edgels,
+            index,
+        })
+    }
+
+    /// Two overlapping bright ellipses, a dark disc and deterministic noise.
+    fn textured_image(w: usize, h: usize) -> Vec<u8> {
+        let a = disc_image(
+            w,
+            h,
+            0.45 * w as f64,
+            0.5 * h as f64,
+            0.3 * w as f64,
+            0.2 * h as f64,
+        );
+        let b = disc_image(
+            w,
+            h,
+            0.6 * w as f64,
+            0.45 * h as f64,
+            0.15 * w as f64,
+            0.3 * h as f64,
+        );
+        let mut state = 12345u64;
+        a.iter()
+            .zip(&b)
+            .enumerate()
+            .map(|(k, (&p, &q))| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let noise = ((state >> 33) % 9) as f64 - 4.0;
+                let (x, y) = ((k % w) as f64, (k / w) as f64);
+                let dark = if (x - 0.2 * w as f64).hypot(y - 0.3 * h as f64) < 0.1 * h as f64 {
+                    -60.0
+                } else {
+                    0.0
+                };
+                (f64::from(p) + 0.6 * f64::from(q) + noise + dark).clamp(0.0, 255.0) as u8
+            })
+            .collect()
+    }
+
+    #[test]
+    fn fused_canny_equals_the_whole_image_reference() {
+        // Sizes that leave partial row blocks; u8 and f32 pixels, with and without pre-blur.
+        for (w, h) in [(211, 157), (64, 5), (5, 64), (320, 97)] {
+            let data = textured_image(w, h);
+            let floats: Vec<f32> = data.iter().map(|&v| f32::from(v) / 255.0).collect();
+            for params in [
+                CannyParams::default(),
+                CannyParams {
+                    low: 3.0,
+                    high: 8.0,
+                    blur_sigma: 1.2,
+                },
+            ] {
+                let view = GrayView::new(&data, w, h).unwrap();
+                let (got, want) = (
+                    canny(&view, &params).unwrap(),
+                    canny_reference(&view, &params).unwrap(),
+                );
+                assert!(
+                    w < 6 || h < 6 || got.edgels.len() > 20,
+                    "{w}x{h}: {}",
+                    got.edgels.len()
+                );
+                assert_eq!(got.edgels, want.edgels, "{w}x{h} u8 {params:?}");
+                assert_eq!(got.index, want.index);
+                let view = GrayView::new(&floats, w, h).unwrap();
+                let (got, want) = (
+                    canny(&view, &params).unwrap(),
+                    canny_reference(&view, &params).unwrap(),
+                );
+                assert_eq!(got.edgels, want.edgels, "{w}x{h} f32 {params:?}");
+                assert_eq!(got.index, want.index);
+            }
+        }
     }
 
     #[test]

@@ -5,8 +5,7 @@
 
 use autoteach_estimate::handeye::{
     EdgeFactor, EdgeObservation, FreeCamera, PriorSigmas, Rim, SlamMot, SlamMotConfig,
-    SlamMotSolution, SlamMotState, UkfNoise, WaferGeometry, WindowRecord, run_autoteach_ukf,
-    theoretical_resolution,
+    SlamMotSolution, SlamMotState, UkfNoise, WaferGeometry, WindowRecord, theoretical_resolution,
 };
 use autoteach_geometry::lie::se3_log;
 use autoteach_geometry::robot::{Joints, RobotParams, WaferRobot};
@@ -134,7 +133,7 @@ fn history_list<'py>(py: Python<'py>, hist: &[WindowRecord]) -> PyResult<Bound<'
     obs_start, points, initial_base, initial_offsets, initial_wafers, *, pixel_sigma=0.5, estimate_offsets=vec![1, 3],
     reference_wafer=0, huber=Some(3.0), factor="conic", n_model=360, rounds=3, max_iterations=50, window=0,
     init_heights=None, prior_sigmas=(0.035, 0.02, 0.035), encoder_sigma=None, estimate_mount=false,
-    estimate_links=vec![], free_camera=None))]
+    estimate_links=vec![], free_camera=None, point_sigma_scale=None))]
 #[allow(clippy::too_many_arguments)]
 fn handeye_slam_mot<'py>(
     py: Python<'py>,
@@ -166,12 +165,25 @@ fn handeye_slam_mot<'py>(
     estimate_mount: bool,
     estimate_links: Vec<usize>,
     free_camera: Option<FreeCameraArgs<'py>>,
+    point_sigma_scale: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let k = k_matrix(k)?;
     let params = read_robot_params(robot_params)?;
     let geometry = WaferGeometry::new(wafer_radius, wafer_thickness).map_err(errors::estimate)?;
     let enc = joints(rows(encoders, "encoders", 5)?);
     let pts = rows(points, "points", 2)?;
+    let scale = match &point_sigma_scale {
+        None => Vec::new(),
+        Some(a) => {
+            let v = convert::finite_array(a, "point_sigma_scale")?.exact(&[pts.len()])?;
+            if let Some(x) = v.iter().find(|x| **x <= 0.0) {
+                return Err(errors::invalid_input(format!(
+                    "point_sigma_scale must be positive (one factor per point), got {x}"
+                )));
+            }
+            v
+        }
+    };
     let m = obs_frames.len();
     if obs_wafers.len() != m || obs_rims.len() != m || obs_start.len() != m + 1 {
         return Err(errors::invalid_input(format!(
@@ -205,6 +217,11 @@ fn handeye_slam_mot<'py>(
             wafer: obs_wafers[i],
             rim,
             points: pts[a..b].iter().map(|p| Vector2::new(p[0], p[1])).collect(),
+            sigma_scale: if scale.is_empty() {
+                Vec::new()
+            } else {
+                scale[a..b].to_vec()
+            },
         });
     }
     let base = convert::isometry(initial_base, "initial_base")?;
@@ -316,7 +333,11 @@ fn handeye_slam_mot<'py>(
 /// The UKF of 000_3b1454b2b2194811.txt eqs. (5.1)–(5.2) over a session. `noise`: 16 standard
 /// deviations `w_T(3), w_E(3), v_T(3), v_E(3), v_θ(4)` in SI units or `None` for eq. (5.2).
 #[pyfunction]
-#[pyo3(signature = (robot_params, base_pose, encoders, increments, noise=None, offset_std0=0.035))]
+/// `odometry`: `None` for world-frame increments with white errors (eq. (5.1) literally), or
+/// `[loc_t, loc_r, map_t, map_step]` for the relative poses of a SLAM with a map
+/// (`autoteach_estimate::handeye::ukf_model::UkfOdometry::Slam`).
+#[pyo3(signature = (robot_params, base_pose, encoders, increments, noise=None, offset_std0=0.035, odometry=None))]
+#[allow(clippy::too_many_arguments)]
 fn handeye_ukf<'py>(
     py: Python<'py>,
     robot_params: &Bound<'py, PyAny>,
@@ -325,7 +346,24 @@ fn handeye_ukf<'py>(
     increments: &Bound<'py, PyAny>,
     noise: Option<Vec<f64>>,
     offset_std0: f64,
+    odometry: Option<Vec<f64>>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    use autoteach_estimate::handeye::ukf_model::{SlamNoise, UkfOdometry, run_autoteach_ukf_with};
+    let odometry = match odometry {
+        None => UkfOdometry::World,
+        Some(v) if v.len() == 4 => UkfOdometry::Slam(SlamNoise {
+            loc_t: v[0],
+            loc_r: v[1],
+            map_t: v[2],
+            map_step: v[3],
+        }),
+        Some(v) => {
+            return Err(errors::invalid_input(format!(
+                "odometry must have 4 values [loc_t, loc_r, map_t, map_step], got {}",
+                v.len()
+            )));
+        }
+    };
     let params = read_robot_params(robot_params)?;
     let base = convert::isometry(base_pose, "base_pose")?;
     let robot = WaferRobot::new(params, base).map_err(errors::geometry)?;
@@ -355,7 +393,8 @@ fn handeye_ukf<'py>(
         }
     };
     let run = convert::detached(py, move || {
-        run_autoteach_ukf(robot, &enc, &inc, &noise, offset_std0).map_err(errors::estimate)
+        run_autoteach_ukf_with(robot, &enc, &inc, &noise, odometry, offset_std0)
+            .map_err(errors::estimate)
     })?;
     let d = PyDict::new(py);
     d.set_item("poses", pose_array(py, &run.poses)?)?;
@@ -376,6 +415,7 @@ fn handeye_ukf<'py>(
         "covariance",
         to_numpy(py, run.covariance.transpose().as_slice().to_vec(), &[9, 9])?,
     )?;
+    d.set_item("observable", run.observable.to_vec())?;
     Ok(d)
 }
 

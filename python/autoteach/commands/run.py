@@ -40,6 +40,13 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
         help="detect front end: drop edge points where the wafer's side band is narrower than this (pixels; "
         "about 3x the edge blur of the optics; 0 keeps all)",
     )
+    p.add_argument(
+        "--no-band-weights",
+        dest="band_weights",
+        action="store_false",
+        help="detect front end: give every edge point the same standard deviation instead of one from the "
+        "predicted band width at the point",
+    )
     p.set_defaults(func=_run)
 
 
@@ -61,6 +68,7 @@ def _run(args: argparse.Namespace) -> int:
         window=args.window,
         baseline=args.baseline,
         min_band_px=args.min_band_px,
+        band_weights=args.band_weights,
         progress=_progress_enabled(args),
     )
     out_log = args.out if args.out is not None and args.out.suffix == ".mcap" else None

@@ -32,7 +32,7 @@
 //!   constant `c` (its posteriors are below `1e−6/M`, set to 0) or evaluated exactly against
 //!   all points. Used automatically when the neighbouring runs hold under half of the pairs
 //!   (large sets late in the iteration, when σ is small);
-//! - for large sets (above 10⁷ pairs) whenever its estimated cost is under half of the exact
+//! - above 10⁶ pairs (e.g. N = M = 2000) whenever its estimated cost is under half of the exact
 //!   strategy's, the fast Gauss transform of the `fgt` module: separable tensor Chebyshev
 //!   interpolation of the kernel, over the whole bounding box at large σ or piecewise on boxes
 //!   a few σ wide (interacting with neighbours up to 7.1σ away) in the middle range, in
@@ -117,12 +117,13 @@ pub(crate) struct EStepSums<const D: usize> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum EStep {
     /// The cheapest by estimated cost: grid truncation when it pays off (neighbouring cells
-    /// hold under half of the pairs), every pair otherwise, and, above 10⁷ pairs, the fast
+    /// hold under half of the pairs), every pair otherwise, and, above 10⁶ pairs, the fast
     /// Gauss transform (one box or boxes a few σ wide) when it is at least ~2× cheaper than
-    /// the exact strategy it replaces.
+    /// the exact strategy it replaces. Full-rank non-rigid CPD also applies its kernel `G`
+    /// by the transform when that is cheaper than the dense product.
     #[default]
     Auto,
-    /// Every pair (exact).
+    /// Every pair (exact); full-rank non-rigid CPD also stores and multiplies the exact `G`.
     Dense,
     /// Grid truncation whenever σ allows a grid (to ε = 1e−8 of each row's largest term).
     Truncated,
@@ -132,9 +133,9 @@ pub enum EStep {
     FastGauss,
 }
 
-/// `Auto` considers the fast Gauss transform above this many pairs (below it the E-step stays
-/// exact, e.g. for parity with pycpd at N = M = 2000).
-const AUTO_FGT_PAIRS: usize = 10_000_000;
+/// `Auto` considers the fast Gauss transform above this many pairs (below it the exact
+/// strategies are cheap and the transform's one-off node-count search would dominate).
+const AUTO_FGT_PAIRS: usize = 1_000_000;
 
 /// A run of rows of X (positions `rows` in the row order) evaluated against the source runs
 /// `ranges[cand]` (positions in the sorted sources).

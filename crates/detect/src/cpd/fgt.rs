@@ -50,8 +50,9 @@ const KERNEL_TOL: f64 = 1e-11;
 /// Largest node count per box and axis considered.
 const MAX_NODES: usize = 72;
 
-/// Box widths (in units of σ) tried for the piecewise scheme.
-const BOX_WIDTHS: [f64; 5] = [1.5, 2.0, 3.0, 4.5, 6.0];
+/// Box widths (in units of σ) tried for the piecewise scheme (the cost model picks the
+/// cheapest per E-step; 0.5σ rungs, so the chosen width tracks the estimated optimum).
+const BOX_WIDTHS: [f64; 9] = [1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0];
 
 /// Truncation radius of the piecewise scheme in units of σ, `√(2 ln(1/KERNEL_TOL))`: kernel
 /// values between points farther apart than this along one axis (`< 10⁻¹¹`) are dropped.
@@ -136,15 +137,18 @@ fn interp_error(width: f64, p: usize, neighbours: bool) -> f64 {
             }
         })
         .collect();
-    let mut s = vec![0.0; p];
+    // The basis at every test point, computed once (row-major, p per point).
+    let mut basis = vec![0.0; q * p];
+    for (&x, s) in xs.iter().zip(basis.chunks_exact_mut(p)) {
+        basis_at(&nodes, &bw, x, s);
+    }
     let mut worst: f64 = 0.0;
     for &t in &ts {
         let at_nodes: Vec<f64> = nodes
             .iter()
             .map(|&xi| exp_neg(-0.5 * (xi - t) * (xi - t)))
             .collect();
-        for &x in &xs {
-            basis_at(&nodes, &bw, x, &mut s);
+        for (&x, s) in xs.iter().zip(basis.chunks_exact(p)) {
             let approx: f64 = s.iter().zip(&at_nodes).map(|(a, b)| a * b).sum();
             let exact = exp_neg(-0.5 * (x - t) * (x - t));
             worst = worst.max((approx - exact).abs());
@@ -274,6 +278,18 @@ impl<const D: usize> Plan<D> {
     /// axis (the whole extent) or boxes [`BOX_WIDTHS`] σ wide — whose estimated cost (in
     /// multiply–adds, both transforms of an E-step) is at most `max_cost`; `None` when none is.
     pub fn new(x: &[[f64; D]], t: &[[f64; D]], sigma2: f64, max_cost: usize) -> Option<Self> {
+        // Weights carried: 1 (row sums) and D + 1 (P1, PX).
+        Self::with_weights(x, t, sigma2, D + 2, max_cost)
+    }
+
+    /// [`Plan::new`] for transforms carrying `weights` weight vectors in all (the cost model).
+    fn with_weights(
+        x: &[[f64; D]],
+        t: &[[f64; D]],
+        sigma2: f64,
+        weights: usize,
+        max_cost: usize,
+    ) -> Option<Self> {
         let inv2s2 = 0.5 / sigma2;
         let sigma = sigma2.sqrt();
         if !inv2s2.is_finite() || !(sigma > 0.0) || x.is_empty() || t.is_empty() {
@@ -295,8 +311,6 @@ impl<const D: usize> Plan<D> {
             }
         });
         let points = x.len() + t.len();
-        // Weights carried: 1 (row sums) and D + 1 (P1, PX).
-        let weights = D + 2;
         // Per axis (lo, width, boxes, band r, nodes p); the best as (cost, shape, kernel error).
         type Shape<const D: usize> = [(f64, f64, usize, usize, usize); D];
         let mut best: Option<(usize, Shape<D>, f64)> = None;
@@ -610,6 +624,67 @@ impl<const D: usize> Plan<D> {
         }
         let np = p1.iter().sum();
         Some(EStepSums { p1, pt1, px, np })
+    }
+}
+
+/// The Gaussian kernel matrix `G` of a fixed point set (`g_ij = exp(−‖y_i − y_j‖²/2β²)`,
+/// 000_3b1454b2b2194811.txt eq. (3.17)) applied to weight vectors by the transform of this
+/// module, without forming `G`: `(G v)_i = Σ_j g_ij v_j` through spreading `v` onto the node
+/// grid, the node matrices and the interpolation back at the same points, i.e.
+/// `G ≈ Bᵀ K B` with `B` the tensor Lagrange basis at the points and `K` the Kronecker
+/// product of the per-axis node matrices. The approximation is symmetric positive
+/// semi-definite (`K` is a Gaussian kernel matrix on distinct nodes, positive definite), so
+/// conjugate gradients on a system built from it behave as with the exact `G`; each entry of
+/// `G` is within the plan's kernel error (about `D · 10⁻¹¹`) of the exact value.
+pub(crate) struct KernelTransform<const D: usize> {
+    plan: Plan<D>,
+    arch: pulp::Arch,
+}
+
+impl<const D: usize> KernelTransform<D> {
+    /// The transform for the points `y` and kernel width `beta` when its estimated cost per
+    /// product with `D` weight vectors is at most `max_cost` multiply–adds; `None` otherwise.
+    pub fn new(y: &[[f64; D]], beta: f64, max_cost: usize) -> Option<Self> {
+        let plan = Plan::with_weights(y, y, beta * beta, D, max_cost)?;
+        Some(Self {
+            plan,
+            arch: pulp::Arch::new(),
+        })
+    }
+
+    /// `G v` for `v` (M × k, M the points of [`KernelTransform::new`], given again as `y`),
+    /// up to three columns per pass.
+    pub fn apply(&self, y: &[[f64; D]], v: &nalgebra::DMatrix<f64>) -> nalgebra::DMatrix<f64> {
+        let mut out = nalgebra::DMatrix::zeros(v.nrows(), v.ncols());
+        let mut c = 0;
+        while c < v.ncols() {
+            let k = (v.ncols() - c).min(3);
+            let part = v.columns(c, k).into_owned();
+            let gv = match k {
+                1 => self.apply_k::<1>(y, &part),
+                2 => self.apply_k::<2>(y, &part),
+                _ => self.apply_k::<3>(y, &part),
+            };
+            out.columns_mut(c, k).copy_from(&gv);
+            c += k;
+        }
+        out
+    }
+
+    fn apply_k<const K: usize>(
+        &self,
+        y: &[[f64; D]],
+        v: &nalgebra::DMatrix<f64>,
+    ) -> nalgebra::DMatrix<f64> {
+        let w = |i: usize, w: &mut [f64; K]| {
+            for k in 0..K {
+                w[k] = v[(i, k)];
+            }
+        };
+        let mut g = self.plan.spread::<K>(y, &w, self.arch);
+        self.plan.transform::<K>(&mut g);
+        let out = self.plan.interpolate::<K>(&g, y, self.arch);
+        nalgebra::DMatrix::from_fn(y.len(), K, |i, k| out[i][k])
     }
 }
 

@@ -129,8 +129,9 @@ pub struct NonrigidOptions {
     pub beta: f64,
     /// Regularisation weight λ (pycpd's `alpha`, default 2).
     pub lambda: f64,
-    /// Number of eigenpairs K of the low-rank `G ≈ QΛQᵀ`; `None` for the full `G` (which
-    /// stores `M × M` numbers and factors an `M × M` matrix per iteration).
+    /// Number of eigenpairs K of the low-rank `G ≈ QΛQᵀ`; `None` for the full `G` (solved by
+    /// conjugate gradients; stored as `M × M` numbers unless the fast Gauss transform applies
+    /// it more cheaply, see [`nonrigid`]).
     pub low_rank: Option<usize>,
     /// Subspace-iteration steps refining the Nyström eigenpairs (see the `lowrank` module
     /// docs); `None` for 2 when `M ≤ 5000`, else 0 (Nyström alone).
@@ -663,9 +664,9 @@ fn affine_d<const D: usize>(
 // Non-rigid.
 
 /// The kernel in one of its two forms.
-enum Kernel {
+enum Kernel<const D: usize> {
     /// Full `G` (M × M), solved by preconditioned CG.
-    Full(Box<pcg::FullSystem>),
+    Full(Box<pcg::FullSystem<D>>),
     /// `G ≈ Q Λ Qᵀ`.
     LowRank {
         q: DMatrix<f64>,
@@ -673,7 +674,7 @@ enum Kernel {
     },
 }
 
-impl Kernel {
+impl<const D: usize> Kernel<D> {
     /// `G W`.
     fn times(&self, w: &DMatrix<f64>) -> DMatrix<f64> {
         match self {
@@ -694,8 +695,10 @@ impl Kernel {
 /// `W = (G + λσ² d(P1)⁻¹)⁻¹ (d(P1)⁻¹ P X − Y)`.
 ///
 /// Full rank solves the equivalent symmetric positive definite system
-/// `(D^{½} G D^{½} + λσ² I) V = D^{-½}(PX − D Y)`, `W = D^{½} V` with `D = d(P1)` by a
-/// Cholesky factorisation (faer, parallel). With `low_rank = Some(K)`, `G ≈ QΛQᵀ` and the
+/// `(D^{½} G D^{½} + λσ² I) V = D^{-½}(PX − D Y)`, `W = D^{½} V` with `D = d(P1)` by
+/// preconditioned conjugate gradients (the `pcg` module: `G` applied by the fast Gauss
+/// transform when that is cheaper than the dense product, except with `EStep::Dense`; dense
+/// Cholesky as fallback). With `low_rank = Some(K)`, `G ≈ QΛQᵀ` and the
 /// Woodbury identity gives
 /// `W = (λσ²)⁻¹ [F − D Q (λσ² Λ⁻¹ + Qᵀ D Q)⁻¹ Qᵀ F]`, `F = PX − D Y`, in `O(M K²)`.
 ///
@@ -751,7 +754,11 @@ fn nonrigid_d<const D: usize>(
     let m = ys.len();
     let mut em = Em::new(&xs, &ys, o)?;
     let mut kernel = match options.low_rank {
-        None => Kernel::Full(Box::new(pcg::FullSystem::new(&ys, options.beta))),
+        None => Kernel::Full(Box::new(pcg::FullSystem::new(
+            &ys,
+            options.beta,
+            o.e_step == EStep::Dense,
+        ))),
         Some(k) => {
             let iters = options
                 .power_iterations

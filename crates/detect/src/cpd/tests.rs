@@ -357,3 +357,34 @@ fn cg_and_fast_gauss_fits_match_direct_and_dense() {
     let diff = (&fast.transformed - &dense.transformed).amax();
     assert!(diff < 1e-6, "fast Gauss vs dense E-step: {diff:e}");
 }
+/// Full-rank non-rigid CPD on the peer benchmark's kind of scene (β = λ = 2 over a 10 × 10
+/// square, N = M = 2000), where `Auto` applies `G` by the fast Gauss transform and takes the
+/// transform E-step: the same fit as the exact run (stored `G`, every pair) to 1e-6.
+#[test]
+fn fast_gauss_kernel_fit_matches_exact_fit() {
+    let n = 2000;
+    let mut rng = Pcg64::seed_from_u64(31);
+    let y = DMatrix::from_fn(n, 2, |_, _| rng.random::<f64>() * 10.0);
+    let x = DMatrix::from_fn(n, 2, |i, d| {
+        let v = if d == 0 {
+            (0.5 * y[(i, 1)]).sin()
+        } else {
+            (0.4 * y[(i, 0)]).cos()
+        };
+        y[(i, d)] + 0.4 * v + 0.01 * (rng.random::<f64>() - 0.5)
+    });
+    let ys = points::<2>(&y, "Y").unwrap();
+    assert!(pcg::FullSystem::new(&ys, 2.0, false).is_fast());
+    let run = |e_step| {
+        let mut o = NonrigidOptions::default();
+        o.cpd.max_iterations = 30;
+        o.cpd.e_step = e_step;
+        nonrigid(&x, &y, &o).unwrap()
+    };
+    let (fast, exact) = (run(EStep::Auto), run(EStep::Dense));
+    assert_eq!(fast.iterations, exact.iterations);
+    let diff = (&fast.transformed - &exact.transformed).amax();
+    assert!(diff < 1e-6, "moved points differ by {diff:e}");
+    assert!((fast.sigma2 - exact.sigma2).abs() < 1e-6 * exact.sigma2);
+    assert!((fast.energy - exact.energy).abs() < 1e-6 * exact.energy);
+}

@@ -102,10 +102,26 @@ pub fn fit_ellipse_geometric(
         })?,
         None => direct,
     };
-    let (e, iterations, converged, angles) = levenberg_marquardt(&prep, start, options);
+    let (fit, _) = finish(&prep, start, options, &[])?;
+    Ok(fit)
+}
+
+/// A fit and the eccentric angles `(sin t, cos t)` of the foot points of its points.
+pub(crate) type FitWithAngles = (EllipseFit, Vec<(f64, f64)>);
+
+/// The geometric fit of `prep` from `start` (centred frame), with the foot angles of the points
+/// on the result; `warm`: foot angles of the points on a nearby ellipse, or empty.
+fn finish(
+    prep: &Prepared,
+    start: Ellipse,
+    options: &GeometricFitOptions,
+    warm: &[(f64, f64)],
+) -> Result<FitWithAngles> {
+    let c = prep.centroid;
+    let (e, iterations, converged, angles) = levenberg_marquardt(prep, start, options, warm);
     let (residual_mean, residual_rms, covariance) =
         residual::evaluate(&e, &prep.centred, Some(&angles))?;
-    Ok(EllipseFit {
+    let fit = EllipseFit {
         ellipse: Ellipse {
             cx: e.cx + c.x,
             cy: e.cy + c.y,
@@ -116,7 +132,41 @@ pub fn fit_ellipse_geometric(
         covariance,
         iterations,
         converged,
-    })
+    };
+    Ok((fit, angles))
+}
+
+/// The combination test of the elliptic-segment assembly (000_3b1454b2b2194811.txt §3.2,
+/// `FitEllipse` in Algorithms 1–2) in one preparation: the direct fit
+/// ([`super::fit_ellipse_direct`]) as a cheap screen — `Ok(None)` when its mean orthogonal
+/// residual is not under `max_direct_residual` — then [`fit_ellipse_geometric`] started from
+/// it. Same results as calling the two in turn, without preparing the points twice, without
+/// the direct fit's covariance, and with the direct fit's foot angles as Newton starts of the
+/// first orthogonal evaluation. Also returns the eccentric angles `(sin t, cos t)` of the foot
+/// points of `points` on the fitted ellipse.
+///
+/// # Errors
+/// As [`fit_ellipse_geometric`].
+pub(crate) fn fit_screened(
+    points: &[Vector2<f64>],
+    max_direct_residual: f64,
+    options: &GeometricFitOptions,
+) -> Result<Option<FitWithAngles>> {
+    let prep = Prepared::new(points)?;
+    let direct = direct::solve(&prep)?;
+    let mut angles = Vec::with_capacity(points.len());
+    residual::foot_angles(&direct, &prep.centred, &[], &mut angles);
+    let sc = direct.theta.sin_cos();
+    let sum_abs: f64 = prep
+        .centred
+        .iter()
+        .zip(&angles)
+        .map(|(p, &t)| residual::foot_at(&direct, sc, p, t).r.abs())
+        .sum();
+    if !(sum_abs / (points.len() as f64) < max_direct_residual) {
+        return Ok(None);
+    }
+    finish(&prep, direct, options, &angles).map(Some)
 }
 
 /// Minimises the sum of squared orthogonal distances from `start` (centred pixel frame).
@@ -138,6 +188,7 @@ fn levenberg_marquardt(
     prep: &Prepared,
     start: Ellipse,
     options: &GeometricFitOptions,
+    warm: &[(f64, f64)],
 ) -> (Ellipse, usize, bool, Vec<(f64, f64)>) {
     let s = prep.scale;
     let inv = 1.0 / s;
@@ -179,7 +230,7 @@ fn levenberg_marquardt(
             tol = options.tolerance;
             // Close to the optimum already: start with nearly Gauss–Newton steps.
             lambda = LAMBDA_START * 1e-3;
-            (jtj, jtr, ssr) = residual::accumulate_conic(&e, &q, &points, &[], &mut angles);
+            (jtj, jtr, ssr) = residual::accumulate_conic(&e, &q, &points, warm, &mut angles);
             if ssr <= exact {
                 return (to_pixels(e), iteration, true, angles);
             }

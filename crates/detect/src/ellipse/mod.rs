@@ -43,6 +43,7 @@ use nalgebra::{Matrix3, Matrix5, SymmetricEigen, Vector2};
 use crate::{DetectError, Result};
 
 pub use direct::fit_ellipse_direct;
+pub(crate) use geometric::fit_screened;
 pub use geometric::{GeometricFitOptions, fit_ellipse_geometric, fit_ellipse_geometric_masked};
 
 /// The result of an ellipse fit.

@@ -142,10 +142,16 @@ pub(crate) fn foot_angles(
             break;
         }
     }
-    angles.clear();
-    angles.extend(ss.iter().zip(&cs).map(|(&s, &c)| (s, c)));
-    let mut general = 0;
-    for (i, (((s, c), &u), &v)) in angles.iter_mut().zip(&us).zip(&vs).enumerate() {
+    // Certifying step, branch-free so that it vectorises (`ok` marks the certified points);
+    // the others go to the general solver below.
+    let mut ok = vec![false; n];
+    for ((((s, c), &u), &v), ok) in ss
+        .iter_mut()
+        .zip(cs.iter_mut())
+        .zip(&us)
+        .zip(&vs)
+        .zip(ok.iter_mut())
+    {
         let g = -a * u * *s + b * v * *c + k * *s * *c;
         let dg = -a * u * *c - b * v * *s + k * (*c - *s) * (*c + *s);
         let delta = -g / dg;
@@ -154,10 +160,16 @@ pub(crate) fn foot_angles(
         let (nc, ns) = (nc * inv, ns * inv);
         let (nu, nv) = (b * nc, a * ns);
         let r = ((u - a * nc) * nu + (v - b * ns) * nv) / (nu * nu + nv * nv).sqrt();
-        if dg < 0.0 && delta.abs() <= 1e-8 && r.abs() < 0.999 * reach {
-            (*s, *c) = (ns, nc);
-        } else if let Some(p) = points.get(i) {
-            (*s, *c) = e.parameter_of(p).sin_cos();
+        *ok = dg < 0.0 && delta.abs() <= 1e-8 && r.abs() < 0.999 * reach;
+        *c = nc;
+        *s = ns;
+    }
+    angles.clear();
+    angles.extend(ss.iter().zip(&cs).map(|(&s, &c)| (s, c)));
+    let mut general = 0;
+    for ((t, ok), p) in angles.iter_mut().zip(&ok).zip(points) {
+        if !ok {
+            *t = e.parameter_of(p).sin_cos();
             general += 1;
         }
     }
@@ -216,49 +228,65 @@ pub(crate) fn distance_and_conic_gradient(
     )
 }
 
-/// Running normal equations `(JᵀJ, Jᵀr, Σ r²)` for `K` parameters, the upper triangle of `JᵀJ`
-/// packed in a flat array so that the per-point update compiles to straight-line code.
-struct NormalAcc<const K: usize, const P: usize> {
-    packed: [f64; P],
-    jtr: [f64; K],
-    ssr: f64,
+/// `Σᵢ aᵢbᵢ` with four independent partial sums, so that the loop vectorises.
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    let mut s = [0.0f64; 4];
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            s[k] += x[k] * y[k];
+        }
+    }
+    (s[0] + s[1]) + (s[2] + s[3]) + tail
 }
 
-impl<const K: usize, const P: usize> NormalAcc<K, P> {
-    fn new() -> Self {
+/// The Jacobian of `K` parameters, stored by columns, and the residuals; the normal equations
+/// `(JᵀJ, Jᵀr, Σ r²)` are formed at the end as column dot products ([`dot`]): 21 running sums
+/// per point (for `K = 6`) do not fit in the registers, column products vectorise.
+struct NormalAcc<const K: usize> {
+    cols: [Vec<f64>; K],
+    r: Vec<f64>,
+}
+
+impl<const K: usize> NormalAcc<K> {
+    fn new(capacity: usize) -> Self {
         NormalAcc {
-            packed: [0.0; P],
-            jtr: [0.0; K],
-            ssr: 0.0,
+            cols: std::array::from_fn(|_| Vec::with_capacity(capacity)),
+            r: Vec::with_capacity(capacity),
         }
     }
 
     /// Adds one residual `r` with gradient `g`.
     #[inline(always)]
     fn add(&mut self, g: &[f64; K], r: f64) {
-        let mut k = 0;
-        for j in 0..K {
-            for i in 0..=j {
-                self.packed[k] += g[i] * g[j];
-                k += 1;
-            }
-            self.jtr[j] += g[j] * r;
+        for (c, v) in self.cols.iter_mut().zip(g) {
+            c.push(*v);
         }
-        self.ssr += r * r;
+        self.r.push(r);
     }
 
-    /// The full symmetric `JᵀJ`.
-    fn jtj(&self) -> nalgebra::SMatrix<f64, K, K> {
+    /// `(JᵀJ, Jᵀr, Σ r²)`.
+    fn finish(&self) -> (nalgebra::SMatrix<f64, K, K>, nalgebra::SVector<f64, K>, f64) {
         let mut m = nalgebra::SMatrix::<f64, K, K>::zeros();
-        let mut k = 0;
+        let mut jtr = nalgebra::SVector::<f64, K>::zeros();
         for j in 0..K {
             for i in 0..=j {
-                m[(i, j)] = self.packed[k];
-                m[(j, i)] = self.packed[k];
-                k += 1;
+                let v = dot(&self.cols[i], &self.cols[j]);
+                m[(i, j)] = v;
+                m[(j, i)] = v;
             }
+            jtr[j] = dot(&self.cols[j], &self.r);
         }
-        m
+        (m, jtr, dot(&self.r, &self.r))
     }
 }
 
@@ -297,16 +325,14 @@ pub(crate) fn accumulate(
             &computed
         }
     };
-    let mut acc = NormalAcc::<5, 15>::new();
+    let mut acc = NormalAcc::<5>::new(points.len());
     let mut sum_abs = 0.0;
     for (p, &t) in points.iter().zip(angles) {
         let (r, g) = gradient_at(e, &foot_at(e, sc, p, t));
         acc.add(&g.into(), r);
         sum_abs += r.abs();
     }
-    out.jtj = acc.jtj();
-    out.jtr = Vector5::from(acc.jtr);
-    out.ssr = acc.ssr;
+    (out.jtj, out.jtr, out.ssr) = acc.finish();
     out.sum_abs = sum_abs;
     out
 }
@@ -324,12 +350,12 @@ pub(crate) fn accumulate_conic(
 ) -> (Matrix6<f64>, Vector6<f64>, f64) {
     let sc = e.theta.sin_cos();
     foot_angles(e, points, start, angles);
-    let mut acc = NormalAcc::<6, 21>::new();
+    let mut acc = NormalAcc::<6>::new(points.len());
     for (p, &t) in points.iter().zip(angles.iter()) {
         let (r, g) = distance_and_conic_gradient(e, sc, q, p, t);
         acc.add(&g.into(), r);
     }
-    (acc.jtj(), Vector6::from(acc.jtr), acc.ssr)
+    acc.finish()
 }
 
 /// Normal equations of the Sampson distances `rᵢ = f(xᵢ)/‖∇f(xᵢ)‖` (the first-order
@@ -354,7 +380,7 @@ pub(crate) fn accumulate_sampson(
             1.0 / (gx * gx + gy * gy).sqrt()
         })
         .collect();
-    let mut acc = NormalAcc::<6, 21>::new();
+    let mut acc = NormalAcc::<6>::new(points.len());
     for (p, &w) in points.iter().zip(&inv_norms) {
         if !w.is_finite() {
             // ∇f = 0 only at the centre, far from any point an iteration would accept.
@@ -370,7 +396,7 @@ pub(crate) fn accumulate_sampson(
         let g: [f64; 6] = std::array::from_fn(|k| m[k] * w - h[k] * fw3);
         acc.add(&g, r);
     }
-    (acc.jtj(), Vector6::from(acc.jtr), acc.ssr)
+    acc.finish()
 }
 
 /// Mean and RMS absolute orthogonal residual and the covariance of `(cx, cy, a, b, θ)` of the
@@ -407,16 +433,19 @@ pub(crate) fn evaluate(
     }
     // `points` are centred on their centroid: their RMS radius.
     let spread = (points.iter().map(|p| p.norm_squared()).sum::<f64>() / n as f64).sqrt();
-    let shape = format!(
-        "fitted ellipse a = {:.4e}, b = {:.4e} px for {n} points of RMS radius {spread:.4e} px{}",
-        e.a,
-        e.b,
-        if e.a > 20.0 * spread {
-            "; the fit degenerates toward a parabola: the arc is too short or too noisy to determine an ellipse"
-        } else {
-            ""
-        }
-    );
+    // The fit described for an error message (formatted only on failure).
+    let shape = || {
+        format!(
+            "fitted ellipse a = {:.4e}, b = {:.4e} px for {n} points of RMS radius {spread:.4e} px{}",
+            e.a,
+            e.b,
+            if e.a > 20.0 * spread {
+                "; the fit degenerates toward a parabola: the arc is too short or too noisy to determine an ellipse"
+            } else {
+                ""
+            }
+        )
+    };
     // θ is undefined for a circle to rounding: its Jacobian column vanishes.
     let d4max = diag.iter().take(4).copied().fold(0.0, f64::max);
     let circular = !(diag[4] > RANK_TOL * d4max);
@@ -435,8 +464,12 @@ pub(crate) fn evaluate(
 /// Inverse of the symmetric positive semi-definite `a` through its correlation form
 /// `D⁻¹AD⁻¹` (unit diagonal), rejecting it when that form is singular to `RANK_TOL`. With
 /// `without_theta`, the `θ` row and column are ignored (the result's are zero): the inverse of
-/// the 4×4 block of the other parameters. `what` describes the fit for the error message.
-fn scaled_inverse(a: &Matrix5<f64>, without_theta: bool, what: &str) -> Result<Matrix5<f64>> {
+/// the 4×4 block of the other parameters. `what()` describes the fit for the error message.
+fn scaled_inverse(
+    a: &Matrix5<f64>,
+    without_theta: bool,
+    what: &dyn Fn() -> String,
+) -> Result<Matrix5<f64>> {
     let keep = |i: usize| !(without_theta && i == 4);
     let d = Vector5::from_fn(|i, _| if keep(i) { 1.0 / a[(i, i)].sqrt() } else { 0.0 });
     // The dropped parameter gets an identity row/column: it decouples and has eigenvalue 1.
@@ -457,10 +490,11 @@ fn scaled_inverse(a: &Matrix5<f64>, without_theta: bool, what: &str) -> Result<M
         return Err(DetectError::RankDeficient {
             reason: format!(
                 "the orthogonal-distance Jacobian is rank deficient (smallest eigenvalue {lmin:.3e} of \
-                 the normalised JᵀJ, along (cx, cy, a, b, theta) = {:?}): {what}",
+                 the normalised JᵀJ, along (cx, cy, a, b, theta) = {:?}): {}",
                 v.iter()
                     .map(|x| (x * 1e3).round() / 1e3)
-                    .collect::<Vec<_>>()
+                    .collect::<Vec<_>>(),
+                what()
             ),
         });
     }
@@ -468,4 +502,34 @@ fn scaled_inverse(a: &Matrix5<f64>, without_theta: bool, what: &str) -> Result<M
         * Matrix5::from_diagonal(&eig.eigenvalues.map(|l| 1.0 / l))
         * eig.eigenvectors.transpose();
     Ok(Matrix5::from_fn(|i, j| rinv[(i, j)] * d[i] * d[j]))
+}
+
+#[cfg(test)]
+mod column_tests {
+    use super::*;
+
+    #[test]
+    fn column_normal_equations_equal_the_running_sums() {
+        // Lengths around the 4-wide chunks of `dot`, values of mixed sign and scale.
+        for n in [0usize, 1, 3, 4, 5, 17, 250] {
+            let g = |i: usize, k: usize| ((i * 37 + k * 11) % 23) as f64 / 7.0 - 1.5 + k as f64;
+            let r = |i: usize| ((i * 13) % 17) as f64 / 3.0 - 2.0;
+            let mut acc = NormalAcc::<6>::new(n);
+            let (mut jtj, mut jtr, mut ssr) = (Matrix6::zeros(), Vector6::zeros(), 0.0);
+            for i in 0..n {
+                let gi: [f64; 6] = std::array::from_fn(|k| g(i, k));
+                acc.add(&gi, r(i));
+                let v = Vector6::from(gi);
+                jtj += v * v.transpose();
+                jtr += v * r(i);
+                ssr += r(i) * r(i);
+            }
+            let (a, b, c) = acc.finish();
+            let scale = 1.0 + jtj.norm();
+            assert!((a - jtj).norm() <= 1e-13 * scale, "n={n}");
+            assert_eq!(a, a.transpose());
+            assert!((b - jtr).norm() <= 1e-13 * (1.0 + jtr.norm()), "n={n}");
+            assert!((c - ssr).abs() <= 1e-13 * (1.0 + ssr), "n={n}");
+        }
+    }
 }

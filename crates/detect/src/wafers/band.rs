@@ -25,23 +25,56 @@ pub(super) const STEP: f64 = 0.5;
 /// A sample at or above this grey level (0–255 scale) counts as clipped.
 const CLIP: f32 = 254.5;
 
-/// Standard normal CDF.
-pub(super) fn cdf(z: f64) -> f64 {
-    0.5 * libm::erfc(-z * std::f64::consts::FRAC_1_SQRT_2)
+/// `p` of Abramowitz & Stegun (1964) eq. 7.1.26.
+const AS_P: f64 = 0.327_591_1;
+/// `a₁ … a₅` of Abramowitz & Stegun (1964) eq. 7.1.26.
+const AS_A: [f64; 5] = [
+    0.254_829_592,
+    -0.284_496_736,
+    1.421_413_741,
+    -1.453_152_027,
+    1.061_405_429,
+];
+/// `Σ aₖ`, the value of the approximation's sum at `t = 1` (`z = 0`).
+const AS_SUM: f64 = AS_A[0] + AS_A[1] + AS_A[2] + AS_A[3] + AS_A[4];
+/// Bound on `|cdf(z) − Φ(z)|` (half the 1.5·10⁻⁷ bound of eq. 7.1.26 on erfc).
+#[cfg(test)]
+pub(super) const CDF_MAX_ERROR: f64 = 0.75e-7;
+
+/// The standard normal CDF `Φ(z)` and its derivative, sharing one exponential:
+/// `Φ(z) = ½·erfc(−z/√2)` with `erfc(x) ≈ e^{−x²}·Σₖ aₖ tᵏ`, `t = 1/(1 + p·x)` for `x ≥ 0`
+/// (Abramowitz & Stegun 1964, eq. 7.1.26: absolute error ≤ 1.5·10⁻⁷, i.e. ≤ 0.75·10⁻⁷ on Φ, or
+/// 2·10⁻⁵ grey levels on a 255-level edge) and `erfc(−x) = 2 − erfc(x)`. The derivative is that
+/// of the approximation itself (`d/dx[e^{−x²}S(t)] = e^{−x²}(−2x·S(t) − p·t²·S′(t))`), so the
+/// model's Jacobian is exact for the model that is fitted (finite differences agree to
+/// rounding); it differs from the normal density by less than 3·10⁻⁶.
+#[inline]
+pub(super) fn cdf_and_density(z: f64) -> (f64, f64) {
+    let x = z.abs() * std::f64::consts::FRAC_1_SQRT_2;
+    let t = 1.0 / (1.0 + AS_P * x);
+    let [a1, a2, a3, a4, a5] = AS_A;
+    let s = t * (a1 + t * (a2 + t * (a3 + t * (a4 + t * a5))));
+    let ds = a1 + t * (2.0 * a2 + t * (3.0 * a3 + t * (4.0 * a4 + t * 5.0 * a5)));
+    // Σ aₖ = 1 − 10⁻⁹: dividing by it makes the tail exactly ½ at z = 0, so the two branches
+    // meet continuously (a 10⁻⁹ jump would spoil finite differences across z = 0).
+    let e = (-x * x).exp() * (0.5 / AS_SUM);
+    // Half the erfc of |z|/√2 (the smaller tail) and its derivative with respect to |z|.
+    let tail = e * s;
+    let dtail = e * (-2.0 * x * s - AS_P * t * t * ds) * std::f64::consts::FRAC_1_SQRT_2;
+    if z < 0.0 {
+        (tail, -dtail)
+    } else {
+        (1.0 - tail, -dtail)
+    }
 }
 
-/// Standard normal density.
-pub(super) fn pdf(z: f64) -> f64 {
-    (-0.5 * z * z).exp()
-        * (0.5 * std::f64::consts::FRAC_2_SQRT_PI * std::f64::consts::FRAC_1_SQRT_2)
-}
-
-/// The model at `t` for `p = [L₀, L_b, L₂, t₁, t₂, σ]`, and its gradient with respect to `p`.
+/// The model at `t` for `p = [L₀, L_b, L₂, t₁, t₂, σ]`, and its gradient with respect to `p`
+/// (Φ and its derivative from [`cdf_and_density`]).
 pub(super) fn model(p: &[f64; 6], t: f64) -> (f64, [f64; 6]) {
     let [l0, lb, l2, t1, t2, s] = *p;
     let (z1, z2) = ((t - t1) / s, (t - t2) / s);
-    let (c1, c2) = (cdf(z1), cdf(z2));
-    let (d1, d2) = (pdf(z1), pdf(z2));
+    let (c1, d1) = cdf_and_density(z1);
+    let (c2, d2) = cdf_and_density(z2);
     let (h1, h2) = (lb - l0, l2 - lb);
     let f = l0 + h1 * c1 + h2 * c2;
     let g = [
@@ -130,59 +163,65 @@ pub(super) fn start(samples: &[(f64, f64)]) -> Option<[f64; 6]> {
     Some([first.1, lb, l2, 0.0, t2.max(0.5), 1.0])
 }
 
+/// Normal equations `(JᵀJ, Jᵀr)` of the first `k` parameters and the cost `Σ r²` at `p`, in one
+/// pass over the samples (a clipped sample, `v = +∞`, only asks the model to reach the clip
+/// level: one-sided residual).
+fn normal_equations(
+    samples: &[(f64, f64)],
+    p: &[f64; 6],
+    k: usize,
+) -> (Matrix6<f64>, Vector6<f64>, f64) {
+    let mut a = Matrix6::<f64>::zeros();
+    let mut g = Vector6::<f64>::zeros();
+    let mut cost = 0.0;
+    for &(t, v) in samples {
+        let (f, j) = model(p, t);
+        let r = if v.is_finite() {
+            f - v
+        } else {
+            (f - f64::from(CLIP)).min(0.0)
+        };
+        cost += r * r;
+        if !v.is_finite() && r == 0.0 {
+            continue;
+        }
+        for i in 0..k {
+            g[i] += j[i] * r;
+            for m in 0..=i {
+                a[(i, m)] += j[i] * j[m];
+            }
+        }
+    }
+    for i in 0..k {
+        for m in 0..i {
+            a[(m, i)] = a[(i, m)];
+        }
+    }
+    for i in k..6 {
+        a[(i, i)] = 1.0;
+    }
+    (a, g, cost)
+}
+
 /// Levenberg–Marquardt fit of the band model to `samples` from `p0`; `sigma_free` fits σ,
 /// else keeps `p0[5]`. Returns the parameters and the RMS residual (σ stays in (0.2, 5));
 /// `None` if no sample is left.
+///
+/// Each trial step is evaluated with its normal equations in the same pass
+/// ([`normal_equations`]), so an accepted step needs no second pass over the samples.
 pub(super) fn fit(
     samples: &[(f64, f64)],
     p0: [f64; 6],
     sigma_free: bool,
 ) -> Option<([f64; 6], f64)> {
+    if samples.is_empty() {
+        return None;
+    }
     let k = if sigma_free { 6 } else { 5 };
-    // A clipped sample (v = +∞) only asks the model to reach the clip level.
-    let residual = |f: f64, v: f64| {
-        if v.is_finite() {
-            f - v
-        } else {
-            (f - f64::from(CLIP)).min(0.0)
-        }
-    };
-    let cost = |p: &[f64; 6]| -> f64 {
-        samples
-            .iter()
-            .map(|&(t, v)| {
-                let r = residual(model(p, t).0, v);
-                r * r
-            })
-            .sum()
-    };
     let mut p = p0;
-    let mut c = cost(&p);
+    let (mut a, mut g, mut c) = normal_equations(samples, &p, k);
     let mut lambda = 1e-3;
     for _ in 0..20 {
-        let mut a = Matrix6::<f64>::zeros();
-        let mut g = Vector6::<f64>::zeros();
-        for &(t, v) in samples {
-            let (f, j) = model(&p, t);
-            let r = residual(f, v);
-            if !v.is_finite() && r == 0.0 {
-                continue;
-            }
-            for i in 0..k {
-                g[i] += j[i] * r;
-                for m in 0..=i {
-                    a[(i, m)] += j[i] * j[m];
-                }
-            }
-        }
-        for i in 0..k {
-            for m in 0..i {
-                a[(m, i)] = a[(i, m)];
-            }
-        }
-        for i in k..6 {
-            a[(i, i)] = 1.0;
-        }
         let mut improved = false;
         while lambda < 1e10 {
             let mut damped = a;
@@ -202,7 +241,7 @@ pub(super) fn fit(
                 lambda *= 10.0;
                 continue;
             }
-            let cq = cost(&q);
+            let (aq, gq, cq) = normal_equations(samples, &q, k);
             if cq < c {
                 let moved = step
                     .iter()
@@ -212,7 +251,7 @@ pub(super) fn fit(
                     .fold(0.0, f64::max);
                 p = q;
                 let small = c - cq <= 1e-8 * c || moved < 1e-4;
-                c = cq;
+                (a, g, c) = (aq, gq, cq);
                 lambda = (lambda * 0.3).max(1e-9);
                 improved = true;
                 if small {
@@ -227,4 +266,84 @@ pub(super) fn fit(
         }
     }
     Some((p, (c / samples.len() as f64).sqrt()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Standard normal CDF from libm's erfc (the reference).
+    fn phi(z: f64) -> f64 {
+        0.5 * libm::erfc(-z * std::f64::consts::FRAC_1_SQRT_2)
+    }
+
+    #[test]
+    fn fast_cdf_is_within_its_bound_and_its_derivative_is_exact() {
+        let mut worst: f64 = 0.0;
+        let mut worst_density: f64 = 0.0;
+        for i in -120_000..=120_000 {
+            let z = i as f64 * 1e-4;
+            let (c, d) = cdf_and_density(z);
+            worst = worst.max((c - phi(z)).abs());
+            let pdf = (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
+            worst_density = worst_density.max((d - pdf).abs());
+            // The returned derivative is that of the returned function.
+            let h = 1e-5;
+            let fd = (cdf_and_density(z + h).0 - cdf_and_density(z - h).0) / (2.0 * h);
+            assert!((fd - d).abs() < 1e-9, "z={z}: {fd} vs {d}");
+            assert!((0.0..=1.0).contains(&c));
+        }
+        assert!(worst <= CDF_MAX_ERROR, "{worst}");
+        // A tight bound is used: the approximation is not looser than that.
+        assert!(worst > 0.1 * CDF_MAX_ERROR, "{worst}");
+        assert!(worst_density < 3e-6, "{worst_density}");
+        // Far tails: exact limits, no NaN.
+        assert_eq!(cdf_and_density(-60.0).0, 0.0);
+        assert_eq!(cdf_and_density(60.0).0, 1.0);
+        assert!(cdf_and_density(f64::INFINITY).0 == 1.0);
+    }
+
+    #[test]
+    fn fused_fit_matches_separate_cost_and_jacobian_passes() {
+        // A noisy sampled band: the fit's cost equals a direct evaluation at its result, and the
+        // gradient there vanishes (a minimum).
+        let truth = [40.0, 210.0, 60.0, 0.3, 2.8, 0.9];
+        let mut samples: Vec<(f64, f64)> = (0..19)
+            .map(|k| {
+                let t = T_MIN + k as f64 * STEP;
+                let noise = 1.5 * (((k * 7919) % 13) as f64 / 6.0 - 1.0);
+                (t, model(&truth, t).0 + noise)
+            })
+            .collect();
+        let p0 = start(&samples).unwrap();
+        let (p, rms) = fit(&samples, p0, true).unwrap();
+        let (_, g, c) = normal_equations(&samples, &p, 6);
+        assert!((rms - (c / 19.0).sqrt()).abs() < 1e-12);
+        assert!(
+            (p[3] - truth[3]).abs() < 0.1 && (p[4] - truth[4]).abs() < 0.1,
+            "{p:?}"
+        );
+        assert!(g.norm() < 1e-2 * c.max(1.0), "{g:?}");
+        // A clipped top (band level 420 seen as "at least the clip level"): censored samples
+        // (v = +∞) are honoured, with σ fixed.
+        let truth = [40.0, 420.0, 60.0, 0.3, 2.8, 0.9];
+        for s in &mut samples {
+            let v = model(&truth, s.0).0;
+            s.1 = if v >= f64::from(CLIP) {
+                f64::INFINITY
+            } else {
+                v
+            };
+        }
+        assert!(samples.iter().filter(|s| s.1.is_infinite()).count() >= 3);
+        let mut p0 = start(&samples).unwrap();
+        p0[5] = 0.9;
+        let (q, _) = fit(&samples, p0, false).unwrap();
+        assert_eq!(q[5], 0.9);
+        assert!(
+            (q[3] - truth[3]).abs() < 0.05 && (q[4] - truth[4]).abs() < 0.05,
+            "{q:?}"
+        );
+        assert!(fit(&[], p0, true).is_none());
+    }
 }

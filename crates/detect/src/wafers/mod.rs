@@ -114,6 +114,10 @@ pub struct DetectParams {
     /// other arcs exceeds `max_arc_deviation` and including it raises the mean residual by more
     /// than this factor. 0 disables. Default 1.5.
     pub max_arc_residual_ratio: f64,
+    /// Refits the less covered rim of a pair with the joint band model of both rims (see
+    /// [`joint`]: the far edge of the side band on the profiles of the well-seen rim, with one
+    /// blur and one smooth band level for all profiles), after [`share_shape`]. Default true.
+    pub joint_band_fit: bool,
     /// Optional size prior.
     pub prior: Option<WaferPrior>,
 }
@@ -136,6 +140,7 @@ impl Default for DetectParams {
             share_rim_shape: true,
             share_rim_centre: true,
             max_arc_residual_ratio: 1.5,
+            joint_band_fit: true,
             prior: None,
         }
     }
@@ -314,7 +319,7 @@ pub fn detect_wafers<T: Pixel>(
             refine_band_edges(image, &mut c.seg, params.assembly.residual_threshold);
         }
     }
-    pair_rims(candidates, up, params)
+    pair_rims(image, candidates, up, params)
 }
 
 /// Most profiles used to estimate the blur σ of a rim (first pass of [`refine_band_edges`]).
@@ -606,7 +611,8 @@ fn reject_reflections(candidates: &mut Vec<Candidate>, ratio: f64) {
 }
 
 /// Pairs upper and lower rims and numbers the wafers.
-fn pair_rims(
+fn pair_rims<T: Pixel>(
+    image: &GrayView<'_, T>,
     candidates: Vec<Candidate>,
     up: Vector2<f64>,
     params: &DetectParams,
@@ -668,6 +674,9 @@ fn pair_rims(
             trim_close_ends(&mut slots, l, u, params);
             if params.share_rim_shape {
                 share_shape(&mut slots, u, l, up, params);
+            }
+            if params.joint_band_fit {
+                joint_partner(image, &mut slots, u, l, up, params);
             }
         }
     }
@@ -904,6 +913,110 @@ fn trim_close_ends(slots: &mut [Option<Candidate>], i: usize, j: usize, params: 
 }
 
 mod band;
+mod joint;
+
+/// Refits one rim of the pair `(i, j)` with [`joint::fit_partner`] against the other one, the
+/// reference: the rim with the larger angular coverage when the two differ by more than 0.15
+/// (as in [`share_shape`]), else (both rims seen along the front arc only) the upper rim of a
+/// wafer seen from above, whose edge against the dark top face is the sharper one; the lower
+/// rim is then the far edge of the side band (seen from above: the lower rim's image is the
+/// rounder one); otherwise the pair is left as it is. The refit is kept
+/// when it moved the rim by less than 2 px and 5 % of `b` and the rim's own points still fit it
+/// (mean orthogonal distance under the residual threshold); the rim's points are kept as they
+/// are and its residual is re-measured on them. Covariance: the joint fit's `(s, b)` covariance
+/// mapped to `(cx, cy, b)`, plus the reference's covariance of the shared parameters (its
+/// centre, `a`, `θ`).
+fn joint_partner<T: Pixel>(
+    image: &GrayView<'_, T>,
+    slots: &mut [Option<Candidate>],
+    i: usize,
+    j: usize,
+    up: Vector2<f64>,
+    params: &DetectParams,
+) {
+    // A wafer seen from above has its lower rim farther below the camera than its upper rim:
+    // the lower rim's image is the rounder one (b/a is the sine of the view elevation).
+    let minor = |k: usize, kind: RimKind| {
+        slots
+            .get(k)
+            .and_then(|c| c.as_ref())
+            .filter(|c| c.kind == kind)
+            .map(|c| c.seg.fit.ellipse.b)
+    };
+    let from_above = match (minor(i, RimKind::Upper), minor(j, RimKind::Lower)) {
+        (Some(bu), Some(bl)) => bl > bu,
+        _ => {
+            matches!((minor(j, RimKind::Upper), minor(i, RimKind::Lower)), (Some(bu), Some(bl)) if bl > bu)
+        }
+    };
+    // Per rim: coverage, whether it is the upper rim of a wafer seen from above, ellipse and
+    // covariance.
+    let cover = |slots: &[Option<Candidate>], k: usize| {
+        slots.get(k).and_then(|c| c.as_ref()).map(|c| {
+            (
+                angular_coverage(&c.seg.fit.ellipse, &c.seg.points),
+                c.kind == RimKind::Upper && from_above,
+                (c.seg.fit.ellipse, c.seg.fit.covariance),
+            )
+        })
+    };
+    let (Some((ci, ki, ei)), Some((cj, kj, ej))) = (cover(slots, i), cover(slots, j)) else {
+        return;
+    };
+    let ((reference, reference_cov), target) = if ci > cj + 0.15 || (ci >= cj - 0.15 && ki >= kj) {
+        (ei, j)
+    } else {
+        (ej, i)
+    };
+    let Some(c) = slots.get_mut(target).and_then(|c| c.as_mut()) else {
+        return;
+    };
+    let current = c.seg.fit.ellipse;
+    let Some(fit) = joint::fit_partner(image, &reference, &current, &c.seg.points, up, 0.9) else {
+        return;
+    };
+    let e = fit.ellipse;
+    if !((e.cx - current.cx).hypot(e.cy - current.cy) < 2.0
+        && (e.b - current.b).abs() < 0.05 * current.b)
+    {
+        return;
+    }
+    let d = e.orthogonal_distances(&c.seg.points);
+    let n = d.len().max(1) as f64;
+    let residual_mean = d.iter().map(|x| x.abs()).sum::<f64>() / n;
+    if !(residual_mean < params.assembly.residual_threshold) {
+        return;
+    }
+    let residual_rms = (d.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+    // (cx, cy, b) = (rcx + s·up.x, rcy + s·up.y, b): J maps (s, b).
+    let mut jac = nalgebra::SMatrix::<f64, 5, 2>::zeros();
+    jac[(0, 0)] = up.x;
+    jac[(1, 0)] = up.y;
+    jac[(3, 1)] = 1.0;
+    let mut cov = jac * fit.covariance * jac.transpose();
+    if let Some(rc) = reference_cov {
+        for (r, k) in [
+            (0, 0),
+            (0, 1),
+            (1, 0),
+            (1, 1),
+            (2, 2),
+            (2, 4),
+            (4, 2),
+            (4, 4),
+        ] {
+            cov[(r, k)] += rc[(r, k)];
+        }
+    }
+    c.seg.fit = EllipseFit {
+        ellipse: e,
+        residual_mean,
+        residual_rms,
+        covariance: Some(cov),
+        iterations: 0,
+        converged: true,
+    };
+}
 
 #[cfg(test)]
 mod tests {

@@ -31,6 +31,11 @@ pub struct EdgeObservation {
     pub rim: Rim,
     /// Edge points in pixels (undistorted, pinhole `K`).
     pub points: Vec<Vector2<f64>>,
+    /// Per-point factors of the edge-point standard deviation: point `i` has
+    /// `σ_i = pixel_sigma · sigma_scale[i]`, i.e. the information `Ω^z_i = 1/σ_i²` of eq. (5.5)
+    /// per point (a heteroscedastic noise model, e.g. from the predicted width of the wafer's
+    /// side band at the point). Empty: every point has `pixel_sigma`.
+    pub sigma_scale: Vec<f64>,
 }
 
 /// The camera-observation factor to use.
@@ -384,6 +389,54 @@ impl EdgeResidual {
     }
 }
 
+/// A residual whose rows are divided by per-point standard-deviation factors (eq. (5.5) with
+/// `Ω^z_i = 1/(σ·s_i)²`): the inner residual is whitened by the common `σ`, each of its
+/// `rows_per_point` rows of point `i` is then multiplied by `1/s_i`, and so are the matching
+/// Jacobian rows (the scaling is constant, so the Jacobians stay exact).
+struct RowScaled<R> {
+    inner: R,
+    /// `1/s` per residual row.
+    inv: Vec<f64>,
+}
+
+impl<R: Residual> RowScaled<R> {
+    fn new(inner: R, scale: &[f64], rows_per_point: usize) -> Self {
+        let inv = scale
+            .iter()
+            .flat_map(|s| std::iter::repeat_n(1.0 / s, rows_per_point))
+            .collect();
+        Self { inner, inv }
+    }
+}
+
+impl<R: Residual> Residual for RowScaled<R> {
+    fn dim(&self) -> usize {
+        self.inner.dim()
+    }
+
+    fn evaluate(
+        &self,
+        params: &[&[f64]],
+        residual: &mut [f64],
+        jacobians: Option<&mut [DMatrix<f64>]>,
+    ) -> Result<()> {
+        let mut jacobians = jacobians;
+        self.inner
+            .evaluate(params, residual, jacobians.as_deref_mut())?;
+        for (r, w) in residual.iter_mut().zip(&self.inv) {
+            *r *= w;
+        }
+        if let Some(jac) = jacobians {
+            for j in jac.iter_mut() {
+                for (i, w) in self.inv.iter().enumerate() {
+                    j.row_mut(i).scale_mut(*w);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Body-frame twist `[0; R_bcᵀ u]` of the camera per unit length of link `l` (0 = l1, 1 = l2,
 /// 2 = l4): lengthening a link moves everything after it along the link's direction `u`
 /// (angles `θ1`, `θ1+θ2`, `θ1+θ2+θ4` of the true joints, eq. (2.4)).
@@ -642,6 +695,24 @@ impl SlamMot {
                     reason: "an observation has no edge points",
                 });
             }
+            if !obs.sigma_scale.is_empty() && obs.sigma_scale.len() != obs.points.len() {
+                return Err(EstimateError::DimensionMismatch {
+                    what: format!("sigma_scale of observation {o} (one per edge point or none)"),
+                    expected: vec![obs.points.len()],
+                    got: vec![obs.sigma_scale.len()],
+                });
+            }
+            if let Some(v) = obs
+                .sigma_scale
+                .iter()
+                .find(|v| !(v.is_finite() && **v > 0.0))
+            {
+                return Err(EstimateError::InvalidParameter {
+                    name: "sigma_scale",
+                    value: *v,
+                    reason: "per-point standard-deviation factors must be finite and positive",
+                });
+            }
             if let Some(p) = obs
                 .points
                 .iter()
@@ -852,7 +923,12 @@ impl SlamMot {
                     sigma: self.config.pixel_sigma,
                 };
                 n_res += res.dim();
-                p.add_residual(res, &[cb, wb], loss)?;
+                if obs.sigma_scale.is_empty() {
+                    p.add_residual(res, &[cb, wb], loss)?;
+                } else {
+                    let res = RowScaled::new(res, &obs.sigma_scale, 1);
+                    p.add_residual(res, &[cb, wb], loss)?;
+                }
                 continue;
             }
             let nb = match (self.config.encoder_sigma, noise[obs.frame]) {
@@ -893,7 +969,12 @@ impl SlamMot {
             blocks.extend(nb);
             blocks.extend(mount);
             blocks.extend(links);
-            p.add_residual(res, &blocks, loss)?;
+            if obs.sigma_scale.is_empty() {
+                p.add_residual(res, &blocks, loss)?;
+            } else {
+                let rows = if res.angles.is_some() { 2 } else { 1 };
+                p.add_residual(RowScaled::new(res, &obs.sigma_scale, rows), &blocks, loss)?;
+            }
         }
         let yaw = {
             let r = state.base.rotation.to_rotation_matrix().into_inner();
@@ -1621,6 +1702,7 @@ pub(crate) mod tests {
                             wafer: wi,
                             rim,
                             points: pts,
+                            sigma_scale: Vec::new(),
                         });
                     }
                 }
@@ -1690,6 +1772,117 @@ pub(crate) mod tests {
             );
         }
         assert!(sol.rms_px < 0.5 && sol.rms_px > 0.15, "rms {}", sol.rms_px);
+    }
+
+    #[test]
+    fn uniform_sigma_scale_equals_a_larger_pixel_sigma() {
+        let sc = scene(2, 20, 0.3);
+        let scaled: Vec<EdgeObservation> = sc
+            .observations
+            .iter()
+            .map(|o| EdgeObservation {
+                sigma_scale: vec![2.0; o.points.len()],
+                ..o.clone()
+            })
+            .collect();
+        let n = sc.truth.wafers.len();
+        let a = SlamMot::new(sc.config.clone(), sc.encoders.clone(), scaled, n).unwrap();
+        let mut cfg = sc.config.clone();
+        cfg.pixel_sigma *= 2.0;
+        let b = SlamMot::new(cfg, sc.encoders.clone(), sc.observations.clone(), n).unwrap();
+        let start = perturbed(&sc.truth);
+        let (sa, sb) = (
+            a.solve_batch(&start).unwrap(),
+            b.solve_batch(&start).unwrap(),
+        );
+        assert!(se3_minus(&sa.state.base, &sb.state.base).norm() < 1e-9);
+        let (ca, cb) = (
+            sa.uncertainty.covariance.unwrap(),
+            sb.uncertainty.covariance.unwrap(),
+        );
+        assert!((&ca - &cb).norm() <= 1e-6 * cb.norm(), "{ca} vs {cb}");
+        // Without the scales the covariance is clearly smaller (not exactly 4×: the yaw-gauge
+        // prior is not scaled and the Huber weights change): the scales are used.
+        let c = SlamMot::new(
+            sc.config.clone(),
+            sc.encoders.clone(),
+            sc.observations.clone(),
+            n,
+        )
+        .unwrap()
+        .solve_batch(&start)
+        .unwrap();
+        let cc = c.uncertainty.covariance.unwrap();
+        let ratio = ca[(3, 3)] / cc[(3, 3)];
+        assert!(
+            (1.5..=4.0 + 1e-9).contains(&ratio),
+            "covariance ratio {ratio}"
+        );
+    }
+
+    #[test]
+    fn per_point_sigma_downweights_the_noisy_points() {
+        // Every other point gets 3 px extra noise; telling the solver so (σ factor 10) must
+        // give a better estimate than treating all points alike.
+        let sc = scene(3, 30, 0.3);
+        let mut rng = Pcg64::seed_from_u64(11);
+        let noise = Normal::new(0.0, 3.0).unwrap();
+        let noisy: Vec<EdgeObservation> = sc
+            .observations
+            .iter()
+            .map(|o| {
+                let mut o = o.clone();
+                for p in o.points.iter_mut().step_by(2) {
+                    *p += Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng));
+                }
+                o
+            })
+            .collect();
+        let weighted: Vec<EdgeObservation> = noisy
+            .iter()
+            .map(|o| EdgeObservation {
+                sigma_scale: (0..o.points.len())
+                    .map(|i| if i % 2 == 0 { 10.0 } else { 1.0 })
+                    .collect(),
+                ..o.clone()
+            })
+            .collect();
+        let n = sc.truth.wafers.len();
+        let err = |obs: Vec<EdgeObservation>| {
+            let slam = SlamMot::new(sc.config.clone(), sc.encoders.clone(), obs, n).unwrap();
+            let sol = slam.solve_batch(&perturbed(&sc.truth)).unwrap();
+            let d: f64 = sol
+                .state
+                .wafers
+                .iter()
+                .zip(&sc.truth.wafers)
+                .map(|(a, b)| (a - b).fixed_rows::<3>(0).norm_squared())
+                .sum();
+            (d / n as f64).sqrt() + se3_minus(&sol.state.base, &sc.truth.base).norm()
+        };
+        let (plain, with_scale) = (err(noisy), err(weighted));
+        assert!(
+            with_scale < 0.6 * plain,
+            "weighted {with_scale} vs plain {plain}"
+        );
+    }
+
+    #[test]
+    fn bad_sigma_scales_are_rejected() {
+        let sc = scene(1, 5, 0.3);
+        let n = sc.truth.wafers.len();
+        let m = sc.observations[0].points.len();
+        // Wrong length, NaN, zero, negative.
+        for bad in [
+            vec![1.0; m + 1],
+            vec![f64::NAN; m],
+            vec![0.0; m],
+            vec![-1.0; m],
+        ] {
+            let mut obs = sc.observations.clone();
+            obs[0].sigma_scale = bad;
+            assert!(SlamMot::new(sc.config.clone(), sc.encoders.clone(), obs, n).is_err());
+        }
     }
 
     /// The edge residual of observation `obs` of scene `sc` (σ 0.5 px, identity mount, zero

@@ -1,0 +1,535 @@
+//! Joint band model of the two rims of one wafer (000_3b1454b2b2194811.txt §3.2, Fig. 3.2: "the
+//! bright boundary of the wafer forms two edges: an upper one corresponding to the upper surface
+//! and lower one corresponding to the lower surface"; the rims are the images of two parallel
+//! circles, eq. (3.1)–(3.2)).
+//!
+//! One rim of a wafer is seen nearly all round (the rim of the face turned to the camera), the
+//! other only along the front arc, as the far edge of the bright side band. The side band is
+//! 2–4 px wide on the benchmark images, so the far edge is everywhere a *narrow-band* edge:
+//! fitting each profile on its own trades the band's width against its brightness and leaves a
+//! position bias that changes along the arc (it grows where the band narrows toward the arc's
+//! ends), which tilts the curvature of the front arc and with it the minor axis of the
+//! partially seen rim by 1–3 %.
+//!
+//! [`fit_partner`] fits the partially seen rim as one model over all band profiles: each profile
+//! starts on the well-seen (reference) rim and runs along its normal through the band; the near
+//! edge `t₁` is free per profile, the far edge `t₂` is where the profile's ray meets the target
+//! ellipse, which shares `a` and `θ` with the reference and has its centre on the line through
+//! the reference centre along `up` (see [`super::share_shape`]); its free shape parameters are
+//! the offset `s` along `up` and the minor axis `b`. The blur σ is one unknown for all profiles,
+//! and the band level is one smooth function along the rim, `L_b(u) = c₀ + c₁u + c₂u²` with `u`
+//! the cosine of the eccentric angle (the side face is Lambertian: its radiance changes with the
+//! direction of the face normal, `rim_albedo·(ambient + (1 − ambient)·n·l)`, times a linear
+//! lighting gradient); the levels on both sides of the band (`L₀`, `L₂`) are free per profile.
+//! Sharing σ and `L_b` removes the width/brightness trade-off that biases per-profile fits.
+//!
+//! Solved by Levenberg–Marquardt with the analytic Jacobian (the band model's gradient,
+//! [`super::band::model`], and the implicit derivative of the ray–ellipse intersection,
+//! [`ray_hit`]) and the Schur complement of the per-profile levels (3 local unknowns per profile,
+//! 6 global ones). Clipped samples are censored, as in [`super::band`].
+
+use super::band;
+use super::{GrayView, Pixel, Vector2};
+use autoteach_geometry::conic::Ellipse;
+use nalgebra::{Matrix2, Matrix3, Matrix6, Vector3, Vector6};
+
+/// A sample at or above this grey level counts as clipped (as in [`super::band`]).
+const CLIP: f64 = 254.5;
+/// Band profiles sampled along the target's angular range on the reference rim.
+const PROFILES: usize = 64;
+/// Fewest usable profiles for a fit.
+const MIN_PROFILES: usize = 12;
+/// A profile whose RMS exceeds this multiple of the median profile RMS, or whose far-edge
+/// contrast is under [`MIN_CONTRAST_RATIO`] × the median, is dropped and the model refitted
+/// (clutter across the profile, e.g. a bright reflection just beyond the far edge near the
+/// ends of the front arc, where the far edge's contrast vanishes).
+const MAX_RMS_RATIO: f64 = 2.5;
+/// See [`MAX_RMS_RATIO`].
+const MIN_CONTRAST_RATIO: f64 = 0.5;
+
+/// The ray parameter `t` at which `p + t·d` meets `e`, the root nearest to `hint`, and its
+/// derivatives with respect to the ellipse's `(cx, cy, b)` (implicit function theorem on
+/// `F(p + t·d) = 0`, `F = x²/a² + y²/b² − 1` in the ellipse frame: `∂t/∂q = −(∂F/∂q)/(∂F/∂t)`).
+/// `None` if the ray misses or grazes the ellipse.
+pub(super) fn ray_hit(
+    e: &Ellipse,
+    p: Vector2<f64>,
+    d: Vector2<f64>,
+    hint: f64,
+) -> Option<(f64, [f64; 3])> {
+    let (s, c) = e.theta.sin_cos();
+    let (dx, dy) = (p.x - e.cx, p.y - e.cy);
+    let (x0, y0) = (c * dx + s * dy, -s * dx + c * dy);
+    let (ux, uy) = (c * d.x + s * d.y, -s * d.x + c * d.y);
+    let (a2, b2) = (e.a * e.a, e.b * e.b);
+    let qa = ux * ux / a2 + uy * uy / b2;
+    let qb = 2.0 * (x0 * ux / a2 + y0 * uy / b2);
+    let qc = x0 * x0 / a2 + y0 * y0 / b2 - 1.0;
+    let disc = qb * qb - 4.0 * qa * qc;
+    if !(disc > 0.0 && qa > 0.0) {
+        return None;
+    }
+    let root = disc.sqrt();
+    let (r1, r2) = ((-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa));
+    let t = if (r1 - hint).abs() <= (r2 - hint).abs() {
+        r1
+    } else {
+        r2
+    };
+    let (xl, yl) = (x0 + t * ux, y0 + t * uy);
+    let f_t = 2.0 * (xl * ux / a2 + yl * uy / b2);
+    if !(f_t.abs() > 1e-12) {
+        return None;
+    }
+    let f_cx = -2.0 * xl * c / a2 + 2.0 * yl * s / b2;
+    let f_cy = -2.0 * xl * s / a2 - 2.0 * yl * c / b2;
+    let f_b = -2.0 * yl * yl / (b2 * e.b);
+    Some((t, [-f_cx / f_t, -f_cy / f_t, -f_b / f_t]))
+}
+
+/// One band profile: its start on the reference rim, direction into the band, the basis value
+/// `u` of the band level, the samples, and its local unknowns `[L₀, L₂, t₁]`.
+struct Profile {
+    p: Vector2<f64>,
+    d: Vector2<f64>,
+    u: f64,
+    samples: Vec<(f64, f64)>,
+    local: Vector3<f64>,
+}
+
+/// Result of [`fit_partner`].
+pub(super) struct PartnerFit {
+    /// The fitted target ellipse (`a`, `θ` of the reference).
+    pub ellipse: Ellipse,
+    /// Covariance of `(s, b)` (offset along `up`, minor axis), `σ̂²·(S)⁻¹` with `S` the Schur
+    /// complement of the normal equations.
+    pub covariance: Matrix2<f64>,
+}
+
+/// The target ellipse for the globals `g = [s, b, …]`.
+fn target(reference: &Ellipse, up: Vector2<f64>, g: &Vector6<f64>) -> Option<Ellipse> {
+    Ellipse::new(
+        reference.cx + g[0] * up.x,
+        reference.cy + g[0] * up.y,
+        reference.a,
+        g[1],
+        reference.theta,
+    )
+    .ok()
+    .filter(|e| (e.a - reference.a).abs() < 1e-9 * reference.a.max(1.0))
+}
+
+/// Output buffers of [`profile_residuals`]: residuals, local and global Jacobian rows.
+type Rows<'a> = (
+    &'a mut Vec<f64>,
+    &'a mut Vec<[f64; 3]>,
+    &'a mut Vec<[f64; 6]>,
+);
+
+/// Residuals of one profile (censored for clipped samples) and, if `jac`, the local
+/// (`n × 3`) and global (`n × 6`) Jacobian rows.
+fn profile_residuals(
+    pr: &Profile,
+    e: &Ellipse,
+    up: Vector2<f64>,
+    g: &Vector6<f64>,
+    mut out: Option<Rows<'_>>,
+) -> Option<f64> {
+    let (t2, dt) = ray_hit(e, pr.p, pr.d, 2.5)?;
+    let dt_ds = dt[0] * up.x + dt[1] * up.y;
+    let dt_db = dt[2];
+    let lb = g[3] + g[4] * pr.u + g[5] * pr.u * pr.u;
+    let [l0, l2, t1] = [pr.local[0], pr.local[1], pr.local[2]];
+    let q = [l0, lb, l2, t1, t2, g[2]];
+    let mut cost = 0.0;
+    if let Some((r, jl, jg)) = out.as_mut() {
+        r.clear();
+        jl.clear();
+        jg.clear();
+    }
+    for &(t, v) in &pr.samples {
+        let (f, grad) = band::model(&q, t);
+        let (res, active) = if v.is_finite() {
+            (f - v, true)
+        } else {
+            let r = (f - CLIP).min(0.0);
+            (r, r < 0.0)
+        };
+        cost += res * res;
+        if let Some((r, jl, jg)) = out.as_mut() {
+            r.push(res);
+            if active {
+                jl.push([grad[0], grad[2], grad[3]]);
+                jg.push([
+                    grad[4] * dt_ds,
+                    grad[4] * dt_db,
+                    grad[5],
+                    grad[1],
+                    grad[1] * pr.u,
+                    grad[1] * pr.u * pr.u,
+                ]);
+            } else {
+                jl.push([0.0; 3]);
+                jg.push([0.0; 6]);
+            }
+        }
+    }
+    Some(cost)
+}
+
+/// Total cost `Σ r²`; `None` if a profile's ray misses the target.
+fn total_cost(
+    profiles: &[Profile],
+    reference: &Ellipse,
+    up: Vector2<f64>,
+    g: &Vector6<f64>,
+) -> Option<f64> {
+    let e = target(reference, up, g)?;
+    profiles
+        .iter()
+        .map(|pr| profile_residuals(pr, &e, up, g, None))
+        .sum()
+}
+
+/// Levenberg–Marquardt on all profiles (Schur complement of the 3 local unknowns per profile).
+/// Returns the globals, the final cost and the undamped Schur complement (for the covariance).
+fn solve(
+    profiles: &mut [Profile],
+    reference: &Ellipse,
+    up: Vector2<f64>,
+    mut g: Vector6<f64>,
+) -> Option<(Vector6<f64>, f64, Matrix6<f64>)> {
+    let mut cost = total_cost(profiles, reference, up, &g)?;
+    let mut lambda = 1e-3;
+    let (mut r, mut jl, mut jg) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..40 {
+        let e = target(reference, up, &g)?;
+        // Normal equations: per profile A (3×3), B (3×6), a (3); global C (6×6), c (6).
+        let mut blocks = Vec::with_capacity(profiles.len());
+        let mut cg = Matrix6::<f64>::zeros();
+        let mut rg = Vector6::<f64>::zeros();
+        for pr in profiles.iter() {
+            profile_residuals(pr, &e, up, &g, Some((&mut r, &mut jl, &mut jg)))?;
+            let mut a = Matrix3::<f64>::zeros();
+            let mut b = nalgebra::Matrix3x6::<f64>::zeros();
+            let mut ra = Vector3::<f64>::zeros();
+            for ((res, l), gl) in r.iter().zip(&jl).zip(&jg) {
+                let l = Vector3::from(*l);
+                let gl = Vector6::from(*gl);
+                a += l * l.transpose();
+                b += l * gl.transpose();
+                ra += l * *res;
+                cg += gl * gl.transpose();
+                rg += gl * *res;
+            }
+            blocks.push((a, b, ra));
+        }
+        let mut improved = false;
+        while lambda < 1e8 {
+            let mut s = cg;
+            let mut rhs = -rg;
+            for i in 0..6 {
+                s[(i, i)] += lambda * cg[(i, i)].max(1e-9);
+            }
+            let mut inverses = Vec::with_capacity(blocks.len());
+            let mut ok = true;
+            for (a, b, ra) in &blocks {
+                let mut ad = *a;
+                for i in 0..3 {
+                    ad[(i, i)] += lambda * a[(i, i)].max(1e-9);
+                }
+                let Some(ai) = ad.try_inverse() else {
+                    ok = false;
+                    break;
+                };
+                s -= b.transpose() * ai * b;
+                rhs += b.transpose() * ai * ra;
+                inverses.push(ai);
+            }
+            let step = if ok {
+                s.cholesky().map(|ch| ch.solve(&rhs))
+            } else {
+                None
+            };
+            let Some(dg) = step else {
+                lambda *= 10.0;
+                continue;
+            };
+            let g_new = g + dg;
+            let saved: Vec<Vector3<f64>> = profiles.iter().map(|p| p.local).collect();
+            for ((pr, (_, b, ra)), ai) in profiles.iter_mut().zip(&blocks).zip(&inverses) {
+                pr.local += ai * (-ra - b * dg);
+            }
+            let c_new = if g_new[2] > 0.2 && g_new[2] < 5.0 && g_new[1] > 0.0 {
+                total_cost(profiles, reference, up, &g_new)
+            } else {
+                None
+            };
+            match c_new {
+                Some(c) if c < cost => {
+                    let small =
+                        cost - c <= 1e-9 * cost || dg.iter().take(3).all(|x| x.abs() < 1e-5);
+                    g = g_new;
+                    cost = c;
+                    lambda = (lambda * 0.3).max(1e-9);
+                    improved = true;
+                    if small {
+                        lambda = 0.0;
+                    }
+                    break;
+                }
+                _ => {
+                    for (pr, l) in profiles.iter_mut().zip(saved) {
+                        pr.local = l;
+                    }
+                    lambda *= 10.0;
+                }
+            }
+        }
+        if !improved || lambda == 0.0 {
+            break;
+        }
+    }
+    // Undamped Schur complement at the solution (covariance).
+    let e = target(reference, up, &g)?;
+    let mut cg = Matrix6::<f64>::zeros();
+    for pr in profiles.iter() {
+        profile_residuals(pr, &e, up, &g, Some((&mut r, &mut jl, &mut jg)))?;
+        let mut a = Matrix3::<f64>::zeros();
+        let mut b = nalgebra::Matrix3x6::<f64>::zeros();
+        for (l, gl) in jl.iter().zip(&jg) {
+            let l = Vector3::from(*l);
+            let gl = Vector6::from(*gl);
+            a += l * l.transpose();
+            b += l * gl.transpose();
+            cg += gl * gl.transpose();
+        }
+        let ai = a.try_inverse()?;
+        cg -= b.transpose() * ai * b;
+    }
+    Some((g, cost, cg))
+}
+
+/// Circular-mean-centred range of the eccentric angles (on `e`) of `points`.
+fn angle_range(e: &Ellipse, points: &[Vector2<f64>]) -> Option<(f64, f64)> {
+    let (s, c) = e.theta.sin_cos();
+    let angles: Vec<f64> = points
+        .iter()
+        .map(|p| {
+            let (dx, dy) = (p.x - e.cx, p.y - e.cy);
+            ((-s * dx + c * dy) / e.b).atan2((c * dx + s * dy) / e.a)
+        })
+        .collect();
+    let (sx, sy) = angles
+        .iter()
+        .fold((0.0, 0.0), |(x, y), t| (x + t.cos(), y + t.sin()));
+    if !(sx.hypot(sy) > 0.0) {
+        return None;
+    }
+    let m = sy.atan2(sx);
+    let rel = |t: f64| {
+        let d = t - m;
+        d - std::f64::consts::TAU * (d / std::f64::consts::TAU).round()
+    };
+    let lo = angles.iter().map(|&t| rel(t)).fold(f64::INFINITY, f64::min);
+    let hi = angles
+        .iter()
+        .map(|&t| rel(t))
+        .fold(f64::NEG_INFINITY, f64::max);
+    (hi > lo).then_some((m + lo, m + hi))
+}
+
+/// Fits the partially seen rim `current` (supported by `points`) of a wafer whose other rim,
+/// `reference`, is well seen, with the joint band model of the module doc. `up` is the unit
+/// image direction of the wafer normal; `sigma0` a starting blur (pixels). `None` when fewer
+/// than [`MIN_PROFILES`] band profiles are usable or the fit fails; the caller decides whether
+/// to keep the result.
+pub(super) fn fit_partner<T: Pixel>(
+    image: &GrayView<'_, T>,
+    reference: &Ellipse,
+    current: &Ellipse,
+    points: &[Vector2<f64>],
+    up: Vector2<f64>,
+    sigma0: f64,
+) -> Option<PartnerFit> {
+    let (t_lo, t_hi) = angle_range(reference, points)?;
+    let s0 = (current.cx - reference.cx) * up.x + (current.cy - reference.cy) * up.y;
+    let mut g = Vector6::new(s0, current.b, sigma0, 0.0, 0.0, 0.0);
+    let e0 = target(reference, up, &g)?;
+    let (st, ct) = reference.theta.sin_cos();
+    let mut profiles = Vec::with_capacity(PROFILES);
+    let mut levels = Vec::new();
+    let mut buf = Vec::new();
+    for k in 0..PROFILES {
+        let t = t_lo + (t_hi - t_lo) * k as f64 / (PROFILES - 1) as f64;
+        let p = reference.point_at(t);
+        let (gx, gy) = (t.cos() / reference.a, t.sin() / reference.b);
+        let n = Vector2::new(gx * ct - gy * st, gx * st + gy * ct);
+        let len = n.norm();
+        if !(len > 0.0) {
+            continue;
+        }
+        let Some(d) = band::profile(image, p, n / len, &mut buf) else {
+            continue;
+        };
+        // The target's edge must lie ahead inside the profile window.
+        let Some((t2, _)) = ray_hit(&e0, p, d, 2.5) else {
+            continue;
+        };
+        if !(t2 > 0.5 && t2 < band::T_MAX - 1.0) {
+            continue;
+        }
+        let Some(mut q0) = band::start(&buf) else {
+            continue;
+        };
+        q0[4] = t2;
+        q0[5] = sigma0;
+        let Some((q, _)) = band::fit(&buf, q0, false) else {
+            continue;
+        };
+        if !(q.iter().all(|x| x.is_finite()) && q[3].abs() <= 1.5) {
+            continue;
+        }
+        if !buf.iter().any(|s| s.1.is_infinite()) {
+            levels.push(q[1]);
+        }
+        profiles.push(Profile {
+            p,
+            d,
+            u: t.cos(),
+            samples: buf.clone(),
+            local: Vector3::new(q[0], q[2], q[3]),
+        });
+    }
+    if profiles.len() < MIN_PROFILES {
+        return None;
+    }
+    g[3] = if levels.is_empty() {
+        1.3 * CLIP
+    } else {
+        super::median(&mut levels)
+    };
+    let mut result = None;
+    for _ in 0..3 {
+        let (g1, cost, schur) = solve(&mut profiles, reference, up, g)?;
+        g = g1;
+        let n_samples: usize = profiles.iter().map(|p| p.samples.len()).sum();
+        result = Some((g, cost, schur, n_samples, profiles.len()));
+        // Screen the profiles: clutter across a profile (RMS) or a vanishing far edge.
+        let e = target(reference, up, &g)?;
+        let stats: Vec<(f64, f64)> = profiles
+            .iter()
+            .map(|pr| {
+                let c = profile_residuals(pr, &e, up, &g, None).unwrap_or(f64::INFINITY);
+                let lb = g[3] + g[4] * pr.u + g[5] * pr.u * pr.u;
+                (
+                    (c / pr.samples.len().max(1) as f64).sqrt(),
+                    (lb - pr.local[1]).abs(),
+                )
+            })
+            .collect();
+        let mut rms: Vec<f64> = stats.iter().map(|s| s.0).collect();
+        let mut contrast: Vec<f64> = stats.iter().map(|s| s.1).collect();
+        let (rms_limit, contrast_limit) = (
+            MAX_RMS_RATIO * super::median(&mut rms),
+            MIN_CONTRAST_RATIO * super::median(&mut contrast),
+        );
+        let keep: Vec<bool> = stats
+            .iter()
+            .map(|&(r, c)| r <= rms_limit && c >= contrast_limit)
+            .collect();
+        if keep.iter().all(|&k| k) {
+            break;
+        }
+        let mut k = 0;
+        profiles.retain(|_| {
+            k += 1;
+            keep[k - 1]
+        });
+        if profiles.len() < MIN_PROFILES {
+            return None;
+        }
+    }
+    let (g, cost, schur, n_samples, n_profiles) = result?;
+    let dof = n_samples.checked_sub(6 + 3 * n_profiles)?.max(1);
+    let var = cost / dof as f64;
+    let cov6 = schur.try_inverse()?;
+    let covariance = cov6.fixed_view::<2, 2>(0, 0).into_owned() * var;
+    Some(PartnerFit {
+        ellipse: target(reference, up, &g)?,
+        covariance,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ray_hit_derivatives_match_finite_differences() {
+        let e = Ellipse::new(600.0, 300.0, 280.0, 33.0, 0.04).unwrap();
+        for t in [0.4, 1.2, 1.7, 2.6] {
+            let p = e.point_at(t) - Vector2::new(0.3, 2.2);
+            let d = Vector2::new(0.1, 1.0).normalize();
+            let (t0, g) = ray_hit(&e, p, d, 2.0).unwrap();
+            // The hit lies on the ellipse.
+            assert!(e.orthogonal_distance(&(p + d * t0)).abs() < 1e-9);
+            let h = 1e-6;
+            let shifted = |k: usize, sign: f64| {
+                let mut v = [e.cx, e.cy, e.b];
+                v[k] += sign * h;
+                let f = Ellipse::new(v[0], v[1], e.a, v[2], e.theta).unwrap();
+                ray_hit(&f, p, d, t0).unwrap().0
+            };
+            for (k, gk) in g.iter().enumerate() {
+                let fd = (shifted(k, 1.0) - shifted(k, -1.0)) / (2.0 * h);
+                assert!(
+                    (fd - gk).abs() < 1e-5 * (1.0 + fd.abs()),
+                    "t={t} k={k}: {fd} vs {}",
+                    gk
+                );
+            }
+        }
+        // A ray that misses.
+        let far = Vector2::new(0.0, -500.0);
+        assert!(ray_hit(&e, far, Vector2::new(1.0, 0.0), 0.0).is_none());
+    }
+
+    #[test]
+    fn rendered_lower_rim_is_recovered_from_a_biased_start() {
+        use autoteach_geometry::render::Rim;
+        // Target wafer seen from above (renderer ground truth): the upper rim as the reference,
+        // the lower rim started 2 % too flat and 0.5 px off along `up`, supported by its front
+        // arc only.
+        let (data, w, h, rims) = super::super::tests::scene(3, 1.0, 11);
+        let view = GrayView::new(&data, w, h).unwrap();
+        let truth = |rim: Rim| {
+            rims.iter()
+                .find(|r| r.0 == 0 && r.1 == rim)
+                .map(|r| r.2)
+                .unwrap()
+        };
+        let (upper, lower) = (truth(Rim::Upper), truth(Rim::Lower));
+        let up = Vector2::new(0.0, -1.0);
+        let start = Ellipse::new(
+            lower.cx,
+            lower.cy + 0.5,
+            lower.a,
+            0.98 * lower.b,
+            lower.theta,
+        )
+        .unwrap();
+        let points = lower.sample(200, 0.5, std::f64::consts::PI - 0.5).unwrap();
+        let fit = fit_partner(&view, &upper, &start, &points, up, 0.9).unwrap();
+        let e = fit.ellipse;
+        let centre = (e.cx - lower.cx).hypot(e.cy - lower.cy);
+        assert!(centre < 0.25, "centre error {centre}: {e:?} vs {lower:?}");
+        assert!(
+            (e.b - lower.b).abs() < 0.005 * lower.b,
+            "b {} vs {}",
+            e.b,
+            lower.b
+        );
+        assert!(fit.covariance[(1, 1)] > 0.0 && fit.covariance[(1, 1)].sqrt() < 0.2);
+    }
+}
