@@ -3,7 +3,7 @@
 Commands::
 
     autoteach simulate --seed 7 --frames 200 --out session.mcap   # simulate and write a log
-    autoteach demo [--seed N] [--frames N] [--out DIR] [--json]  # simulate, auto-teach, report
+    autoteach demo [--seed N] [--frames N] [--out DIR] [--ukf-odometry slam|vo] [--json]  # simulate, auto-teach, report
     autoteach info LOG.mcap [--json]                              # describe a log
 
 User errors (bad arguments, unreadable logs, invalid configurations) print one line to stderr
@@ -90,6 +90,13 @@ def _parser() -> argparse.ArgumentParser:
         help="edge front end: detection + tracking on the rendered images (default) or the simulator's "
         "ground-truth rims with pixel noise",
     )
+    demo.add_argument(
+        "--ukf-odometry",
+        choices=("slam", "vo"),
+        default="slam",
+        help="odometry fed to the UKF (eq. 5.1): relative poses of a SLAM with a map, like the seed's "
+        "ORB-SLAM2 (default; θ1 is then reported unobservable), or world-frame visual-odometry increments",
+    )
 
     info = sub.add_parser("info", parents=[common], help="describe an MCAP session log")
     info.add_argument("log", type=Path, help="the MCAP file")
@@ -151,6 +158,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 baseline=True,
                 frontend=getattr(args, "frontend", "detect"),
+                ukf_odometry=getattr(args, "ukf_odometry", "slam"),
                 progress=_progress_enabled(args),
             )
         except AutoteachError as exc:

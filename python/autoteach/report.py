@@ -80,8 +80,12 @@ def format_table(result: AutoTeachResult) -> str:
             ok = "yes" if sig.get(keys[k], False) else "NO"
             lines.append(f"  {k:<22} {v:9.4f}   (goal {GOALS[k]:g}; {ok})")
         if result.ukf is not None and "errors" in result.ukf:
+            seen = result.ukf.get("observable", [True, True, True])
+            names = ", ".join(n for n, o in zip(("θ1", "θ2", "θ4"), seen, strict=True) if o)
+            hidden = [n for n, o in zip(("θ1", "θ2", "θ4"), seen, strict=True) if not o]
+            note = f"; {', '.join(hidden)} unobservable to the UKF" if hidden else ""
             lines.append(
-                f"  UKF joint offsets (θ1, θ2, θ4) max error: {result.ukf['errors']['joint_offset_deg']:.4f} deg"
+                f"  UKF joint offsets ({names}) max error: {result.ukf['errors']['joint_offset_deg']:.4f} deg{note}"
             )
         if result.baseline is not None and "errors" in result.baseline:
             b = result.baseline["errors"]
