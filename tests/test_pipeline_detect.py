@@ -167,22 +167,30 @@ def test_band_width_matches_the_closed_form():
     assert abs(band[1]) < 1e-6
 
 
+def _gate_truth(session, detections, **kw):
+    """The detections gated at 1 px by the true camera and wafer poses (the simulator's truth)."""
+    cfg = session.config
+    wafers = np.stack([wafer_params_of(p) for p in session.wafer_poses])
+    return pipeline.gate_detections(
+        detections,
+        session.camera_poses,
+        wafers,
+        np.asarray(session.wafer_slots),
+        k=_k(session),
+        radius=cfg.wafer_radius,
+        thickness=cfg.wafer_thickness,
+        gate_px=1.0,
+        **kw,
+    )
+
+
 def test_narrow_band_edge_points_are_the_biased_ones(session, detections):
     # The physical premise of ``min_band_px``: where the side band is narrow its two blurred
     # edges merge and the detected rim points stray from the true rim. Independent truth: the
     # simulator's rim conics (eq. (5.13)) from the true camera and wafer poses.
     k, cfg = _k(session), session.config
     wafers = np.stack([wafer_params_of(p) for p in session.wafer_poses])
-    obs = pipeline.gate_detections(
-        detections,
-        session.camera_poses,
-        wafers,
-        np.asarray(session.wafer_slots),
-        k=k,
-        radius=cfg.wafer_radius,
-        thickness=cfg.wafer_thickness,
-        gate_px=1.0,
-    )
+    obs = _gate_truth(session, detections)
     off, band = [], []
     for i, (f, w, rim) in enumerate(zip(obs.frames, obs.wafers, obs.rims, strict=True)):
         p = obs.points[obs.start[i] : obs.start[i + 1]]
@@ -197,17 +205,7 @@ def test_narrow_band_edge_points_are_the_biased_ones(session, detections):
     assert narrow.sum() > 100 and (~narrow).sum() > 1000
     assert np.sqrt(np.mean(off[narrow] ** 2)) > 1.3 * np.sqrt(np.mean(off[~narrow] ** 2))
     # and the gate with the band filter keeps only the wide-band points
-    kept = pipeline.gate_detections(
-        detections,
-        session.camera_poses,
-        wafers,
-        np.asarray(session.wafer_slots),
-        k=k,
-        radius=cfg.wafer_radius,
-        thickness=cfg.wafer_thickness,
-        gate_px=1.0,
-        min_band_px=2.5,
-    )
+    kept = _gate_truth(session, detections, min_band_px=2.5)
     assert kept.stats["points_narrow_band"] > 0
     assert kept.stats["rims_associated"] == len(obs)
 
@@ -218,17 +216,7 @@ def test_band_weights_follow_the_detector_noise(session, detections):
     # true rim, and once divided by their factor the two groups are alike.
     k, cfg = _k(session), session.config
     wafers = np.stack([wafer_params_of(p) for p in session.wafer_poses])
-    obs = pipeline.gate_detections(
-        detections,
-        session.camera_poses,
-        wafers,
-        np.asarray(session.wafer_slots),
-        k=k,
-        radius=cfg.wafer_radius,
-        thickness=cfg.wafer_thickness,
-        gate_px=1.0,
-        band_weights=True,
-    )
+    obs = _gate_truth(session, detections, band_weights=True)
     assert obs.sigma_scale is not None and obs.sigma_scale.shape == (len(obs.points),)
     assert np.all(obs.sigma_scale >= 1.0)
     off = []
@@ -243,16 +231,7 @@ def test_band_weights_follow_the_detector_noise(session, detections):
     assert rms(high, off) > 1.5 * rms(low, off)
     assert 0.6 < rms(high, off / s) / rms(low, off / s) < 1.6
     # Without band weights no factors are produced.
-    plain = pipeline.gate_detections(
-        detections,
-        session.camera_poses,
-        wafers,
-        np.asarray(session.wafer_slots),
-        k=k,
-        radius=cfg.wafer_radius,
-        thickness=cfg.wafer_thickness,
-        gate_px=1.0,
-    )
+    plain = _gate_truth(session, detections)
     assert plain.sigma_scale is None
 
 

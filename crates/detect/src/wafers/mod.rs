@@ -150,75 +150,80 @@ impl DetectParams {
     fn validate(&self) -> Result<Vector2<f64>> {
         let up = Vector2::new(self.up[0], self.up[1]);
         let n = up.norm();
-        if !(n > 0.0 && n.is_finite()) {
-            return Err(DetectError::InvalidParameter {
-                what: "up",
-                value: n,
-                reason: "must be a finite non-zero direction",
-            });
-        }
+        require(
+            n > 0.0 && n.is_finite(),
+            "up",
+            n,
+            "must be a finite non-zero direction",
+        )?;
         for (what, value) in [
             ("max_rim_offset", self.max_rim_offset),
             ("max_rim_axis_difference", self.max_rim_axis_difference),
         ] {
-            if !(value > 0.0 && value.is_finite()) {
-                return Err(DetectError::InvalidParameter {
-                    what,
-                    value,
-                    reason: "must be positive and finite",
-                });
-            }
+            require(
+                value > 0.0 && value.is_finite(),
+                what,
+                value,
+                "must be positive and finite",
+            )?;
         }
-        if !(self.min_coverage >= 0.0 && self.min_coverage <= 1.0) {
-            return Err(DetectError::InvalidParameter {
-                what: "min_coverage",
-                value: self.min_coverage,
-                reason: "must be in [0, 1]",
-            });
-        }
-        if !(self.min_rim_separation >= 0.0 && self.min_rim_separation < 1.0) {
-            return Err(DetectError::InvalidParameter {
-                what: "min_rim_separation",
-                value: self.min_rim_separation,
-                reason: "must be in [0, 1)",
-            });
-        }
-        if !(self.max_arc_deviation >= 0.0 && self.max_arc_deviation.is_finite()) {
-            return Err(DetectError::InvalidParameter {
-                what: "max_arc_deviation",
-                value: self.max_arc_deviation,
-                reason: "must be finite and >= 0",
-            });
-        }
-        if !(self.max_arc_residual_ratio >= 0.0 && self.max_arc_residual_ratio.is_finite()) {
-            return Err(DetectError::InvalidParameter {
-                what: "max_arc_residual_ratio",
-                value: self.max_arc_residual_ratio,
-                reason: "must be finite and >= 0",
-            });
-        }
-        if !(self.min_contrast_ratio >= 0.0 && self.min_contrast_ratio <= 1.0) {
-            return Err(DetectError::InvalidParameter {
-                what: "min_contrast_ratio",
-                value: self.min_contrast_ratio,
-                reason: "must be in [0, 1]",
-            });
-        }
+        require(
+            self.min_coverage >= 0.0 && self.min_coverage <= 1.0,
+            "min_coverage",
+            self.min_coverage,
+            "must be in [0, 1]",
+        )?;
+        require(
+            self.min_rim_separation >= 0.0 && self.min_rim_separation < 1.0,
+            "min_rim_separation",
+            self.min_rim_separation,
+            "must be in [0, 1)",
+        )?;
+        require(
+            self.max_arc_deviation >= 0.0 && self.max_arc_deviation.is_finite(),
+            "max_arc_deviation",
+            self.max_arc_deviation,
+            "must be finite and >= 0",
+        )?;
+        require(
+            self.max_arc_residual_ratio >= 0.0 && self.max_arc_residual_ratio.is_finite(),
+            "max_arc_residual_ratio",
+            self.max_arc_residual_ratio,
+            "must be finite and >= 0",
+        )?;
+        require(
+            self.min_contrast_ratio >= 0.0 && self.min_contrast_ratio <= 1.0,
+            "min_contrast_ratio",
+            self.min_contrast_ratio,
+            "must be in [0, 1]",
+        )?;
         if let Some(p) = &self.prior {
             for (what, (lo, hi)) in [
                 ("prior semi_major", p.semi_major),
                 ("prior semi_minor", p.semi_minor),
             ] {
-                if !(lo >= 0.0 && hi >= lo && hi.is_finite()) {
-                    return Err(DetectError::InvalidParameter {
-                        what,
-                        value: lo,
-                        reason: "must be a range 0 <= low <= high < inf",
-                    });
-                }
+                require(
+                    lo >= 0.0 && hi >= lo && hi.is_finite(),
+                    what,
+                    lo,
+                    "must be a range 0 <= low <= high < inf",
+                )?;
             }
         }
         Ok(up / n)
+    }
+}
+
+/// `Ok` when `ok`, else [`DetectError::InvalidParameter`] naming the parameter, its value and why.
+fn require(ok: bool, what: &'static str, value: f64, reason: &'static str) -> Result<()> {
+    if ok {
+        Ok(())
+    } else {
+        Err(DetectError::InvalidParameter {
+            what,
+            value,
+            reason,
+        })
     }
 }
 
