@@ -490,16 +490,10 @@ fn drop_inconsistent_arcs(seg: &mut Segment, arcs: &[Arc], params: &DetectParams
         return;
     }
     while seg.arcs.len() >= 3 {
-        let e = seg.fit.ellipse;
         let mut worst: Option<(f64, LeftOut)> = None;
         for (slot, &k) in seg.arcs.iter().enumerate() {
             let Some(arc) = arcs.get(k) else { return };
-            let (kept, points) = without_arc(seg, arcs, slot);
-            let Ok(fit) = crate::ellipse::fit_ellipse_geometric(
-                &points,
-                Some(e),
-                &crate::ellipse::GeometricFitOptions::default(),
-            ) else {
+            let Some((kept, points, fit)) = refit_without_arc(seg, arcs, slot) else {
                 continue;
             };
             if !(seg.fit.residual_mean > ratio * fit.residual_mean) {
@@ -536,6 +530,19 @@ fn without_arc(seg: &Segment, arcs: &[Arc], slot: usize) -> (Vec<usize>, Vec<Vec
     (kept, points)
 }
 
+/// [`without_arc`] refitted: the orthogonal-distance LM fit of the remaining points, started
+/// from the segment's current ellipse; `None` when the fit fails.
+fn refit_without_arc(seg: &Segment, arcs: &[Arc], slot: usize) -> Option<LeftOut> {
+    let (kept, points) = without_arc(seg, arcs, slot);
+    let fit = crate::ellipse::fit_ellipse_geometric(
+        &points,
+        Some(seg.fit.ellipse),
+        &crate::ellipse::GeometricFitOptions::default(),
+    )
+    .ok()?;
+    Some((kept, points, fit))
+}
+
 /// Median absolute orthogonal distance of `points` to `e`.
 fn median_abs_distance(e: &Ellipse, points: &[Vector2<f64>]) -> f64 {
     let mut d = e.orthogonal_distances(points);
@@ -566,12 +573,7 @@ fn drop_outlier_arcs(seg: &mut Segment, arcs: &[Arc], params: &DetectParams) {
         if !(m > limit) {
             return;
         }
-        let (kept, points) = without_arc(seg, arcs, slot);
-        let Ok(fit) = crate::ellipse::fit_ellipse_geometric(
-            &points,
-            Some(e),
-            &crate::ellipse::GeometricFitOptions::default(),
-        ) else {
+        let Some((kept, points, fit)) = refit_without_arc(seg, arcs, slot) else {
             return;
         };
         seg.arcs = kept;
