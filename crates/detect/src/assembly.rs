@@ -29,6 +29,7 @@ use crate::assignment::solve_assignment_with_unassigned;
 use crate::edges::{Arc, Quadrant};
 use crate::ellipse::{EllipseFit, GeometricFitOptions, fit_screened};
 use crate::{DetectError, Result};
+use rayon::prelude::*;
 
 /// Options of the assembly.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -341,16 +342,22 @@ pub fn merge_arcs(arcs: &[Arc], params: &AssemblyParams) -> Result<(Vec<Segment>
         .map(|a| Part::new(&a.points, a.polarity, Some(a.quadrant)))
         .collect();
     let n = parts.len();
+    // The combination tests of all pairs are independent: evaluated in parallel (rayon),
+    // collected in the sequential order (i, then j), so the graph is built as before.
+    let accepted: Vec<((usize, usize), (EllipseFit, f64))> = (0..n)
+        .into_par_iter()
+        .flat_map_iter(|i| {
+            let parts = &parts;
+            (i + 1..n)
+                .filter_map(move |j| combine(&parts[i], &parts[j], params).map(|f| ((i, j), f)))
+        })
+        .collect();
     let mut fits = std::collections::HashMap::new();
     let mut parent: Vec<usize> = (0..n).collect();
-    for i in 0..n {
-        for j in i + 1..n {
-            if let Some((fit, r)) = combine(&parts[i], &parts[j], params) {
-                fits.insert((i, j), (fit, r));
-                let (ri, rj) = (root(&mut parent, i), root(&mut parent, j));
-                parent[ri] = rj;
-            }
-        }
+    for ((i, j), f) in accepted {
+        fits.insert((i, j), f);
+        let (ri, rj) = (root(&mut parent, i), root(&mut parent, j));
+        parent[ri] = rj;
     }
     let mut components: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
     for i in 0..n {
@@ -432,29 +439,36 @@ pub fn merge_segments(
                 .map(|&k| Part::new(&arcs[k].points, arcs[k].polarity, None)),
         );
         let n = parts.len();
-        let mut fits = std::collections::HashMap::new();
-        let mut parent: Vec<usize> = (0..n).collect();
-        for i in 0..ns {
-            for j in i + 1..n {
+        let pairs: Vec<(usize, usize, Key)> = (0..ns)
+            .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+            .map(|(i, j)| {
                 let other = if j < ns {
                     segments[j].arcs.clone()
                 } else {
                     vec![rest[j - ns]]
                 };
-                let key = (segments[i].arcs.clone(), other, j < ns);
-                let result = match cache.get(&key) {
-                    Some(r) => r.clone(),
-                    None => {
-                        let r = combine(&parts[i], &parts[j], params);
-                        cache.insert(key, r.clone());
-                        r
-                    }
-                };
-                if let Some(f) = result {
-                    fits.insert((i, j), f);
-                    let (ri, rj) = (root(&mut parent, i), root(&mut parent, j));
-                    parent[ri] = rj;
-                }
+                (i, j, (segments[i].arcs.clone(), other, j < ns))
+            })
+            .collect();
+        // The pairs not in the cache are combined in parallel (rayon), then cached.
+        let missing: Vec<&(usize, usize, Key)> = pairs
+            .iter()
+            .filter(|(_, _, k)| !cache.contains_key(k))
+            .collect();
+        let computed: Vec<Option<(EllipseFit, f64)>> = missing
+            .par_iter()
+            .map(|&&(i, j, _)| combine(&parts[i], &parts[j], params))
+            .collect();
+        for (&(_, _, k), r) in missing.iter().zip(computed) {
+            cache.insert(k.clone(), r);
+        }
+        let mut fits = std::collections::HashMap::new();
+        let mut parent: Vec<usize> = (0..n).collect();
+        for (i, j, k) in &pairs {
+            if let Some(Some(f)) = cache.get(k) {
+                fits.insert((*i, *j), f.clone());
+                let (ri, rj) = (root(&mut parent, *i), root(&mut parent, *j));
+                parent[ri] = rj;
             }
         }
         if fits.is_empty() {

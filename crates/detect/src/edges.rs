@@ -255,7 +255,7 @@ fn gaussian_blur(img: &mut [f32], w: usize, h: usize, sigma: f64) {
 /// Sobel gradients of one row, normalised by 1/8 (grey levels per pixel): `gx`, `gy` and the
 /// squared magnitude `mag` at columns `1..w − 1` from the grey rows above (`r0`), at (`r1`)
 /// and below (`r2`); zero in the first and last column.
-#[inline]
+#[inline(always)]
 fn sobel_row(
     (r0, r1, r2): (&[f32], &[f32], &[f32]),
     gx: &mut [f32],
@@ -318,13 +318,62 @@ struct Survivor {
 /// Rows per parallel work item of [`canny`]'s fused pass.
 const CANNY_ROWS: usize = 48;
 
+/// Where [`suppress_rows`] reads its grey rows: the image itself, or its blurred copy.
+#[derive(Clone, Copy)]
+enum GreySource<'a, T: Pixel> {
+    /// The image's pixels (converted with [`Pixel::grey`]).
+    Image(&'a [T]),
+    /// A pre-blurred grey image.
+    Blurred(&'a [f32]),
+}
+
+impl<T: Pixel> GreySource<'_, T> {
+    /// Writes grey row `y` (of width `out.len()`) into `out`.
+    #[inline(always)]
+    fn row(&self, y: usize, out: &mut [f32]) {
+        let w = out.len();
+        match self {
+            GreySource::Image(data) => {
+                for (o, p) in out.iter_mut().zip(&data[y * w..(y + 1) * w]) {
+                    *o = p.grey();
+                }
+            }
+            GreySource::Blurred(b) => out.copy_from_slice(&b[y * w..(y + 1) * w]),
+        }
+    }
+}
+
+/// One block of rows of [`canny`]'s fused pass, run under runtime instruction-set dispatch
+/// (`pulp`): the row loops of [`suppress_rows`] are compiled for the dispatched instruction set
+/// (8-wide single-precision vectors with AVX2 on x86-64-v3, the baseline elsewhere). The
+/// arithmetic is the same on every path (no fused multiply–adds), so the output is
+/// bit-identical.
+struct SuppressOp<'a, T: Pixel> {
+    grey: GreySource<'a, T>,
+    size: (usize, usize),
+    rows: (usize, usize),
+    thresholds: (f32, f32),
+    state: &'a mut [u8],
+}
+
+impl<T: Pixel> pulp::WithSimd for SuppressOp<'_, T> {
+    type Output = Vec<Survivor>;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
+        let ((w, h), (y0, y1)) = (self.size, self.rows);
+        suppress_rows(&self.grey, w, h, y0, y1, self.thresholds, self.state)
+    }
+}
+
 /// Sobel gradients and non-maximum suppression (with the parabolic refinement) of rows
-/// `y0..y1` (clipped to the suppression range `2..h − 2`), streamed through three-row rings:
-/// `grey(r, out)` writes grey row `r`. Writes the state (1 candidate, 2 strong) of each
-/// survivor into `state` (the rows `y0..y1`) and returns the survivors in raster order.
+/// `y0..y1` (clipped to the suppression range `2..h − 2`), streamed through three-row rings
+/// of the grey rows of `grey`. Writes the state (1 candidate, 2 strong) of each survivor into
+/// `state` (the rows `y0..y1`) and returns the survivors in raster order.
 #[allow(clippy::too_many_arguments)]
-fn suppress_rows(
-    grey: &(dyn Fn(usize, &mut [f32]) + Sync),
+#[inline(always)]
+fn suppress_rows<T: Pixel>(
+    grey: &GreySource<'_, T>,
     w: usize,
     h: usize,
     y0: usize,
@@ -342,11 +391,11 @@ fn suppress_rows(
     let mut gy = vec![0.0f32; 3 * w];
     let mut mag = vec![0.0f32; 3 * w];
     let slot = |r: usize| (r % 3) * w..(r % 3 + 1) * w;
-    grey(ys - 2, &mut g[slot(ys - 2)]);
-    grey(ys - 1, &mut g[slot(ys - 1)]);
+    grey.row(ys - 2, &mut g[slot(ys - 2)]);
+    grey.row(ys - 1, &mut g[slot(ys - 1)]);
     for r in ys - 1..=ye {
         // Gradient row r from grey rows r − 1, r, r + 1 (r + 1 ≤ h − 1).
-        grey(r + 1, &mut g[slot(r + 1)]);
+        grey.row(r + 1, &mut g[slot(r + 1)]);
         sobel_row(
             (&g[slot(r - 1)], &g[slot(r)], &g[slot(r + 1)]),
             &mut gx[slot(r)],
@@ -431,15 +480,11 @@ pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<
         gaussian_blur(&mut img, w, h, params.blur_sigma);
         img
     });
-    let data = image.data;
-    let grey = |y: usize, out: &mut [f32]| match &blurred {
-        Some(b) => out.copy_from_slice(&b[y * w..(y + 1) * w]),
-        None => {
-            for (o, p) in out.iter_mut().zip(&data[y * w..(y + 1) * w]) {
-                *o = p.grey();
-            }
-        }
+    let grey = match &blurred {
+        Some(b) => GreySource::Blurred(b),
+        None => GreySource::Image(image.data),
     };
+    let arch = pulp::Arch::new();
     // `state`: 0 none, 1 candidate (≥ low), 2 strong (≥ high), 3 kept by the hysteresis.
     let mut state = vec![0u8; w * h];
     let survivors: Vec<Vec<Survivor>> = state
@@ -447,8 +492,13 @@ pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<
         .enumerate()
         .map(|(c, rows)| {
             let y0 = c * CANNY_ROWS;
-            let y1 = (y0 + CANNY_ROWS).min(h);
-            suppress_rows(&grey, w, h, y0, y1, thresholds, rows)
+            arch.dispatch(SuppressOp {
+                grey,
+                size: (w, h),
+                rows: (y0, (y0 + CANNY_ROWS).min(h)),
+                thresholds,
+                state: rows,
+            })
         })
         .collect();
     // Hysteresis: grow from strong pixels through 8-connected candidates. Survivors lie in

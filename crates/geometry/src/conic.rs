@@ -162,14 +162,20 @@ fn analyse(c: &Matrix3<f64>) -> Result<ConicAnalysis> {
     let det_c = cn.determinant();
     let col_prod = cn.column(0).norm() * cn.column(1).norm() * cn.column(2).norm();
     let rank_deficient = det_c.abs() <= RANK_TOL * col_prod;
-    let numbers = format!(
-        "discriminant B²−4AC = {disc:.6e}, det C = {det_c:.6e} (unit-Frobenius matrix), \
-         coefficients [A, B, C, D, E, F] = {}",
-        fmt_values(&coeffs)
-    );
+    // Built only on the error paths (this runs on every fit of the detector's hot loops).
+    let numbers = || {
+        format!(
+            "discriminant B²−4AC = {disc:.6e}, det C = {det_c:.6e} (unit-Frobenius matrix), \
+             coefficients [A, B, C, D, E, F] = {}",
+            fmt_values(&coeffs)
+        )
+    };
     if m_sq == 0.0 {
         return Err(GeometryError::DegenerateConic {
-            reason: format!("no quadratic part (a line or the line at infinity): {numbers}"),
+            reason: format!(
+                "no quadratic part (a line or the line at infinity): {}",
+                numbers()
+            ),
         });
     }
     let rho = det_m / (0.5 * m_sq);
@@ -180,7 +186,7 @@ fn analyse(c: &Matrix3<f64>) -> Result<ConicAnalysis> {
             "a hyperbola, not an ellipse"
         };
         return Err(GeometryError::DegenerateConic {
-            reason: format!("{what}: {numbers}"),
+            reason: format!("{what}: {}", numbers()),
         });
     }
     if rho <= PARABOLIC_TOL {
@@ -190,7 +196,7 @@ fn analyse(c: &Matrix3<f64>) -> Result<ConicAnalysis> {
             "a parabola (or an ellipse with aspect ratio above ~1e6), not an ellipse"
         };
         return Err(GeometryError::DegenerateConic {
-            reason: format!("{what}: {numbers}"),
+            reason: format!("{what}: {}", numbers()),
         });
     }
     let sigma = if cn[(0, 0)] + cn[(1, 1)] > 0.0 {
@@ -208,8 +214,10 @@ fn analyse(c: &Matrix3<f64>) -> Result<ConicAnalysis> {
     if f0.abs() <= RANK_TOL * (cn[(2, 2)].abs() + gc.abs()) {
         return Err(GeometryError::DegenerateConic {
             reason: format!(
-                "a point ellipse at ({:.6e}, {:.6e}) (rank-deficient, value at the centre {f0:.3e}): {numbers}",
-                centre.x, centre.y
+                "a point ellipse at ({:.6e}, {:.6e}) (rank-deficient, value at the centre {f0:.3e}): {}",
+                centre.x,
+                centre.y,
+                numbers()
             ),
         });
     }
@@ -217,7 +225,8 @@ fn analyse(c: &Matrix3<f64>) -> Result<ConicAnalysis> {
         return Err(GeometryError::DegenerateConic {
             reason: format!(
                 "an imaginary ellipse (no real points: value at the centre {f0:.6e} has the sign \
-                 of the quadratic part): {numbers}"
+                 of the quadratic part): {}",
+                numbers()
             ),
         });
     }
@@ -236,7 +245,10 @@ fn analyse(c: &Matrix3<f64>) -> Result<ConicAnalysis> {
         theta,
     )
     .map_err(|e| GeometryError::DegenerateConic {
-        reason: format!("ellipse parameters are not representable ({e}): {numbers}"),
+        reason: format!(
+            "ellipse parameters are not representable ({e}): {}",
+            numbers()
+        ),
     })?;
     Ok(ConicAnalysis {
         ellipse,

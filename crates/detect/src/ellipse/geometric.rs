@@ -1,7 +1,7 @@
 //! Geometric (orthogonal-distance) ellipse fit by Levenberg–Marquardt.
 
 use autoteach_geometry::conic::Ellipse;
-use nalgebra::{Vector2, Vector6};
+use nalgebra::{Matrix6, Vector2, Vector6};
 
 use super::{EllipseFit, Prepared, direct, residual};
 use crate::{DetectError, Result};
@@ -17,6 +17,16 @@ pub struct GeometricFitOptions {
     /// `tolerance` of it, or moves the unit-norm conic coefficients (normalised coordinates) by
     /// less than `tolerance`. Default `1e-10`.
     pub tolerance: f64,
+    /// Statistical stopping rule of the orthogonal phase: it also stops when the next
+    /// Gauss–Newton step is predicted to move the ellipse by less than `noise_tolerance`
+    /// standard deviations of its own estimate — the predicted decrease `‖Jδ‖²` of the sum of
+    /// squares, over `σ̂² = SSR/(n − 5)`, is the squared Mahalanobis length of the step
+    /// `δᵀ(σ̂²(JᵀJ)⁻¹)⁻¹δ` under the covariance the fit reports. Steps that small change no
+    /// figure of merit (at the default the remaining error adds `10⁻⁴` of the variance) but
+    /// cost full iterations when `tolerance` alone must be met. `0` disables the rule
+    /// (iterate to `tolerance`); noiseless data (`σ̂ → 0`) are always iterated to
+    /// `tolerance`. Default `0.01`.
+    pub noise_tolerance: f64,
 }
 
 impl Default for GeometricFitOptions {
@@ -24,6 +34,7 @@ impl Default for GeometricFitOptions {
         GeometricFitOptions {
             max_iterations: 100,
             tolerance: 1e-10,
+            noise_tolerance: 0.01,
         }
     }
 }
@@ -51,8 +62,14 @@ const SAMPSON_TOLERANCE: f64 = 1e-6;
 /// foot point (Ahn, Rauh & Warnecke 2001, orthogonal distance fitting with the foot-point angles
 /// eliminated).
 ///
-/// Starts from `initial` if given, else from [`super::fit_ellipse_direct`] (which screens the
-/// points in either case). The returned covariance is `σ̂²(JᵀJ)⁻¹` at the solution (see
+/// Starts from `initial` if given (Sampson phase first), else from Taubin's algebraic fit —
+/// nearly unbiased on partial arcs, so the orthogonal phase starts at once and usually needs
+/// one or two steps — or, when Taubin's conic is not an ellipse, from
+/// [`super::fit_ellipse_direct`] with the Sampson phase first. The direct fit screens the
+/// points in every case. The orthogonal phase stops at `options.tolerance` or, on noisy data,
+/// once the next step would move the ellipse by less than `options.noise_tolerance` standard
+/// deviations (see [`GeometricFitOptions::noise_tolerance`]). The returned covariance is
+/// `σ̂²(JᵀJ)⁻¹` at the solution (see
 /// [`EllipseFit::covariance`] for near-circles). When the iteration limit is reached the last
 /// (best) ellipse is returned with `converged = false`.
 ///
@@ -81,26 +98,37 @@ pub fn fit_ellipse_geometric(
             reason: "must be positive and finite",
         });
     }
+    if !(options.noise_tolerance >= 0.0 && options.noise_tolerance.is_finite()) {
+        return Err(DetectError::InvalidParameter {
+            what: "noise_tolerance",
+            value: options.noise_tolerance,
+            reason: "must be non-negative and finite",
+        });
+    }
     let prep = Prepared::new(points)?;
     let c = prep.centroid;
     // The direct fit also screens the data (hyperbolas, line pairs), even with an `initial`.
     let direct = direct::solve(&prep)?;
     let start = match initial {
-        Some(e) => Ellipse::new(e.cx - c.x, e.cy - c.y, e.a, e.b, e.theta).map_err(|err| {
-            DetectError::InvalidParameter {
-                what: "initial ellipse",
-                value: [e.cx, e.cy, e.a, e.b, e.theta]
-                    .into_iter()
-                    .find(|v| !v.is_finite() || *v <= 0.0)
-                    .unwrap_or(f64::NAN),
-                reason: if matches!(err, autoteach_geometry::GeometryError::NonFinite { .. }) {
-                    "parameters must be finite"
-                } else {
-                    "semi-axes must be positive"
-                },
-            }
-        })?,
-        None => direct,
+        Some(e) => {
+            let start = Ellipse::new(e.cx - c.x, e.cy - c.y, e.a, e.b, e.theta).map_err(|err| {
+                DetectError::InvalidParameter {
+                    what: "initial ellipse",
+                    value: [e.cx, e.cy, e.a, e.b, e.theta]
+                        .into_iter()
+                        .find(|v| !v.is_finite() || *v <= 0.0)
+                        .unwrap_or(f64::NAN),
+                    reason: if matches!(err, autoteach_geometry::GeometryError::NonFinite { .. }) {
+                        "parameters must be finite"
+                    } else {
+                        "semi-axes must be positive"
+                    },
+                }
+            })?;
+            // A caller's guess may be far off: the Sampson phase first.
+            (start, true)
+        }
+        None => start_of(&prep, direct),
     };
     let (fit, _) = finish(&prep, start, options, &[])?;
     Ok(fit)
@@ -109,18 +137,20 @@ pub fn fit_ellipse_geometric(
 /// A fit and the eccentric angles `(sin t, cos t)` of the foot points of its points.
 pub(crate) type FitWithAngles = (EllipseFit, Vec<(f64, f64)>);
 
-/// The geometric fit of `prep` from `start` (centred frame), with the foot angles of the points
-/// on the result; `warm`: foot angles of the points on a nearby ellipse, or empty.
+/// The geometric fit of `prep` from `start` (centred frame; with the Sampson phase first if
+/// `start.1`), with the foot angles of the points on the result; `warm`: foot angles of the
+/// points on a nearby ellipse, or empty.
 fn finish(
     prep: &Prepared,
-    start: Ellipse,
+    start: (Ellipse, bool),
     options: &GeometricFitOptions,
     warm: &[(f64, f64)],
 ) -> Result<FitWithAngles> {
     let c = prep.centroid;
-    let (e, iterations, converged, angles) = levenberg_marquardt(prep, start, options, warm);
+    let (e, iterations, converged, angles, normal) =
+        levenberg_marquardt(prep, start.0, start.1, options, warm);
     let (residual_mean, residual_rms, covariance) =
-        residual::evaluate(&e, &prep.centred, Some(&angles))?;
+        residual::statistics(&e, &prep.centred, &normal)?;
     let fit = EllipseFit {
         ellipse: Ellipse {
             cx: e.cx + c.x,
@@ -139,10 +169,10 @@ fn finish(
 /// The combination test of the elliptic-segment assembly (000_3b1454b2b2194811.txt §3.2,
 /// `FitEllipse` in Algorithms 1–2) in one preparation: the direct fit
 /// ([`super::fit_ellipse_direct`]) as a cheap screen — `Ok(None)` when its mean orthogonal
-/// residual is not under `max_direct_residual` — then [`fit_ellipse_geometric`] started from
-/// it. Same results as calling the two in turn, without preparing the points twice, without
-/// the direct fit's covariance, and with the direct fit's foot angles as Newton starts of the
-/// first orthogonal evaluation. Also returns the eccentric angles `(sin t, cos t)` of the foot
+/// residual is not under `max_direct_residual` — then [`fit_ellipse_geometric`] (from its
+/// usual start). Same results as calling the two in turn, without preparing the points twice,
+/// without the direct fit's covariance, and with the direct fit's foot angles as Newton starts
+/// of the first orthogonal evaluation. Also returns the eccentric angles `(sin t, cos t)` of the foot
 /// points of `points` on the fitted ellipse.
 ///
 /// # Errors
@@ -166,12 +196,25 @@ pub(crate) fn fit_screened(
     if !(sum_abs / (points.len() as f64) < max_direct_residual) {
         return Ok(None);
     }
-    finish(&prep, direct, options, &angles).map(Some)
+    finish(&prep, start_of(&prep, direct), options, &angles).map(Some)
+}
+
+/// The start of the iteration without a caller's guess: Taubin's fit ([`direct::taubin`]),
+/// nearly unbiased on partial arcs, so the orthogonal phase starts at once (`false`: no
+/// Sampson phase); else the ellipse-specific `direct` fit, biased on partial arcs, with the
+/// Sampson phase first.
+fn start_of(prep: &Prepared, direct: Ellipse) -> (Ellipse, bool) {
+    match direct::taubin(prep) {
+        Some(t) => (t, false),
+        None => (direct, true),
+    }
 }
 
 /// Minimises the sum of squared orthogonal distances from `start` (centred pixel frame).
-/// Returns the best ellipse, the number of iterations, whether a tolerance was met, and the
-/// foot angles of the points on that ellipse.
+/// Returns the best ellipse, the number of iterations, whether a tolerance was met, the foot
+/// angles of the points on that ellipse, and the normal equations of its orthogonal distances
+/// with respect to `(cx, cy, a, b, θ)` in pixels (from those with respect to the conic by
+/// [`residual::conic_parameter_jacobian`]: no further pass over the points).
 ///
 /// The iteration runs on the unit-norm conic coefficients `q` of the ellipse in the
 /// normalised frame of `prep` (see [`residual::distance_and_conic_gradient`]): the ellipses
@@ -180,25 +223,43 @@ pub(crate) fn fit_screened(
 /// Gauss–Newton steps overshoot and Levenberg–Marquardt crawls. The scale of `q` is fixed by a
 /// gauge term `‖JᵀJ‖·qqᵀ` (no step along `q`) and renormalisation after each step.
 ///
-/// Two phases: first the Sampson distance `f/‖∇f‖` (the first-order orthogonal distance, no
-/// foot points, a few times cheaper) to a loose tolerance, then the exact orthogonal distance
-/// from there to `options.tolerance`; the second phase only has to cover the small difference
-/// between the two optima, usually in one or two steps.
+/// Two phases: if `sampson` (a start that may be far off), first the Sampson distance `f/‖∇f‖`
+/// (the first-order orthogonal distance, no foot points, a few times cheaper) to a loose
+/// tolerance; then the exact orthogonal distance from there to `options.tolerance` or the noise
+/// rule of [`GeometricFitOptions::noise_tolerance`]; the second phase only has to cover the
+/// small difference between the two optima, usually in one or two steps. Foot angles are
+/// warm-started from the previous evaluation's.
 fn levenberg_marquardt(
     prep: &Prepared,
     start: Ellipse,
+    sampson: bool,
     options: &GeometricFitOptions,
     warm: &[(f64, f64)],
-) -> (Ellipse, usize, bool, Vec<(f64, f64)>) {
+) -> (Ellipse, usize, bool, Vec<(f64, f64)>, residual::Normal) {
     let s = prep.scale;
     let inv = 1.0 / s;
     let points: Vec<Vector2<f64>> = prep.centred.iter().map(|p| p * inv).collect();
-    let to_pixels = |e: Ellipse| Ellipse {
-        cx: e.cx * s,
-        cy: e.cy * s,
-        a: e.a * s,
-        b: e.b * s,
-        theta: e.theta,
+    // The result in pixels, with the normal equations `conic` at `e` carried over to
+    // `(cx, cy, a, b, θ)`: `Jₚ = J_q·∂q/∂p` in the normalised frame, then residuals and the
+    // first four parameters scaled by `s` (so `∂r/∂θ` by `s`).
+    let result = |e: Ellipse, conic: &residual::ConicNormal, q: &[f64; 6]| {
+        let g = residual::conic_parameter_jacobian(&e, q);
+        let d = nalgebra::Vector5::new(1.0, 1.0, 1.0, 1.0, s);
+        let jtj = g.transpose() * conic.jtj * g;
+        let normal = residual::Normal {
+            jtj: nalgebra::Matrix5::from_fn(|i, j| jtj[(i, j)] * d[i] * d[j]),
+            jtr: (g.transpose() * conic.jtr).component_mul(&d) * s,
+            ssr: conic.ssr * s * s,
+            sum_abs: conic.sum_abs * s,
+        };
+        let e = Ellipse {
+            cx: e.cx * s,
+            cy: e.cy * s,
+            a: e.a * s,
+            b: e.b * s,
+            theta: e.theta,
+        };
+        (e, normal)
     };
     // Sum of squares that counts as an exact fit (rounding level of the input coordinates).
     let exact = points.len() as f64 * (1e-15 * (1.0 + prep.centroid.abs().max() * inv)).powi(2);
@@ -216,26 +277,48 @@ fn levenberg_marquardt(
     let mut next_angles = Vec::with_capacity(points.len());
     let mut orthogonal = false;
     let mut tol = SAMPSON_TOLERANCE.max(options.tolerance);
-    let (mut jtj, mut jtr, mut ssr) = residual::accumulate_sampson(&q, &points);
+    // Variance per residual `σ̂²` per unit of sum of squares (`1/(n − 5)`), for the noise rule.
+    let per_dof = if points.len() > 5 {
+        1.0 / (points.len() - 5) as f64
+    } else {
+        0.0
+    };
+    // The noise rule applies to the orthogonal phase only.
+    let mut noise = 0.0;
+    let (mut jtj, mut jtr, mut ssr) = if sampson {
+        residual::accumulate_sampson(&q, &points)
+    } else {
+        (Matrix6::zeros(), Vector6::zeros(), f64::INFINITY)
+    };
+    // Σ |r| of the orthogonal distances at `e` (orthogonal phase).
+    let mut sum_abs = f64::NAN;
     let mut lambda = LAMBDA_START;
     let mut iteration = 0;
-    let mut phase_end = false;
+    // Without the Sampson phase: straight to the hand-over below.
+    let mut phase_end = !sampson;
     loop {
         if phase_end || ssr <= exact || iteration >= options.max_iterations {
             if orthogonal {
-                return (to_pixels(e), iteration, phase_end || ssr <= exact, angles);
+                let conic = residual::ConicNormal {
+                    jtj,
+                    jtr,
+                    ssr,
+                    sum_abs,
+                };
+                let (e, normal) = result(e, &conic, &q);
+                return (e, iteration, phase_end || ssr <= exact, angles, normal);
             }
             // Hand over from the Sampson to the orthogonal distance.
             orthogonal = true;
             tol = options.tolerance;
+            noise = options.noise_tolerance.powi(2) * per_dof;
             // Close to the optimum already: start with nearly Gauss–Newton steps.
             lambda = LAMBDA_START * 1e-3;
-            (jtj, jtr, ssr) = residual::accumulate_conic(&e, &q, &points, warm, &mut angles);
-            if ssr <= exact {
-                return (to_pixels(e), iteration, true, angles);
-            }
-            if iteration >= options.max_iterations {
-                return (to_pixels(e), iteration, false, angles);
+            let conic = residual::accumulate_conic(&e, &q, &points, warm, &mut angles);
+            (jtj, jtr, ssr, sum_abs) = (conic.jtj, conic.jtr, conic.ssr, conic.sum_abs);
+            if ssr <= exact || iteration >= options.max_iterations {
+                let (e, normal) = result(e, &conic, &q);
+                return (e, iteration, ssr <= exact, angles, normal);
             }
         }
         iteration += 1;
@@ -265,17 +348,24 @@ fn levenberg_marquardt(
             // by less than `tol` of it, ‖r + Jδ‖² − ‖r‖² = 2δᵀJᵀr + δᵀJᵀJδ: no need to
             // evaluate it.
             let predicted = -(2.0 * delta.dot(&jtr) + delta.dot(&(jtj * delta)));
-            if lambda <= LAMBDA_START && (predicted <= tol * ssr || delta.amax() <= tol) {
+            // Or by less than `noise` (ε²/(n − 5)) of it: a step of less than ε standard
+            // deviations (see [`GeometricFitOptions::noise_tolerance`]).
+            let enough = (tol * ssr).max(noise * ssr);
+            if lambda <= LAMBDA_START && (predicted <= enough || delta.amax() <= tol) {
                 break true;
             }
-            let (next_jtj, next_jtr, next_ssr) = if orthogonal {
-                residual::accumulate_conic(&next, &next_q, &points, &angles, &mut next_angles)
+            let (next_jtj, next_jtr, next_ssr, next_abs) = if orthogonal {
+                let c =
+                    residual::accumulate_conic(&next, &next_q, &points, &angles, &mut next_angles);
+                (c.jtj, c.jtr, c.ssr, c.sum_abs)
             } else {
-                residual::accumulate_sampson(&next_q, &points)
+                let (jtj, jtr, ssr) = residual::accumulate_sampson(&next_q, &points);
+                (jtj, jtr, ssr, f64::NAN)
             };
             if next_ssr < ssr {
                 let small_gain = ssr - next_ssr <= tol * ssr;
                 (e, q, jtj, jtr, ssr) = (next, next_q, next_jtj, next_jtr, next_ssr);
+                sum_abs = next_abs;
                 std::mem::swap(&mut angles, &mut next_angles);
                 lambda = (lambda * 0.1).max(1e-15);
                 break small_gain || delta.amax() <= tol;

@@ -118,6 +118,9 @@ pub(crate) struct Prepared {
     pub m: Matrix3<f64>,
     /// Linear coefficients `(D, E, F) = T·(A, B, C)` that minimise the algebraic error.
     pub t: Matrix3<f64>,
+    /// Scatter blocks of `z = [x², xy, y², x, y, 1]` over the normalised points:
+    /// `Σ z₁z₁ᵀ`, `Σ z₁z₂ᵀ`, `Σ z₂z₂ᵀ` with `z₁ = [x², xy, y²]`, `z₂ = [x, y, 1]`.
+    pub scatter: [Matrix3<f64>; 3],
 }
 
 impl Prepared {
@@ -203,6 +206,7 @@ impl Prepared {
             centred,
             m,
             t,
+            scatter: [s1, s2, s3],
         })
     }
 }
