@@ -424,21 +424,34 @@ mod tests {
 
     /// Renders target slot 5 and a disturbance `k` slots above; returns the image, the visible
     /// true rims `(wafer, rim, ellipse, visible fraction)`.
-    type Rendered = (Vec<u8>, usize, usize, Vec<(usize, Rim, Ellipse, f64)>);
+    pub(super) type Rendered = (Vec<u8>, usize, usize, Vec<(usize, Rim, Ellipse, f64)>);
 
     /// Renders target slot 5 and a disturbance `k` slots above.
     pub(crate) fn scene(k: usize, gain: f64, seed: u64) -> Rendered {
+        let t_wc = camera_pose(-0.48, 0.02, 0.09, 0.03, 0.14);
+        render_scene(k, &t_wc, gain, [0.0, 0.0], seed)
+    }
+
+    /// Renders target slot 5 and a disturbance `k` slots above from `t_wc` with lighting `gain`
+    /// and `gradient` and noise `seed`.
+    fn render_scene(
+        k: usize,
+        t_wc: &Isometry3<f64>,
+        gain: f64,
+        gradient: [f64; 2],
+        seed: u64,
+    ) -> Rendered {
         let carrier = Carrier::default();
         let scene = Scene::new(vec![carrier.slot_pose(5), carrier.slot_pose(5 + k)]);
         let camera = Camera::pinhole(1000.0, 1000.0, 639.5, 359.5, 1280, 720).unwrap();
-        let t_wc = camera_pose(-0.48, 0.02, 0.09, 0.03, 0.14);
         let opts = RenderOptions {
             gain,
+            gradient,
             seed,
             ..RenderOptions::default()
         };
-        let img = render::render(&scene, &camera, &t_wc, &opts).unwrap();
-        let truth = render::rim_visibility(&scene, &camera, &t_wc, 720).unwrap();
+        let img = render::render(&scene, &camera, t_wc, &opts).unwrap();
+        let truth = render::rim_visibility(&scene, &camera, t_wc, 720).unwrap();
         let rims = truth
             .into_iter()
             .filter_map(|t| t.ellipse.map(|e| (t.wafer, t.rim, e, t.fraction)))
@@ -769,7 +782,7 @@ mod tests {
     /// `k` slots above, camera at `(x, y, 0.04 + dz)` yawed by `yaw` and pitched down by `down`
     /// (degrees), lighting `gain` and `gradient`, noise `seed`.
     #[allow(clippy::too_many_arguments)]
-    fn benchmark_scene(
+    pub(super) fn benchmark_scene(
         k: usize,
         (x, y, dz): (f64, f64, f64),
         yaw: f64,
@@ -778,23 +791,8 @@ mod tests {
         gradient: [f64; 2],
         seed: u64,
     ) -> Rendered {
-        let carrier = Carrier::default();
-        let scene = Scene::new(vec![carrier.slot_pose(5), carrier.slot_pose(5 + k)]);
-        let camera = Camera::pinhole(1000.0, 1000.0, 639.5, 359.5, 1280, 720).unwrap();
         let t_wc = camera_pose(x, y, 0.04 + dz, yaw.to_radians(), down.to_radians());
-        let opts = RenderOptions {
-            gain,
-            gradient,
-            seed,
-            ..RenderOptions::default()
-        };
-        let img = render::render(&scene, &camera, &t_wc, &opts).unwrap();
-        let truth = render::rim_visibility(&scene, &camera, &t_wc, 720).unwrap();
-        let rims = truth
-            .into_iter()
-            .filter_map(|t| t.ellipse.map(|e| (t.wafer, t.rim, e, t.fraction)))
-            .collect();
-        (img.data, img.width, img.height, rims)
+        render_scene(k, &t_wc, gain, gradient, seed)
     }
 
     #[test]

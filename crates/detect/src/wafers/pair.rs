@@ -466,9 +466,7 @@ fn joint_partner<T: Pixel>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use autoteach_geometry::camera::Camera;
-    use autoteach_geometry::render::{self, RenderOptions, Rim, Scene};
-    use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+    use autoteach_geometry::render::Rim;
 
     /// The values the generator of `benchmarks/wafer_detection.py` drew for one scene: camera
     /// position `(x, y, z)` (metres, `z` above the target slot), yaw and pitch-down (degrees),
@@ -480,31 +478,11 @@ mod tests {
     /// `(wafer, rim, ellipse)`.
     fn benchmark_scene(k: usize, s: Scenario) -> (Vec<WaferEdge>, Vec<(usize, Rim, Ellipse)>) {
         let (x, y, z, yaw, down, gain, gradient, seed) = s;
-        let slot = |n: usize| Isometry3::translation(0.0, 0.0, (n - 1) as f64 * 0.010);
-        let scene = Scene::new(vec![slot(5), slot(5 + k)]);
-        let camera = Camera::pinhole(1000.0, 1000.0, 639.5, 359.5, 1280, 720).unwrap();
-        let axes = Matrix3::from_columns(&[-Vector3::y(), -Vector3::z(), Vector3::x()]);
-        let r = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw.to_radians())
-            * Rotation3::from_matrix_unchecked(axes)
-            * Rotation3::from_axis_angle(&Vector3::x_axis(), -down.to_radians());
-        let t_wc = Isometry3::from_parts(
-            Translation3::new(x, y, 0.04 + z),
-            UnitQuaternion::from_rotation_matrix(&r),
-        );
-        let opts = RenderOptions {
-            gain,
-            gradient,
-            seed,
-            ..RenderOptions::default()
-        };
-        let img = render::render(&scene, &camera, &t_wc, &opts).unwrap();
-        let view = GrayView::new(&img.data, img.width, img.height).unwrap();
+        let (data, w, h, rims) =
+            super::super::tests::benchmark_scene(k, (x, y, z), yaw, down, gain, gradient, seed);
+        let view = GrayView::new(&data, w, h).unwrap();
         let dets = detect_wafers(&view, &DetectParams::default()).unwrap();
-        let truth = render::rim_visibility(&scene, &camera, &t_wc, 720)
-            .unwrap()
-            .into_iter()
-            .filter_map(|t| t.ellipse.map(|e| (t.wafer, t.rim, e)))
-            .collect();
+        let truth = rims.into_iter().map(|(w, r, e, _)| (w, r, e)).collect();
         (dets, truth)
     }
 
