@@ -426,6 +426,27 @@ mod tests {
     /// true rims `(wafer, rim, ellipse, visible fraction)`.
     pub(super) type Rendered = (Vec<u8>, usize, usize, Vec<(usize, Rim, Ellipse, f64)>);
 
+    /// Whether `d` detects the true rim `(rim, e)`: same kind, centre within `tol_c` px, semi-axes
+    /// within the relative tolerances `tol_a` and `tol_b` (the benchmark's rule is 1 px, 1 %).
+    pub(super) fn matches_rim(
+        d: &WaferEdge,
+        rim: Rim,
+        e: &Ellipse,
+        tol_c: f64,
+        tol_a: f64,
+        tol_b: f64,
+    ) -> bool {
+        let kind = if rim == Rim::Upper {
+            RimKind::Upper
+        } else {
+            RimKind::Lower
+        };
+        d.kind == kind
+            && (d.ellipse.cx - e.cx).hypot(d.ellipse.cy - e.cy) < tol_c
+            && (d.ellipse.a - e.a).abs() < tol_a * e.a
+            && (d.ellipse.b - e.b).abs() < tol_b * e.b
+    }
+
     /// Renders target slot 5 and a disturbance `k` slots above.
     pub(crate) fn scene(k: usize, gain: f64, seed: u64) -> Rendered {
         let t_wc = camera_pose(-0.48, 0.02, 0.09, 0.03, 0.14);
@@ -474,17 +495,9 @@ mod tests {
                 if *fraction < 0.3 {
                     continue;
                 }
-                let kind = if *rim == Rim::Upper {
-                    RimKind::Upper
-                } else {
-                    RimKind::Lower
-                };
-                let hit = edges.iter().find(|d| {
-                    d.kind == kind
-                        && (d.ellipse.cx - e.cx).hypot(d.ellipse.cy - e.cy) < 1.0
-                        && (d.ellipse.a - e.a).abs() < 0.01 * e.a
-                        && (d.ellipse.b - e.b).abs() < 0.02 * e.b
-                });
+                let hit = edges
+                    .iter()
+                    .find(|d| matches_rim(d, *rim, e, 1.0, 0.01, 0.02));
                 let hit = hit.unwrap_or_else(|| {
                     panic!("k={k}: wafer {wafer} {rim:?} {e:?} missing in {edges:#?}")
                 });
@@ -813,22 +826,11 @@ mod tests {
             1404235740,
         );
         let view = GrayView::new(&data, w, h).unwrap();
-        let kind_of = |rim: &Rim| {
-            if *rim == Rim::Upper {
-                RimKind::Upper
-            } else {
-                RimKind::Lower
-            }
-        };
         // A detection within 3 px and 5 % of a rim of its kind (a hit or a near miss), and
         // within 1 px and 1 % (a hit).
         let near = |d: &WaferEdge, tol_c: f64, tol_a: f64| {
-            rims.iter().any(|(_, rim, e, _)| {
-                d.kind == kind_of(rim)
-                    && (d.ellipse.cx - e.cx).hypot(d.ellipse.cy - e.cy) < tol_c
-                    && (d.ellipse.a - e.a).abs() < tol_a * e.a
-                    && (d.ellipse.b - e.b).abs() < tol_a * e.b
-            })
+            rims.iter()
+                .any(|(_, rim, e, _)| matches_rim(d, *rim, e, tol_c, tol_a, tol_a))
         };
         let without = DetectParams {
             max_unpaired_residual: f64::INFINITY,

@@ -499,17 +499,9 @@ mod tests {
             .find(|t| t.0 == wafer && t.1 == rim)
             .map(|t| t.2)
             .unwrap();
-        let kind = if rim == Rim::Upper {
-            RimKind::Upper
-        } else {
-            RimKind::Lower
-        };
-        let hit = dets.iter().any(|d| {
-            d.kind == kind
-                && (d.ellipse.cx - e.cx).hypot(d.ellipse.cy - e.cy) < 1.0
-                && (d.ellipse.a - e.a).abs() < 0.01 * e.a
-                && (d.ellipse.b - e.b).abs() < 0.01 * e.b
-        });
+        let hit = dets
+            .iter()
+            .any(|d| super::super::tests::matches_rim(d, rim, &e, 1.0, 0.01, 0.01));
         assert!(
             hit,
             "{what}: wafer {wafer} {rim:?} {e:?} not within 1 px / 1 % in {dets:#?}"
