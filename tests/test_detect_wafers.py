@@ -191,3 +191,63 @@ def test_releases_the_gil(scene: tuple[np.ndarray, list[dict]]) -> None:
     t.join()
     # With the GIL held, the counter could not run during detection.
     assert ticks >= max(3, int(0.2 * elapsed / 0.0015)), (ticks, elapsed)
+
+
+def test_python_defaults_are_the_library_defaults() -> None:
+    """Every documented default of detect_wafers equals DetectParams::default() in Rust."""
+    import inspect
+
+    from autoteach import _core
+
+    rust = _core.wafer_detect_defaults()
+    sig = inspect.signature(detect_wafers)
+    exposed = {n: p.default for n, p in sig.parameters.items() if n != "image" and p.default is not None}
+    assert set(rust) <= set(sig.parameters), set(rust) - set(sig.parameters)
+    for name, value in rust.items():
+        assert exposed[name] == pytest.approx(value), name
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"max_unpaired_residual": 0.0}, "max_unpaired_residual"),
+        ({"min_coverage": 1.5}, "min_coverage"),
+        ({"max_arc_deviation": math.nan}, "max_arc_deviation"),
+        ({"min_rim_separation": 1.0}, "min_rim_separation"),
+        ({"max_arc_residual_ratio": -1.0}, "max_arc_residual_ratio"),
+    ],
+)
+def test_bad_stage_parameters_raise(kwargs: dict[str, float], match: str) -> None:
+    with pytest.raises(InvalidInputError, match=match):
+        detect_wafers(np.zeros((20, 20), np.uint8), **kwargs)
+
+
+def test_stage_switches_reach_the_detector(scene: tuple[np.ndarray, list[dict]]) -> None:
+    """Turning the band refinement off changes the rims' points (the refinement moves them to
+    the band model's edges), and keeping lone rims of any residual never loses a rim."""
+    image, _ = scene
+    ref = detect_wafers(image)
+    raw = detect_wafers(image, band_refinement=False)
+    assert ref and raw
+    moved = [
+        not np.array_equal(a.points, b.points)
+        for a in ref
+        for b in raw
+        if a.kind == b.kind and a.wafer_id == b.wafer_id
+    ]
+    assert any(moved)
+    loose = detect_wafers(image, max_unpaired_residual=math.inf)
+    assert len(loose) >= len(ref)
+
+
+def test_non_contiguous_view_equals_its_copy(scene: tuple[np.ndarray, list[dict]]) -> None:
+    """The binding reads C-contiguous images in place and copies other views: same result."""
+    image, _ = scene
+    fortran = np.asfortranarray(image)
+    from autoteach import _core
+
+    a = _core.wafer_detect(fortran)
+    b = _core.wafer_detect(np.ascontiguousarray(image))
+    assert len(a) == len(b) and len(a) > 0
+    for x, y in zip(a, b, strict=True):
+        assert np.array_equal(x.points, y.points)

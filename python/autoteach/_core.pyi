@@ -546,8 +546,23 @@ def wafer_detect(
     min_contrast_ratio: float = 0.45,
     semi_major_range: tuple[float, float] | None = None,
     semi_minor_range: tuple[float, float] | None = None,
+    min_coverage: float | None = None,
+    min_rim_separation: float | None = None,
+    max_arc_deviation: float | None = None,
+    max_arc_residual_ratio: float | None = None,
+    max_unpaired_residual: float | None = None,
+    band_refinement: bool | None = None,
+    share_rim_shape: bool | None = None,
+    share_rim_centre: bool | None = None,
+    joint_band_fit: bool | None = None,
 ) -> list[WaferEdge]:
-    """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`."""
+    """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
+
+    ``None`` keeps the library default (:func:`wafer_detect_defaults`).
+    """
+
+def wafer_detect_defaults() -> dict[str, float | int | bool | tuple[float, float]]:
+    """The detector's default parameters by keyword name of :func:`wafer_detect`."""
 
 # --- end wafers ---
 

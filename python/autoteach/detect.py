@@ -221,6 +221,15 @@ def detect_wafers(
     min_contrast_ratio: float = 0.45,
     semi_major_range: tuple[float, float] | None = None,
     semi_minor_range: tuple[float, float] | None = None,
+    min_coverage: float = 0.15,
+    min_rim_separation: float = 0.5,
+    max_arc_deviation: float = 0.6,
+    max_arc_residual_ratio: float = 1.5,
+    max_unpaired_residual: float = 0.15,
+    band_refinement: bool = True,
+    share_rim_shape: bool = True,
+    share_rim_centre: bool = True,
+    joint_band_fit: bool = True,
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -246,6 +255,21 @@ def detect_wafers(
             rim of similar size are rejected as reflections (0 disables).
         semi_major_range: Optional prior ``(low, high)`` on the semi-major axis (pixels).
         semi_minor_range: Optional prior ``(low, high)`` on the semi-minor axis (pixels).
+        min_coverage: Smallest fraction of its ellipse's perimeter a segment's arcs must cover.
+        min_rim_separation: Points of the far lower rim closer to the upper rim than this
+            fraction of the widest rim distance are dropped before its refit (0 disables).
+        max_arc_deviation: An arc whose median distance (pixels) to its segment's ellipse
+            exceeds this is dropped and the rest refitted (0 disables).
+        max_arc_residual_ratio: Leave-one-out check of segments of three or more arcs: factor by
+            which an arc may raise the mean residual (0 disables).
+        max_unpaired_residual: A rim without a partner rim is kept only under this mean
+            residual (pixels); ``math.inf`` disables.
+        band_refinement: Re-locate rim points with the two-edge band model of the rim profile.
+        share_rim_shape: Refit the less covered rim of a pair with its partner's semi-major
+            axis and orientation.
+        share_rim_centre: With ``share_rim_shape``, also hold its centre on the partner's line
+            along ``up``.
+        joint_band_fit: Refit the less covered rim with the joint band model of both rims.
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -275,6 +299,15 @@ def detect_wafers(
         min_contrast_ratio=float(min_contrast_ratio),
         semi_major_range=None if semi_major_range is None else tuple(map(float, semi_major_range)),
         semi_minor_range=None if semi_minor_range is None else tuple(map(float, semi_minor_range)),
+        min_coverage=float(min_coverage),
+        min_rim_separation=float(min_rim_separation),
+        max_arc_deviation=float(max_arc_deviation),
+        max_arc_residual_ratio=float(max_arc_residual_ratio),
+        max_unpaired_residual=float(max_unpaired_residual),
+        band_refinement=bool(band_refinement),
+        share_rim_shape=bool(share_rim_shape),
+        share_rim_centre=bool(share_rim_centre),
+        joint_band_fit=bool(joint_band_fit),
     )
     return [
         WaferEdge(

@@ -8,6 +8,7 @@ use autoteach_detect::edges::{GrayView, Pixel};
 use autoteach_detect::wafers::{DetectParams, WaferEdge, WaferPrior, detect_wafers};
 use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use crate::convert;
 use crate::errors;
@@ -92,12 +93,48 @@ fn run<T: Pixel + numpy::Element>(
 ) -> PyResult<Vec<WaferEdge>> {
     let shape = arr.shape();
     let (h, w) = (shape[0], shape[1]);
-    // Row-major copy (handles non-contiguous views without raw-slice access).
-    let data: Vec<T> = arr.as_array().iter().copied().collect();
+    // A C-contiguous array is read in place; any other view is copied row-major first.
+    let copied: Vec<T>;
+    // (`as_slice` also accepts Fortran order, whose memory order is not row-major.)
+    let data: &[T] = match arr.as_slice() {
+        Ok(slice) if arr.is_c_contiguous() => slice,
+        _ => {
+            copied = arr.as_array().iter().copied().collect();
+            &copied
+        }
+    };
     convert::detached(py, || {
-        let view = GrayView::new(&data, w, h).map_err(errors::detect)?;
+        let view = GrayView::new(data, w, h).map_err(errors::detect)?;
         detect_wafers(&view, params).map_err(errors::detect)
     })
+}
+
+/// The detector's default parameters, by the keyword names of `wafer_detect` (the Python front
+/// checks its documented defaults against these).
+#[pyfunction]
+fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    let p = DetectParams::default();
+    let d = PyDict::new(py);
+    d.set_item("canny_low", p.canny.low)?;
+    d.set_item("canny_high", p.canny.high)?;
+    d.set_item("blur_sigma", p.canny.blur_sigma)?;
+    d.set_item("min_arc_points", p.arcs.min_points)?;
+    d.set_item("residual_threshold", p.assembly.residual_threshold)?;
+    d.set_item("max_gap", p.assembly.max_gap)?;
+    d.set_item("up", (p.up[0], p.up[1]))?;
+    d.set_item("max_rim_offset", p.max_rim_offset)?;
+    d.set_item("max_rim_axis_difference", p.max_rim_axis_difference)?;
+    d.set_item("min_contrast_ratio", p.min_contrast_ratio)?;
+    d.set_item("min_coverage", p.min_coverage)?;
+    d.set_item("min_rim_separation", p.min_rim_separation)?;
+    d.set_item("max_arc_deviation", p.max_arc_deviation)?;
+    d.set_item("max_arc_residual_ratio", p.max_arc_residual_ratio)?;
+    d.set_item("max_unpaired_residual", p.max_unpaired_residual)?;
+    d.set_item("band_refinement", p.band_refinement)?;
+    d.set_item("share_rim_shape", p.share_rim_shape)?;
+    d.set_item("share_rim_centre", p.share_rim_centre)?;
+    d.set_item("joint_band_fit", p.joint_band_fit)?;
+    Ok(d)
 }
 
 /// Detects wafer rims in a grayscale image `(height, width)` of dtype uint8 (0–255) or
@@ -107,7 +144,9 @@ fn run<T: Pixel + numpy::Element>(
     image, *, canny_low=6.0, canny_high=15.0, blur_sigma=0.0, min_arc_points=16,
     residual_threshold=0.25, max_gap=60.0, up=(0.0, -1.0), max_rim_offset=10.0,
     max_rim_axis_difference=0.03, min_contrast_ratio=0.45, semi_major_range=None,
-    semi_minor_range=None
+    semi_minor_range=None, min_coverage=None, min_rim_separation=None, max_arc_deviation=None,
+    max_arc_residual_ratio=None, max_unpaired_residual=None, band_refinement=None,
+    share_rim_shape=None, share_rim_centre=None, joint_band_fit=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -125,8 +164,38 @@ fn wafer_detect(
     min_contrast_ratio: f64,
     semi_major_range: Option<(f64, f64)>,
     semi_minor_range: Option<(f64, f64)>,
+    min_coverage: Option<f64>,
+    min_rim_separation: Option<f64>,
+    max_arc_deviation: Option<f64>,
+    max_arc_residual_ratio: Option<f64>,
+    max_unpaired_residual: Option<f64>,
+    band_refinement: Option<bool>,
+    share_rim_shape: Option<bool>,
+    share_rim_centre: Option<bool>,
+    joint_band_fit: Option<bool>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let mut params = DetectParams::default();
+    // `None` keeps the library default (`wafer_detect_defaults`).
+    let set = |slot: &mut f64, value: Option<f64>| {
+        if let Some(v) = value {
+            *slot = v;
+        }
+    };
+    set(&mut params.min_coverage, min_coverage);
+    set(&mut params.min_rim_separation, min_rim_separation);
+    set(&mut params.max_arc_deviation, max_arc_deviation);
+    set(&mut params.max_arc_residual_ratio, max_arc_residual_ratio);
+    set(&mut params.max_unpaired_residual, max_unpaired_residual);
+    for (slot, value) in [
+        (&mut params.band_refinement, band_refinement),
+        (&mut params.share_rim_shape, share_rim_shape),
+        (&mut params.share_rim_centre, share_rim_centre),
+        (&mut params.joint_band_fit, joint_band_fit),
+    ] {
+        if let Some(v) = value {
+            *slot = v;
+        }
+    }
     params.canny.low = canny_low;
     params.canny.high = canny_high;
     params.canny.blur_sigma = blur_sigma;
@@ -187,5 +256,6 @@ fn wafer_detect(
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyWaferEdge>()?;
     m.add_function(wrap_pyfunction!(wafer_detect, m)?)?;
+    m.add_function(wrap_pyfunction!(wafer_detect_defaults, m)?)?;
     Ok(())
 }
