@@ -215,6 +215,7 @@ def test_python_defaults_are_the_library_defaults() -> None:
         ({"max_arc_deviation": math.nan}, "max_arc_deviation"),
         ({"min_rim_separation": 1.0}, "min_rim_separation"),
         ({"max_arc_residual_ratio": -1.0}, "max_arc_residual_ratio"),
+        ({"inflection_sigmas": math.inf}, "inflection_sigmas"),
     ],
 )
 def test_bad_stage_parameters_raise(kwargs: dict[str, float], match: str) -> None:

@@ -555,6 +555,7 @@ def wafer_detect(
     share_rim_shape: bool | None = None,
     share_rim_centre: bool | None = None,
     joint_band_fit: bool | None = None,
+    inflection_sigmas: float | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 

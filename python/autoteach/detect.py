@@ -230,6 +230,7 @@ def detect_wafers(
     share_rim_shape: bool = True,
     share_rim_centre: bool = True,
     joint_band_fit: bool = True,
+    inflection_sigmas: float = 0.0,
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -270,6 +271,9 @@ def detect_wafers(
         share_rim_centre: With ``share_rim_shape``, also hold its centre on the partner's line
             along ``up``.
         joint_band_fit: Refit the less covered rim with the joint band model of both rims.
+        inflection_sigmas: When above 0, a cut at a turn-sign change moves to the previous
+            polygon vertex if the points between already bend its way by more than this many
+            standard errors of the chain's edge noise (0: cut at the sign change).
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -308,6 +312,7 @@ def detect_wafers(
         share_rim_shape=bool(share_rim_shape),
         share_rim_centre=bool(share_rim_centre),
         joint_band_fit=bool(joint_band_fit),
+        inflection_sigmas=float(inflection_sigmas),
     )
     return [
         WaferEdge(

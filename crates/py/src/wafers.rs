@@ -119,6 +119,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("canny_high", p.canny.high)?;
     d.set_item("blur_sigma", p.canny.blur_sigma)?;
     d.set_item("min_arc_points", p.arcs.min_points)?;
+    d.set_item("inflection_sigmas", p.arcs.inflection_sigmas)?;
     d.set_item("residual_threshold", p.assembly.residual_threshold)?;
     d.set_item("max_gap", p.assembly.max_gap)?;
     d.set_item("up", (p.up[0], p.up[1]))?;
@@ -146,7 +147,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     max_rim_axis_difference=0.03, min_contrast_ratio=0.45, semi_major_range=None,
     semi_minor_range=None, min_coverage=None, min_rim_separation=None, max_arc_deviation=None,
     max_arc_residual_ratio=None, max_unpaired_residual=None, band_refinement=None,
-    share_rim_shape=None, share_rim_centre=None, joint_band_fit=None
+    share_rim_shape=None, share_rim_centre=None, joint_band_fit=None, inflection_sigmas=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -173,6 +174,7 @@ fn wafer_detect(
     share_rim_shape: Option<bool>,
     share_rim_centre: Option<bool>,
     joint_band_fit: Option<bool>,
+    inflection_sigmas: Option<f64>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let mut params = DetectParams::default();
     // `None` keeps the library default (`wafer_detect_defaults`).
@@ -186,6 +188,7 @@ fn wafer_detect(
     set(&mut params.max_arc_deviation, max_arc_deviation);
     set(&mut params.max_arc_residual_ratio, max_arc_residual_ratio);
     set(&mut params.max_unpaired_residual, max_unpaired_residual);
+    set(&mut params.arcs.inflection_sigmas, inflection_sigmas);
     for (slot, value) in [
         (&mut params.band_refinement, band_refinement),
         (&mut params.share_rim_shape, share_rim_shape),

@@ -45,6 +45,7 @@ use crate::{DetectError, Result};
 pub use direct::fit_ellipse_direct;
 pub(crate) use geometric::fit_screened;
 pub use geometric::{GeometricFitOptions, fit_ellipse_geometric, fit_ellipse_geometric_masked};
+pub(crate) use residual::point_distance_and_gradient;
 
 /// The result of an ellipse fit.
 #[derive(Debug, Clone, PartialEq)]

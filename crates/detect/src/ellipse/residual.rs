@@ -207,6 +207,15 @@ pub(crate) fn distance_and_gradient(
     gradient_at(e, &foot(e, sc, p))
 }
 
+/// [`distance_and_gradient`] for one point outside a fit, with the foot angle from the exact
+/// solver [`Ellipse::parameter_of`] (the fits find theirs in batches with [`foot_angles`]): the
+/// one linearisation of the orthogonal distance that the detector's refits and screens
+/// (`wafers::validate`, `wafers::rim_shared`) share.
+pub(crate) fn point_distance_and_gradient(e: &Ellipse, p: &Vector2<f64>) -> (f64, Vector5<f64>) {
+    let t = e.parameter_of(p).sin_cos();
+    gradient_at(e, &foot_at(e, e.theta.sin_cos(), p, t))
+}
+
 /// [`distance_and_gradient`] from a computed foot point.
 fn gradient_at(e: &Ellipse, f: &Foot) -> (f64, Vector5<f64>) {
     let grad = Vector5::new(

@@ -98,6 +98,12 @@ fn jacobian_matches_finite_differences() {
                 "distance {r} vs {}",
                 e.orthogonal_distance(&p)
             );
+            // The single-point form (exact foot angle) is the same linearisation.
+            let (r1, g1) = residual::point_distance_and_gradient(&e, &p);
+            assert!(
+                (r1 - r).abs() < 1e-12 && (g1 - g).amax() < 1e-9,
+                "{g1} vs {g}"
+            );
             for k in 0..5 {
                 let h = 1e-6;
                 let mut plus = params(&e);

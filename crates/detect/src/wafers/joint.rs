@@ -31,7 +31,7 @@
 use super::band;
 use super::{GrayView, Pixel, Vector2};
 use autoteach_geometry::conic::Ellipse;
-use nalgebra::{Matrix2, Matrix3, Matrix6, Vector3, Vector6};
+use nalgebra::{Matrix2, Matrix3, Matrix3x6, Matrix6, Vector3, Vector6};
 
 /// A sample at or above this grey level counts as clipped (as in [`super::band`]).
 const CLIP: f64 = 254.5;
@@ -120,6 +120,7 @@ fn target(reference: &Ellipse, up: Vector2<f64>, g: &Vector6<f64>) -> Option<Ell
 }
 
 /// Output buffers of [`profile_residuals`]: residuals, local and global Jacobian rows.
+#[cfg(test)]
 type Rows<'a> = (
     &'a mut Vec<f64>,
     &'a mut Vec<[f64; 3]>,
@@ -127,7 +128,9 @@ type Rows<'a> = (
 );
 
 /// Residuals of one profile (censored for clipped samples) and, if `jac`, the local
-/// (`n × 3`) and global (`n × 6`) Jacobian rows.
+/// (`n × 3`) and global (`n × 6`) Jacobian rows. The separate-pass reference of
+/// [`profile_block`] (kept for its test).
+#[cfg(test)]
 fn profile_residuals(
     pr: &Profile,
     e: &Ellipse,
@@ -177,63 +180,149 @@ fn profile_residuals(
     Some(cost)
 }
 
-/// Total cost `Σ r²`; `None` if a profile's ray misses the target.
-fn total_cost(
+/// Normal-equation blocks of one profile at the current globals and locals: `A = JₗᵀJₗ` (3×3),
+/// `B = JₗᵀJ_g` (3×6), `a = Jₗᵀr` (3), and the profile's cost `Σ r²`.
+#[derive(Clone, Copy)]
+struct Block {
+    a: Matrix3<f64>,
+    b: Matrix3x6<f64>,
+    ra: Vector3<f64>,
+    cost: f64,
+}
+
+/// One pass over all profiles ([`evaluate`]): the per-profile blocks, the global `C = J_gᵀJ_g`
+/// and `c = J_gᵀr`, and the total cost.
+#[derive(Default)]
+struct Evaluation {
+    blocks: Vec<Block>,
+    cg: Matrix6<f64>,
+    rg: Vector6<f64>,
+    cost: f64,
+}
+
+/// The cost and normal-equation blocks of one profile in one pass over its samples: the
+/// residuals and Jacobian rows of `profile_residuals` (the test-only separate-pass reference)
+/// accumulated as they are formed; a censored sample that is inactive contributes a zero row.
+/// Adds the profile's `J_gᵀJ_g` and `J_gᵀr` to `cg`, `rg` (lower triangle of `cg` only).
+/// `None` if the profile's ray misses the target.
+fn profile_block(
+    pr: &Profile,
+    e: &Ellipse,
+    up: Vector2<f64>,
+    g: &Vector6<f64>,
+    cg: &mut [[f64; 6]; 6],
+    rg: &mut [f64; 6],
+) -> Option<Block> {
+    let (t2, dt) = ray_hit(e, pr.p, pr.d, 2.5)?;
+    let dt_ds = dt[0] * up.x + dt[1] * up.y;
+    let dt_db = dt[2];
+    let lb = g[3] + g[4] * pr.u + g[5] * pr.u * pr.u;
+    let [l0, l2, t1] = [pr.local[0], pr.local[1], pr.local[2]];
+    let q = [l0, lb, l2, t1, t2, g[2]];
+    let mut cost = 0.0;
+    let mut a = [[0.0f64; 3]; 3];
+    let mut b = [[0.0f64; 6]; 3];
+    let mut ra = [0.0f64; 3];
+    for &(t, v) in &pr.samples {
+        let (f, grad) = band::model(&q, t);
+        let (res, active) = if v.is_finite() {
+            (f - v, true)
+        } else {
+            let r = (f - CLIP).min(0.0);
+            (r, r < 0.0)
+        };
+        cost += res * res;
+        if !active {
+            continue;
+        }
+        let l = [grad[0], grad[2], grad[3]];
+        let gl = [
+            grad[4] * dt_ds,
+            grad[4] * dt_db,
+            grad[5],
+            grad[1],
+            grad[1] * pr.u,
+            grad[1] * pr.u * pr.u,
+        ];
+        for i in 0..3 {
+            for m in 0..3 {
+                a[i][m] += l[i] * l[m];
+            }
+            for m in 0..6 {
+                b[i][m] += l[i] * gl[m];
+            }
+            ra[i] += l[i] * res;
+        }
+        for i in 0..6 {
+            for m in 0..=i {
+                cg[i][m] += gl[i] * gl[m];
+            }
+            rg[i] += gl[i] * res;
+        }
+    }
+    Some(Block {
+        a: Matrix3::from_fn(|i, m| a[i][m]),
+        b: Matrix3x6::from_fn(|i, m| b[i][m]),
+        ra: Vector3::from(ra),
+        cost,
+    })
+}
+
+/// Evaluates all profiles at the globals `g` into `out` (cost and normal equations in one
+/// pass, so an accepted Levenberg–Marquardt step needs no second pass; `out`'s buffers are
+/// reused). `None` if the target is no ellipse or a profile's ray misses it.
+fn evaluate(
     profiles: &[Profile],
     reference: &Ellipse,
     up: Vector2<f64>,
     g: &Vector6<f64>,
-) -> Option<f64> {
+    out: &mut Evaluation,
+) -> Option<()> {
     let e = target(reference, up, g)?;
-    profiles
-        .iter()
-        .map(|pr| profile_residuals(pr, &e, up, g, None))
-        .sum()
+    out.blocks.clear();
+    let mut cg = [[0.0f64; 6]; 6];
+    let mut rg = [0.0f64; 6];
+    let mut cost = 0.0;
+    for pr in profiles {
+        let block = profile_block(pr, &e, up, g, &mut cg, &mut rg)?;
+        cost += block.cost;
+        out.blocks.push(block);
+    }
+    out.cg = Matrix6::from_fn(|i, m| if m <= i { cg[i][m] } else { cg[m][i] });
+    out.rg = Vector6::from(rg);
+    out.cost = cost;
+    Some(())
 }
 
+/// Result of [`solve`]: the globals, the final cost, the undamped Schur complement (for the
+/// covariance) and each profile's cost at the solution.
+type Solution = (Vector6<f64>, f64, Matrix6<f64>, Vec<f64>);
+
 /// Levenberg–Marquardt on all profiles (Schur complement of the 3 local unknowns per profile).
-/// Returns the globals, the final cost and the undamped Schur complement (for the covariance).
+/// Each trial step is evaluated with its normal equations in the same pass ([`evaluate`]).
 fn solve(
     profiles: &mut [Profile],
     reference: &Ellipse,
     up: Vector2<f64>,
     mut g: Vector6<f64>,
-) -> Option<(Vector6<f64>, f64, Matrix6<f64>)> {
-    let mut cost = total_cost(profiles, reference, up, &g)?;
+) -> Option<Solution> {
+    let mut cur = Evaluation::default();
+    evaluate(profiles, reference, up, &g, &mut cur)?;
+    let mut trial = Evaluation::default();
     let mut lambda = 1e-3;
-    let (mut r, mut jl, mut jg) = (Vec::new(), Vec::new(), Vec::new());
+    let mut inverses: Vec<Matrix3<f64>> = Vec::with_capacity(profiles.len());
+    let mut saved: Vec<Vector3<f64>> = Vec::with_capacity(profiles.len());
     for _ in 0..40 {
-        let e = target(reference, up, &g)?;
-        // Normal equations: per profile A (3×3), B (3×6), a (3); global C (6×6), c (6).
-        let mut blocks = Vec::with_capacity(profiles.len());
-        let mut cg = Matrix6::<f64>::zeros();
-        let mut rg = Vector6::<f64>::zeros();
-        for pr in profiles.iter() {
-            profile_residuals(pr, &e, up, &g, Some((&mut r, &mut jl, &mut jg)))?;
-            let mut a = Matrix3::<f64>::zeros();
-            let mut b = nalgebra::Matrix3x6::<f64>::zeros();
-            let mut ra = Vector3::<f64>::zeros();
-            for ((res, l), gl) in r.iter().zip(&jl).zip(&jg) {
-                let l = Vector3::from(*l);
-                let gl = Vector6::from(*gl);
-                a += l * l.transpose();
-                b += l * gl.transpose();
-                ra += l * *res;
-                cg += gl * gl.transpose();
-                rg += gl * *res;
-            }
-            blocks.push((a, b, ra));
-        }
         let mut improved = false;
         while lambda < 1e8 {
-            let mut s = cg;
-            let mut rhs = -rg;
+            let mut s = cur.cg;
+            let mut rhs = -cur.rg;
             for i in 0..6 {
-                s[(i, i)] += lambda * cg[(i, i)].max(1e-9);
+                s[(i, i)] += lambda * cur.cg[(i, i)].max(1e-9);
             }
-            let mut inverses = Vec::with_capacity(blocks.len());
+            inverses.clear();
             let mut ok = true;
-            for (a, b, ra) in &blocks {
+            for Block { a, b, ra, .. } in &cur.blocks {
                 let mut ad = *a;
                 for i in 0..3 {
                     ad[(i, i)] += lambda * a[(i, i)].max(1e-9);
@@ -256,58 +345,46 @@ fn solve(
                 continue;
             };
             let g_new = g + dg;
-            let saved: Vec<Vector3<f64>> = profiles.iter().map(|p| p.local).collect();
-            for ((pr, (_, b, ra)), ai) in profiles.iter_mut().zip(&blocks).zip(&inverses) {
-                pr.local += ai * (-ra - b * dg);
+            saved.clear();
+            saved.extend(profiles.iter().map(|p| p.local));
+            for ((pr, blk), ai) in profiles.iter_mut().zip(&cur.blocks).zip(&inverses) {
+                pr.local += ai * (-blk.ra - blk.b * dg);
             }
-            let c_new = if g_new[2] > 0.2 && g_new[2] < 5.0 && g_new[1] > 0.0 {
-                total_cost(profiles, reference, up, &g_new)
-            } else {
-                None
-            };
-            match c_new {
-                Some(c) if c < cost => {
-                    let small =
-                        cost - c <= 1e-9 * cost || dg.iter().take(3).all(|x| x.abs() < 1e-5);
-                    g = g_new;
-                    cost = c;
-                    lambda = (lambda * 0.3).max(1e-9);
-                    improved = true;
-                    if small {
-                        lambda = 0.0;
-                    }
-                    break;
+            let accepted = g_new[2] > 0.2
+                && g_new[2] < 5.0
+                && g_new[1] > 0.0
+                && evaluate(profiles, reference, up, &g_new, &mut trial).is_some()
+                && trial.cost < cur.cost;
+            if accepted {
+                let (cost, c) = (cur.cost, trial.cost);
+                let small = cost - c <= 1e-9 * cost || dg.iter().take(3).all(|x| x.abs() < 1e-5);
+                g = g_new;
+                std::mem::swap(&mut cur, &mut trial);
+                lambda = (lambda * 0.3).max(1e-9);
+                improved = true;
+                if small {
+                    lambda = 0.0;
                 }
-                _ => {
-                    for (pr, l) in profiles.iter_mut().zip(saved) {
-                        pr.local = l;
-                    }
-                    lambda *= 10.0;
-                }
+                break;
             }
+            for (pr, l) in profiles.iter_mut().zip(&saved) {
+                pr.local = *l;
+            }
+            lambda *= 10.0;
         }
         if !improved || lambda == 0.0 {
             break;
         }
     }
-    // Undamped Schur complement at the solution (covariance).
-    let e = target(reference, up, &g)?;
-    let mut cg = Matrix6::<f64>::zeros();
-    for pr in profiles.iter() {
-        profile_residuals(pr, &e, up, &g, Some((&mut r, &mut jl, &mut jg)))?;
-        let mut a = Matrix3::<f64>::zeros();
-        let mut b = nalgebra::Matrix3x6::<f64>::zeros();
-        for (l, gl) in jl.iter().zip(&jg) {
-            let l = Vector3::from(*l);
-            let gl = Vector6::from(*gl);
-            a += l * l.transpose();
-            b += l * gl.transpose();
-            cg += gl * gl.transpose();
-        }
+    // Undamped Schur complement at the solution (covariance), from the last evaluation (the
+    // solution's: globals and locals have not moved since).
+    let mut schur = cur.cg;
+    for Block { a, b, .. } in &cur.blocks {
         let ai = a.try_inverse()?;
-        cg -= b.transpose() * ai * b;
+        schur -= b.transpose() * ai * b;
     }
-    Some((g, cost, cg))
+    let costs = cur.blocks.iter().map(|b| b.cost).collect();
+    Some((g, cur.cost, schur, costs))
 }
 
 /// Circular-mean-centred range of the eccentric angles (on `e`) of `points`.
@@ -411,16 +488,16 @@ pub(super) fn fit_partner<T: Pixel>(
     };
     let mut result = None;
     for _ in 0..3 {
-        let (g1, cost, schur) = solve(&mut profiles, reference, up, g)?;
+        let (g1, cost, schur, costs) = solve(&mut profiles, reference, up, g)?;
         g = g1;
         let n_samples: usize = profiles.iter().map(|p| p.samples.len()).sum();
         result = Some((g, cost, schur, n_samples, profiles.len()));
-        // Screen the profiles: clutter across a profile (RMS) or a vanishing far edge.
-        let e = target(reference, up, &g)?;
+        // Screen the profiles: clutter across a profile (RMS) or a vanishing far edge (each
+        // profile's cost at the solution comes from the solver's last evaluation).
         let stats: Vec<(f64, f64)> = profiles
             .iter()
-            .map(|pr| {
-                let c = profile_residuals(pr, &e, up, &g, None).unwrap_or(f64::INFINITY);
+            .zip(&costs)
+            .map(|(pr, &c)| {
                 let lb = g[3] + g[4] * pr.u + g[5] * pr.u * pr.u;
                 (
                     (c / pr.samples.len().max(1) as f64).sqrt(),
@@ -493,6 +570,112 @@ mod tests {
         // A ray that misses.
         let far = Vector2::new(0.0, -500.0);
         assert!(ray_hit(&e, far, Vector2::new(1.0, 0.0), 0.0).is_none());
+    }
+
+    /// Synthetic profiles across the band between `reference` and the target `g` (band model
+    /// samples with a deterministic wobble; the brightest band top clipped), locals perturbed.
+    fn synthetic_profiles(reference: &Ellipse, up: Vector2<f64>, g: &Vector6<f64>) -> Vec<Profile> {
+        let e = target(reference, up, g).unwrap();
+        let (st, ct) = reference.theta.sin_cos();
+        (0..24)
+            .map(|k| {
+                let t = 0.6 + 1.9 * k as f64 / 23.0;
+                let p = reference.point_at(t);
+                let (gx, gy) = (t.cos() / reference.a, t.sin() / reference.b);
+                let n = Vector2::new(gx * ct - gy * st, gx * st + gy * ct).normalize();
+                let d = if n.dot(&up) < 0.0 { n } else { -n };
+                let (t2, _) = ray_hit(&e, p, d, 2.5).unwrap();
+                let u = t.cos();
+                let lb = g[3] + g[4] * u + g[5] * u * u;
+                let q = [30.0 + k as f64, lb, 50.0, 0.1, t2, g[2]];
+                let samples = (0..19)
+                    .map(|i| {
+                        let s = band::T_MIN + i as f64 * band::STEP;
+                        let v =
+                            band::model(&q, s).0 + 0.8 * (((i * 7919 + k) % 11) as f64 / 5.0 - 1.0);
+                        (s, if v >= CLIP { f64::INFINITY } else { v })
+                    })
+                    .collect();
+                Profile {
+                    p,
+                    d,
+                    u,
+                    samples,
+                    local: Vector3::new(q[0] + 2.0, q[2] - 3.0, q[3] + 0.2),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn fused_evaluation_equals_separate_passes() {
+        // The one-pass cost and normal equations of `evaluate` against the residual/Jacobian
+        // rows of `profile_residuals` accumulated separately (the pre-fusion code path), at a
+        // start and at the solver's solution; the solver's per-profile costs and Schur
+        // complement against a fresh separate evaluation there.
+        let reference = Ellipse::new(620.0, 310.0, 300.0, 40.0, 0.03).unwrap();
+        let up = Vector2::new(0.03, -1.0).normalize();
+        let truth = Vector6::new(-3.0, 39.2, 0.9, 330.0, 30.0, -20.0);
+        let profiles = synthetic_profiles(&reference, up, &truth);
+        assert!(
+            profiles
+                .iter()
+                .any(|p| p.samples.iter().any(|s| s.1.is_infinite()))
+        );
+        let separate = |profiles: &[Profile], g: &Vector6<f64>| {
+            let e = target(&reference, up, g).unwrap();
+            let (mut r, mut jl, mut jg) = (Vec::new(), Vec::new(), Vec::new());
+            let mut cg = Matrix6::<f64>::zeros();
+            let mut rg = Vector6::<f64>::zeros();
+            let mut schur = Matrix6::<f64>::zeros();
+            let mut blocks = Vec::new();
+            let mut total = 0.0;
+            for pr in profiles {
+                let c = profile_residuals(pr, &e, up, g, Some((&mut r, &mut jl, &mut jg))).unwrap();
+                total += c;
+                let mut a = Matrix3::<f64>::zeros();
+                let mut b = Matrix3x6::<f64>::zeros();
+                let mut ra = Vector3::<f64>::zeros();
+                for ((res, l), gl) in r.iter().zip(&jl).zip(&jg) {
+                    let l = Vector3::from(*l);
+                    let gl = Vector6::from(*gl);
+                    a += l * l.transpose();
+                    b += l * gl.transpose();
+                    ra += l * *res;
+                    cg += gl * gl.transpose();
+                    rg += gl * *res;
+                }
+                schur -= b.transpose() * a.try_inverse().unwrap() * b;
+                blocks.push((a, b, ra, c));
+            }
+            (blocks, cg, rg, total, schur + cg)
+        };
+        let close = |x: f64, y: f64, scale: f64| (x - y).abs() <= 1e-12 * scale.max(1.0);
+        let g0 = Vector6::new(-2.5, 39.8, 1.1, 230.0, 20.0, 0.0);
+        let mut ev = Evaluation::default();
+        evaluate(&profiles, &reference, up, &g0, &mut ev).unwrap();
+        let (blocks, cg, rg, total, _) = separate(&profiles, &g0);
+        assert!(close(ev.cost, total, total));
+        assert_eq!(ev.blocks.len(), blocks.len());
+        for (f, (a, b, ra, c)) in ev.blocks.iter().zip(&blocks) {
+            assert!(close(f.cost, *c, *c));
+            assert!((f.a - a).norm() <= 1e-12 * a.norm().max(1.0));
+            assert!((f.b - b).norm() <= 1e-12 * b.norm().max(1.0));
+            assert!((f.ra - ra).norm() <= 1e-12 * ra.norm().max(1.0));
+        }
+        assert!((ev.cg - cg).norm() <= 1e-12 * cg.norm());
+        assert!((ev.rg - rg).norm() <= 1e-12 * rg.norm());
+        // At the solution.
+        let mut solved = synthetic_profiles(&reference, up, &truth);
+        let (g, cost, schur, costs) = solve(&mut solved, &reference, up, g0).unwrap();
+        assert!(cost < total, "{cost} vs {total}");
+        assert!((g[1] - truth[1]).abs() < 0.05, "{g:?}");
+        let (blocks, _, _, total, schur_ref) = separate(&solved, &g);
+        assert!(close(cost, total, total));
+        for (c, b) in costs.iter().zip(&blocks) {
+            assert!(close(*c, b.3, b.3));
+        }
+        assert!((schur - schur_ref).norm() <= 1e-12 * schur_ref.norm());
     }
 
     #[test]

@@ -394,6 +394,7 @@ mod band;
 mod joint;
 mod pair;
 mod refine;
+mod rim_shared;
 mod validate;
 
 use pair::pair_rims;
@@ -861,6 +862,55 @@ mod tests {
         let mut ids: Vec<usize> = after.iter().map(|d| d.wafer_id).collect();
         ids.dedup();
         assert_eq!(ids, (0..ids.len()).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn rim_whose_front_arc_meets_a_foreign_contour_is_found() {
+        // Image 170 of the wafer benchmark (seed 3): the edge chain of the target's lower rim
+        // comes in from a foreign contour with a concave bend; the first polygon vertex on the
+        // nearly straight front arc turns the arc's way by a few degrees. Cutting the inflection
+        // there left the side before it (on the rim) to a piece rejected as straight, and the
+        // rest assembled into a wrong lower rim; placed at the earlier vertex (the side between
+        // them already bends the arc's way, against the edge noise) the rim is found.
+        let (data, w, h, rims) = benchmark_scene(
+            11,
+            (
+                -0.5288154088668556,
+                -0.006602436435584502,
+                0.03254095273127437,
+            ),
+            1.0559850788024363,
+            9.44910123492236,
+            0.6465700414032725,
+            [-0.27715584397947823, 0.15607016150979858],
+            3630844684,
+        );
+        let view = GrayView::new(&data, w, h).unwrap();
+        let found = |params: &DetectParams| {
+            let dets = detect_wafers(&view, params).unwrap();
+            let (_, rim, e, _) = rims
+                .iter()
+                .find(|(wafer, rim, _, _)| *wafer == 0 && *rim == Rim::Lower)
+                .unwrap();
+            let hit = dets
+                .iter()
+                .any(|d| matches_rim(d, *rim, e, 1.0, 0.01, 0.01));
+            let wrong = dets
+                .iter()
+                .filter(|d| {
+                    !rims
+                        .iter()
+                        .any(|(_, r, e, _)| matches_rim(d, *r, e, 3.0, 0.05, 0.05))
+                })
+                .count();
+            (hit, wrong)
+        };
+        let mut plain = DetectParams::default();
+        plain.arcs.inflection_sigmas = 0.0;
+        let mut placed = DetectParams::default();
+        placed.arcs.inflection_sigmas = 3.0;
+        assert_eq!(found(&plain), (false, 1));
+        assert_eq!(found(&placed), (true, 0));
     }
 
     #[test]

@@ -77,19 +77,19 @@ pub fn refine_band_edges<T: Pixel>(image: &GrayView<'_, T>, seg: &mut Segment, t
     // (`None`) when the profile is no band.
     let located: Vec<(Vector2<f64>, Option<f64>)> = picked
         .par_iter()
-        .map(|p| {
-            let mut buf = Vec::new();
+        // One sample buffer per rayon work split (`map_init`), not one allocation per point.
+        .map_init(Vec::new, |buf, p| {
             let Some(nv) = normal(p) else {
                 return (*p, None);
             };
-            let Some(d) = band::profile(image, *p, nv, &mut buf) else {
+            let Some(d) = band::profile(image, *p, nv, buf) else {
                 return (*p, None);
             };
-            let Some(mut p0) = band::start(&buf) else {
+            let Some(mut p0) = band::start(buf) else {
                 return (*p, None);
             };
             p0[5] = sigma;
-            match band::fit(&buf, p0, false) {
+            match band::fit(buf, p0, false) {
                 Some((q, rms)) if is_band(&q) => (p + d * q[3], Some(rms)),
                 _ => (*p, None),
             }

@@ -93,7 +93,6 @@ impl LeaveOneOutScreen {
     /// to `n̂`; Ahn, Rauh & Warnecke 2001). `None` if an arc index is out of range.
     fn new(seg: &Segment, arcs: &[Arc]) -> Option<Self> {
         let e = &seg.fit.ellipse;
-        let (sth, cth) = e.theta.sin_cos();
         let mut rows = Vec::with_capacity(seg.points.len());
         let mut per_arc = Vec::with_capacity(seg.arcs.len());
         let (mut h, mut g) = (Matrix5::zeros(), Vector5::zeros());
@@ -102,19 +101,7 @@ impl LeaveOneOutScreen {
             let start = rows.len();
             let (mut ha, mut ga) = (Matrix5::<f64>::zeros(), Vector5::<f64>::zeros());
             for p in &arc.points {
-                let (st, ct) = e.parameter_of(p).sin_cos();
-                // Foot point and normal in the ellipse frame, then rotated by θ.
-                let (u, v) = (e.a * ct, e.b * st);
-                let (nu, nv) = (e.b * ct, e.a * st);
-                let nn = nu.hypot(nv);
-                let n = Vector2::new(cth * nu - sth * nv, sth * nu + cth * nv) / nn;
-                let foot = Vector2::new(e.cx + cth * u - sth * v, e.cy + sth * u + cth * v);
-                let r = n.dot(&(p - foot));
-                // ∂x'/∂a = R·[cos t, 0]ᵀ, ∂x'/∂b = R·[0, sin t]ᵀ, ∂x'/∂θ = R'·[u, v]ᵀ.
-                let da = Vector2::new(cth * ct, sth * ct);
-                let db = Vector2::new(-sth * st, cth * st);
-                let dth = Vector2::new(-(sth * u + cth * v), cth * u - sth * v);
-                let j = -Vector5::new(n.x, n.y, n.dot(&da), n.dot(&db), n.dot(&dth));
+                let (r, j) = crate::ellipse::point_distance_and_gradient(e, p);
                 ha += j * j.transpose();
                 ga += j * r;
                 rows.push((r, j));
