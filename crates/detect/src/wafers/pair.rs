@@ -426,18 +426,9 @@ fn joint_partner<T: Pixel>(
         return;
     };
     let e = fit.ellipse;
-    if !((e.cx - current.cx).hypot(e.cy - current.cy) < 2.0
-        && (e.b - current.b).abs() < 0.05 * current.b)
-    {
+    if !near_own_fit(&e, &current) {
         return;
     }
-    let d = e.orthogonal_distances(&c.seg.points);
-    let n = d.len().max(1) as f64;
-    let residual_mean = d.iter().map(|x| x.abs()).sum::<f64>() / n;
-    if !(residual_mean < params.assembly.residual_threshold) {
-        return;
-    }
-    let residual_rms = (d.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
     // (cx, cy, b) = (rcx + s·up.x, rcy + s·up.y, b): J maps (s, b).
     let mut jac = nalgebra::SMatrix::<f64, 5, 2>::zeros();
     jac[(0, 0)] = up.x;
@@ -458,11 +449,31 @@ fn joint_partner<T: Pixel>(
             cov[(r, k)] += rc[(r, k)];
         }
     }
+    take_refit(c, e, cov, params);
+}
+
+/// Whether a refit `e` of a rim stays within 2 px (centre) and 5 % of `b` of the rim's own fit
+/// `own`: a shared or joint model that moves a rim farther does not describe it.
+fn near_own_fit(e: &Ellipse, own: &Ellipse) -> bool {
+    (e.cx - own.cx).hypot(e.cy - own.cy) < 2.0 && (e.b - own.b).abs() < 0.05 * own.b
+}
+
+/// Gives rim `c` the refitted ellipse `e` (covariance `covariance`) when its own points still
+/// fit it (mean orthogonal distance under the assembly's residual threshold); the points are
+/// kept as they are and the residuals re-measured on them.
+fn take_refit(c: &mut Candidate, e: Ellipse, covariance: Matrix5<f64>, params: &DetectParams) {
+    let d = e.orthogonal_distances(&c.seg.points);
+    let n = d.len().max(1) as f64;
+    let residual_mean = d.iter().map(|x| x.abs()).sum::<f64>() / n;
+    if !(residual_mean < params.assembly.residual_threshold) {
+        return;
+    }
+    let residual_rms = (d.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
     c.seg.fit = EllipseFit {
         ellipse: e,
         residual_mean,
         residual_rms,
-        covariance: Some(cov),
+        covariance: Some(covariance),
         iterations: 0,
         converged: true,
     };
@@ -523,33 +534,13 @@ fn refit_front_arc_pair(
     let Some(fit) = rim_shared::fit_rim_pair(pu, pl, &eu, &el, up) else {
         return;
     };
-    // Both rims must stay near their own fits: a shared model that moves either one by 2 px or
-    // 5 % of `b` does not describe this pair.
-    let close = |e: &Ellipse, own: &Ellipse| {
-        (e.cx - own.cx).hypot(e.cy - own.cy) < 2.0 && (e.b - own.b).abs() < 0.05 * own.b
-    };
-    if !(close(&fit.upper, &eu) && close(&fit.lower, &el)) {
+    // Both rims must stay near their own fits, else the shared model does not describe the pair.
+    if !(near_own_fit(&fit.upper, &eu) && near_own_fit(&fit.lower, &el)) {
         return;
     }
-    let Some(c) = slots.get_mut(l).and_then(|c| c.as_mut()) else {
-        return;
-    };
-    let e = fit.lower;
-    let d = e.orthogonal_distances(&c.seg.points);
-    let n = d.len().max(1) as f64;
-    let residual_mean = d.iter().map(|x| x.abs()).sum::<f64>() / n;
-    if !(residual_mean < params.assembly.residual_threshold) {
-        return;
+    if let Some(c) = slots.get_mut(l).and_then(|c| c.as_mut()) {
+        take_refit(c, fit.lower, fit.lower_covariance(), params);
     }
-    let residual_rms = (d.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
-    c.seg.fit = EllipseFit {
-        ellipse: e,
-        residual_mean,
-        residual_rms,
-        covariance: Some(fit.lower_covariance()),
-        iterations: 0,
-        converged: true,
-    };
 }
 
 #[cfg(test)]
