@@ -386,13 +386,7 @@ fn joint_partner<T: Pixel>(
 ) {
     // A wafer seen from above has its lower rim farther below the camera than its upper rim:
     // the lower rim's image is the rounder one (b/a is the sine of the view elevation).
-    let minor = |k: usize, kind: RimKind| {
-        slots
-            .get(k)
-            .and_then(|c| c.as_ref())
-            .filter(|c| c.kind == kind)
-            .map(|c| c.seg.fit.ellipse.b)
-    };
+    let minor = |k: usize, kind: RimKind| rim(slots, k, kind).map(|c| c.seg.fit.ellipse.b);
     let from_above = match (minor(i, RimKind::Upper), minor(j, RimKind::Lower)) {
         (Some(bu), Some(bl)) => bl > bu,
         _ => {
@@ -450,6 +444,14 @@ fn joint_partner<T: Pixel>(
         }
     }
     take_refit(c, e, cov, params);
+}
+
+/// The candidate in slot `k` if it is a rim of kind `kind`.
+fn rim(slots: &[Option<Candidate>], k: usize, kind: RimKind) -> Option<&Candidate> {
+    slots
+        .get(k)
+        .and_then(|c| c.as_ref())
+        .filter(|c| c.kind == kind)
 }
 
 /// Whether a refit `e` of a rim stays within 2 px (centre) and 5 % of `b` of the rim's own fit
@@ -516,13 +518,8 @@ fn refit_front_arc_pair(
     up: Vector2<f64>,
     params: &DetectParams,
 ) {
-    let get = |k: usize, kind: RimKind| {
-        slots
-            .get(k)
-            .and_then(|c| c.as_ref())
-            .filter(|c| c.kind == kind)
-            .map(|c| (c.seg.fit.ellipse, &c.seg.points))
-    };
+    let get =
+        |k: usize, kind: RimKind| rim(slots, k, kind).map(|c| (c.seg.fit.ellipse, &c.seg.points));
     let (Some((eu, pu)), Some((el, pl))) = (get(u, RimKind::Upper), get(l, RimKind::Lower)) else {
         return;
     };
