@@ -21,7 +21,7 @@ detections / detections, where a detection that matches a rim that is present bu
 visibility cut is counted in neither. Also prints the median centre and axis errors of the
 matches and the median detection time per image (the Sobel/NMS and band-profile stages use rayon: all cores).
 
-Run: ``python benchmarks/wafer_detection.py [n_images] [--all-silhouettes]`` (default 210).
+Run: ``python benchmarks/wafer_detection.py [n_images] [--all-silhouettes] [--rim-offset-prior]`` (default 210).
 """
 
 from __future__ import annotations
@@ -47,6 +47,9 @@ AXIS_TOL = 0.01
 # Second recall line only (the metric is unchanged): rims with a semi-minor axis of at least this
 # many pixels, where 1 % of b is at least 0.08 px.
 MIN_B_PX = 8.0
+# The rendered wafer (the renderer's default `WaferShape`: 150 mm radius, 1 mm thick) and the
+# camera's focal length: the inputs of the optional rim offset prior (`--rim-offset-prior`).
+WAFER_RADIUS, WAFER_THICKNESS = 0.150, 0.001
 
 
 def slot_pose(k: int) -> np.ndarray:
@@ -124,8 +127,13 @@ def match(dets: list[WaferEdge], truth: list[dict]) -> list[tuple[int, int]]:
     return [(int(r), index[int(c)]) for r, c in zip(rows, cols, strict=True) if np.isfinite(cost[r, c])]
 
 
-def evaluate(n_images: int, seed: int = SEED, silhouettes: bool = False) -> dict[str, float]:
-    """Runs the robustness test on ``n_images`` scenes; returns the figures."""
+def evaluate(
+    n_images: int, seed: int = SEED, silhouettes: bool = False, rim_offset_prior: bool = False
+) -> dict[str, float]:
+    """Runs the robustness test on ``n_images`` scenes; returns the figures. ``rim_offset_prior``
+    gives the detector the wafer's thickness ratio and the camera's focal length."""
+    prior = {"thickness_ratio": WAFER_THICKNESS / WAFER_RADIUS, "focal_length": float(PARAMS[0])}
+    kwargs = prior if rim_offset_prior else {}
     rng = np.random.default_rng(seed)
     n_visible = n_matched_visible = n_det = n_det_ignored = n_det_matched = 0
     n_visible_b8 = n_matched_b8 = 0
@@ -135,7 +143,7 @@ def evaluate(n_images: int, seed: int = SEED, silhouettes: bool = False) -> dict
         k = 1 + i % 20
         image, truth = make_scene(rng, k)
         t0 = time.perf_counter()
-        dets = detect_wafers(image)
+        dets = detect_wafers(image, **kwargs)
         times.append(time.perf_counter() - t0)
         visible = [visible_fraction(t, silhouettes) >= MIN_VISIBLE for t in truth]
         pairs = match(dets, truth)
@@ -182,9 +190,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("n_images", nargs="?", type=int, default=210)
     parser.add_argument("--all-silhouettes", action="store_true", help="count silhouette-only rims as visible")
+    parser.add_argument(
+        "--rim-offset-prior",
+        action="store_true",
+        help="give the detector the wafer's thickness/radius and the camera's focal length",
+    )
     args = parser.parse_args()
-    r = evaluate(args.n_images, silhouettes=args.all_silhouettes)
+    r = evaluate(args.n_images, silhouettes=args.all_silhouettes, rim_offset_prior=args.rim_offset_prior)
     print(f"visible-rim definition: {'any unoccluded point' if args.all_silhouettes else 'side-facing band edge'}")
+    print(f"rim offset prior: {'thickness/radius and focal length given' if args.rim_offset_prior else 'none'}")
     print(f"images {r['images']}, visible rims {r['visible_rims']}, detections {r['detections']}")
     print(f"recall {r['recall']:.4f}  precision {r['precision']:.4f}  target-wafer recall {r['target_recall']:.4f}")
     print(

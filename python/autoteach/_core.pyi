@@ -542,7 +542,7 @@ def wafer_detect(
     max_gap: float = 60.0,
     up: tuple[float, float] = (0.0, -1.0),
     max_rim_offset: float = 10.0,
-    max_rim_axis_difference: float = 0.03,
+    max_rim_axis_difference: float = 0.10,
     min_contrast_ratio: float = 0.45,
     semi_major_range: tuple[float, float] | None = None,
     semi_minor_range: tuple[float, float] | None = None,
@@ -556,6 +556,9 @@ def wafer_detect(
     share_rim_centre: bool | None = None,
     joint_band_fit: bool | None = None,
     inflection_sigmas: float | None = None,
+    join_border_cut_arcs: bool | None = None,
+    thickness_ratio: float | None = None,
+    focal_length: float | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 

@@ -217,7 +217,7 @@ def detect_wafers(
     max_gap: float = 60.0,
     up: tuple[float, float] = (0.0, -1.0),
     max_rim_offset: float = 10.0,
-    max_rim_axis_difference: float = 0.03,
+    max_rim_axis_difference: float = 0.10,
     min_contrast_ratio: float = 0.45,
     semi_major_range: tuple[float, float] | None = None,
     semi_minor_range: tuple[float, float] | None = None,
@@ -231,6 +231,9 @@ def detect_wafers(
     share_rim_centre: bool = True,
     joint_band_fit: bool = True,
     inflection_sigmas: float = 0.0,
+    join_border_cut_arcs: bool = True,
+    thickness_ratio: float | None = None,
+    focal_length: float | None = None,
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -274,6 +277,15 @@ def detect_wafers(
         inflection_sigmas: When above 0, a cut at a turn-sign change moves to the previous
             polygon vertex if the points between already bend its way by more than this many
             standard errors of the chain's edge noise (0: cut at the sign change).
+        join_border_cut_arcs: Join two arcs left over by the assembly into one rim when the
+            part of their ellipse between them lies outside the image (a rim whose front arc runs
+            out of the image top; farther apart than ``max_gap``).
+        thickness_ratio: Wafer thickness / wafer radius (a standard 300 mm wafer: 0.775 / 150);
+            with ``focal_length``, a prior on the offset between the images of a wafer's two
+            rims, ``thickness_ratio · a · sqrt(1 + (a / focal_length)²)`` along ``up`` (4 %
+            standard deviation), pins the joint fit of the far lower rim of a wafer seen from
+            above. Give both or neither; a wrong thickness is worse than none.
+        focal_length: Camera focal length (pixels) for the rim offset prior.
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -313,6 +325,9 @@ def detect_wafers(
         share_rim_centre=bool(share_rim_centre),
         joint_band_fit=bool(joint_band_fit),
         inflection_sigmas=float(inflection_sigmas),
+        join_border_cut_arcs=bool(join_border_cut_arcs),
+        thickness_ratio=None if thickness_ratio is None else float(thickness_ratio),
+        focal_length=None if focal_length is None else float(focal_length),
     )
     return [
         WaferEdge(

@@ -569,17 +569,17 @@ def _drop_sparse_wafers(obs: Observations, min_frames: int) -> Observations:
 #: RMS normal offset of the detected points from the true rim, relative to that of upper-rim
 #: points on bands of at least 3 px (0.061 px), at the centres of the bins 0–1, 1–1.5, then
 #: 0.25 px wide to 3.5 (1.5–2 measured as one bin: its value serves both entries), and 3.5–4
-#: px. Re-measured on the session-6 detector (upper rims no longer trimmed at the band ends) on
-#: the simulated sessions of seeds 0–4 (200 frames, 367 k gated points; ``python
+#: px. Re-measured on the session-8 detector (pairing gate 0.10, image-top-cut rims joined) on
+#: the simulated sessions of seeds 0–4 (200 frames, 380 k gated points; ``python
 #: benchmarks/autoteach_sessions.py --noise-model --seeds 0 1 2 3 4``); seeds 5–7 were not
 #: used. Where the band narrows its two blurred edges merge and the band-profile fit of the
 #: detector is biased along the edge; the lower rim, the band's far edge, is the worse one from
 #: 3 px down.
 BAND_NOISE_WIDTH_PX: tuple[float, ...] = (0.5, 1.25, 1.625, 1.875, 2.125, 2.375, 2.625, 2.875, 3.125, 3.375, 3.75)
 #: Relative noise of the upper rim at :data:`BAND_NOISE_WIDTH_PX` (clamped below at 1).
-BAND_NOISE_UPPER: tuple[float, ...] = (3.83, 2.64, 3.0, 3.0, 2.21, 1.63, 1.17, 1.04, 1.10, 0.97, 0.80)
+BAND_NOISE_UPPER: tuple[float, ...] = (3.84, 2.63, 2.98, 2.98, 2.20, 1.63, 1.16, 1.04, 1.09, 0.98, 0.80)
 #: Relative noise of the lower rim at :data:`BAND_NOISE_WIDTH_PX` (clamped below at 1).
-BAND_NOISE_LOWER: tuple[float, ...] = (5.15, 3.98, 3.05, 3.05, 2.98, 2.65, 1.80, 1.58, 1.35, 1.09, 0.82)
+BAND_NOISE_LOWER: tuple[float, ...] = (5.08, 4.07, 2.95, 2.95, 2.87, 2.59, 1.78, 1.56, 1.34, 1.09, 0.82)
 
 
 def band_sigma_scale(band: np.ndarray, rim: int) -> np.ndarray:

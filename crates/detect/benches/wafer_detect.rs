@@ -7,14 +7,16 @@
 //! Per-stage profile: with `AUTOTEACH_DETECT_PROFILE=1` the bench first renders 10 scenes like
 //! `benchmarks/wafer_detection.py` (target in slot 5, disturbance 1–20 slots above, camera
 //! 0.42–0.55 m away, random lighting; fixed seed) and prints the median milliseconds per image of
-//! each stage over 4 repeats: Canny, linking, arc splitting, Algorithm 1, Algorithm 2, the
+//! each stage over 4 repeats: Canny (on an `EdgeWorkspace` kept across the frames, as
+//! `detect_wafers` does), linking, arc splitting, Algorithm 1, Algorithm 2, the
 //! validation and rim pairing of `detect_wafers` (total without band refinement minus the
 //! stages before it) and the band refinement (total minus total without it). With
 //! `AUTOTEACH_DETECT_PROFILE=only` it prints the profile and skips the criterion benches.
 
 use autoteach_detect::assembly::{AssemblyParams, assemble, merge_arcs, merge_segments};
 use autoteach_detect::edges::{
-    ArcParams, CannyParams, GrayView, LinkParams, canny, detect_arcs, link_edges, split_arcs,
+    ArcParams, CannyParams, EdgeWorkspace, GrayView, LinkParams, canny, detect_arcs, link_edges,
+    split_arcs,
 };
 use autoteach_detect::wafers::{DetectParams, detect_wafers};
 use autoteach_geometry::camera::Camera;
@@ -112,13 +114,15 @@ fn stage_profile() {
     ];
     let mut t: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
     let mut rims = 0;
+    // The edge map from a workspace kept across frames, as `detect_wafers` does.
+    let mut ws = EdgeWorkspace::new();
     for _ in 0..4 {
         rims = 0;
         for data in &images {
             let view = GrayView::new(data, 1280, 720).expect("image");
-            let (t0, map) = ms(|| canny(&view, &p.canny).expect("canny"));
-            let (t1, chains) = ms(|| link_edges(&map, &p.link).expect("link"));
-            let (t2, arcs) = ms(|| split_arcs(&map, &chains, &p.arcs).expect("split"));
+            let (t0, map) = ms(|| ws.canny(&view, &p.canny).expect("canny"));
+            let (t1, chains) = ms(|| link_edges(map, &p.link).expect("link"));
+            let (t2, arcs) = ms(|| split_arcs(map, &chains, &p.arcs).expect("split"));
             let (t3, (s0, v0)) = ms(|| merge_arcs(&arcs, &p.assembly).expect("alg 1"));
             let (t4, _) = ms(|| merge_segments(&arcs, s0, v0, &p.assembly).expect("alg 2"));
             let (t5, _) = ms(|| detect_wafers(&view, &no_band).expect("detect"));
@@ -158,6 +162,13 @@ fn bench(c: &mut Criterion) {
     });
     c.bench_function("canny 1280x720", |b| {
         b.iter(|| canny(black_box(&view), &CannyParams::default()))
+    });
+    let mut ws = EdgeWorkspace::new();
+    c.bench_function("canny 1280x720 (reused workspace)", |b| {
+        b.iter(|| {
+            ws.canny(black_box(&view), &CannyParams::default())
+                .map(|m| m.edgels.len())
+        })
     });
     let map = canny(&view, &CannyParams::default()).expect("canny");
     c.bench_function("link_edges 1280x720", |b| {

@@ -188,7 +188,7 @@ fn gap(a: &Part<'_>, b: &Part<'_>) -> f64 {
 /// Angular extent `(start, length)` (eccentric angle, length in `[0, 2π)`) of an ordered run
 /// of points given by their eccentric angles `ts` on the fitted ellipse, unwrapped along the
 /// run.
-fn extent(ts: &[f64]) -> (f64, f64) {
+pub(crate) fn extent(ts: &[f64]) -> (f64, f64) {
     let Some(&first) = ts.first() else {
         return (0.0, 0.0);
     };
@@ -276,6 +276,27 @@ fn combine(a: &Part<'_>, b: &Part<'_>, params: &AssemblyParams) -> Option<(Ellip
         return None;
     }
     Some((fit, r))
+}
+
+/// The combination rule of [`merge_arcs`] for two single arcs (polarity, quadrant classes and
+/// relative position, gap up to `params.max_gap`, residual threshold, no overlap on the fitted
+/// ellipse): the geometric fit of their union and the eccentric angle of each point on it
+/// (first `a`'s points, then `b`'s), if the pair is accepted.
+pub(crate) fn combine_arcs(
+    a: &Arc,
+    b: &Arc,
+    params: &AssemblyParams,
+) -> Option<(EllipseFit, Vec<f64>)> {
+    let pa = Part::new(&a.points, a.polarity, Some(a.quadrant));
+    let pb = Part::new(&b.points, b.polarity, Some(b.quadrant));
+    let (fit, _) = combine(&pa, &pb, params)?;
+    let ts = a
+        .points
+        .iter()
+        .chain(&b.points)
+        .map(|p| fit.ellipse.parameter_of(p))
+        .collect();
+    Some((fit, ts))
 }
 
 /// Union–find root.

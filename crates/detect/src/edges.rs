@@ -467,10 +467,36 @@ fn suppress_rows<T: Pixel>(
 /// strong survivors over a one-byte state image. The squared magnitudes are compared (monotone
 /// in the magnitude); square roots are taken only for the parabolic refinement of the maxima.
 ///
+/// Allocates the whole-image state and index images on every call; [`EdgeWorkspace::canny`]
+/// gives the same edge map from buffers kept between calls (frames of a video).
+///
 /// # Errors
 /// [`DetectError::InvalidParameter`] for bad thresholds or blur.
 pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<EdgeMap> {
     params.validate()?;
+    let (w, h) = (image.width, image.height);
+    let mut state = vec![0u8; w * h];
+    let mut map = EdgeMap {
+        width: w,
+        height: h,
+        edgels: Vec::new(),
+        index: vec![NONE; w * h],
+    };
+    canny_into(image, params, &mut state, &mut Vec::new(), &mut map);
+    Ok(map)
+}
+
+/// The work of [`canny`] on caller-provided buffers, with `params` already validated. On entry
+/// `state` is `w·h` zeros, `map.index` is `w·h` × [`NONE`] and `map.edgels` is empty (sizes
+/// set); on return `map` holds the edge map and `state` is all zeros again (only the survivors'
+/// pixels are ever written, and they are cleared), so both can serve the next call unchanged.
+fn canny_into<T: Pixel>(
+    image: &GrayView<'_, T>,
+    params: &CannyParams,
+    state: &mut [u8],
+    stack: &mut Vec<usize>,
+    map: &mut EdgeMap,
+) {
     let (w, h) = (image.width, image.height);
     let low = params.low as f32;
     let high = params.high as f32;
@@ -486,7 +512,6 @@ pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<
     };
     let arch = pulp::Arch::new();
     // `state`: 0 none, 1 candidate (≥ low), 2 strong (≥ high), 3 kept by the hysteresis.
-    let mut state = vec![0u8; w * h];
     let survivors: Vec<Vec<Survivor>> = state
         .par_chunks_mut(w * CANNY_ROWS)
         .enumerate()
@@ -503,7 +528,7 @@ pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<
         .collect();
     // Hysteresis: grow from strong pixels through 8-connected candidates. Survivors lie in
     // rows and columns 2..n − 2, so every neighbour index is inside the image.
-    let mut stack = Vec::new();
+    stack.clear();
     let offsets = [
         -(w as isize) - 1,
         -(w as isize),
@@ -538,11 +563,14 @@ pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<
         .flatten()
         .filter(|s| state[s.k as usize] == 3)
         .count();
-    let mut edgels = Vec::with_capacity(kept);
-    let mut index = vec![NONE; w * h];
+    let (edgels, index) = (&mut map.edgels, &mut map.index);
+    edgels.clear();
+    edgels.reserve(kept);
     for s in survivors.iter().flatten() {
         let k = s.k as usize;
-        if state[k] != 3 {
+        // Back to zero for the next call (a survivor is the only kind of pixel written).
+        let kept = std::mem::take(&mut state[k]) == 3;
+        if !kept {
             continue;
         }
         let (x, y) = (k % w, k / w);
@@ -560,12 +588,84 @@ pub fn canny<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<
             py: y as u32,
         });
     }
-    Ok(EdgeMap {
-        width: w,
-        height: h,
-        edgels,
-        index,
-    })
+}
+
+/// Buffers of the edge stage kept between calls: [`EdgeWorkspace::canny`] computes the same
+/// edge map as [`canny`] without allocating and clearing the whole-image state (1 byte per
+/// pixel) and index (4 bytes per pixel) images on every frame: only the pixels the last call
+/// wrote are reset. (For 1280×720 images: where the allocator hands freed blocks back to the
+/// system, fresh pages' faults and clearing were ≈ 4 of ≈ 10 ms of Canny; where it keeps them,
+/// as in the Python benchmark, the clearing alone, ≈ 1 % of the detection.) [`detect_arcs`]
+/// (and so [`crate::wafers::detect_wafers`]) keeps one workspace per thread; hold one yourself
+/// to reuse the edge map between the stages.
+#[derive(Debug, Clone)]
+pub struct EdgeWorkspace {
+    /// The last edge map; `index` is [`NONE`] except at the pixels of `edgels`.
+    map: EdgeMap,
+    /// The hysteresis state image, all zeros between calls.
+    state: Vec<u8>,
+    /// The hysteresis stack.
+    stack: Vec<usize>,
+    /// Set while a call runs: a call that did not finish (a panic) leaves the buffers in an
+    /// unknown state, and the next call then starts from fresh ones.
+    busy: bool,
+}
+
+impl Default for EdgeWorkspace {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl EdgeWorkspace {
+    /// An empty workspace (buffers are sized by the first image).
+    pub fn new() -> Self {
+        Self {
+            map: EdgeMap {
+                width: 0,
+                height: 0,
+                edgels: Vec::new(),
+                index: Vec::new(),
+            },
+            state: Vec::new(),
+            stack: Vec::new(),
+            busy: false,
+        }
+    }
+
+    /// [`canny`] on the workspace's buffers (reallocated when the image size changes); the
+    /// returned map is the same as [`canny`]'s and stays valid until the next call.
+    ///
+    /// # Errors
+    /// As [`canny`] (the workspace is left usable).
+    pub fn canny<T: Pixel>(
+        &mut self,
+        image: &GrayView<'_, T>,
+        params: &CannyParams,
+    ) -> Result<&EdgeMap> {
+        params.validate()?;
+        let (w, h) = (image.width, image.height);
+        let map = &mut self.map;
+        if self.busy || (map.width, map.height) != (w, h) || map.index.len() != w * h {
+            *map = EdgeMap {
+                width: w,
+                height: h,
+                edgels: Vec::new(),
+                index: vec![NONE; w * h],
+            };
+            self.state = vec![0u8; w * h];
+        } else {
+            // Sparse reset of the last call's index entries.
+            for e in &map.edgels {
+                map.index[e.py as usize * w + e.px as usize] = NONE;
+            }
+            map.edgels.clear();
+        }
+        self.busy = true;
+        canny_into(image, params, &mut self.state, &mut self.stack, map);
+        self.busy = false;
+        Ok(&self.map)
+    }
 }
 
 /// Options of [`link_edges`].
@@ -1084,7 +1184,18 @@ fn make_arc(
     })
 }
 
+thread_local! {
+    /// The [`EdgeWorkspace`] of [`detect_arcs`] on this thread.
+    static EDGE_WORKSPACE: std::cell::RefCell<EdgeWorkspace> =
+        std::cell::RefCell::new(EdgeWorkspace::new());
+}
+
 /// [`canny`], [`link_edges`] and [`split_arcs`] with the given parameters.
+///
+/// The edge map comes from an [`EdgeWorkspace`] kept per thread (the whole-image buffers are
+/// allocated once per thread and image size, not per call; same result as [`canny`]); a nested
+/// call on the same thread (a rayon worker that picks up another detection while this one
+/// waits) uses a fresh workspace. [`detect_arcs_with`] takes the workspace from the caller.
 ///
 /// # Errors
 /// As the three steps.
@@ -1094,9 +1205,32 @@ pub fn detect_arcs<T: Pixel>(
     link_params: &LinkParams,
     arc_params: &ArcParams,
 ) -> Result<Vec<Arc>> {
-    let map = canny(image, canny_params)?;
-    let chains = link_edges(&map, link_params)?;
-    split_arcs(&map, &chains, arc_params)
+    EDGE_WORKSPACE.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut ws) => detect_arcs_with(&mut ws, image, canny_params, link_params, arc_params),
+        Err(_) => detect_arcs_with(
+            &mut EdgeWorkspace::new(),
+            image,
+            canny_params,
+            link_params,
+            arc_params,
+        ),
+    })
+}
+
+/// [`detect_arcs`] with the edge map computed in `workspace` ([`EdgeWorkspace::canny`]).
+///
+/// # Errors
+/// As the three steps.
+pub fn detect_arcs_with<T: Pixel>(
+    workspace: &mut EdgeWorkspace,
+    image: &GrayView<'_, T>,
+    canny_params: &CannyParams,
+    link_params: &LinkParams,
+    arc_params: &ArcParams,
+) -> Result<Vec<Arc>> {
+    let map = workspace.canny(image, canny_params)?;
+    let chains = link_edges(map, link_params)?;
+    split_arcs(map, &chains, arc_params)
 }
 
 #[cfg(test)]
@@ -1310,6 +1444,95 @@ mod tests {
                 assert_eq!(got.edgels, want.edgels, "{w}x{h} f32 {params:?}");
                 assert_eq!(got.index, want.index);
             }
+        }
+    }
+
+    #[test]
+    fn workspace_canny_equals_the_reference_over_a_sequence_of_frames() {
+        // One workspace over frames of changing content, size, pixel type and parameters, a
+        // rejected call and a call that did not finish: every map equals the whole-image
+        // reference (the sparse reset leaves no edgel of an earlier frame behind).
+        let mut ws = EdgeWorkspace::new();
+        let blur = CannyParams {
+            low: 3.0,
+            high: 8.0,
+            blur_sigma: 1.2,
+        };
+        let frames = [
+            (211, 157, CannyParams::default()),
+            (211, 157, blur),
+            (211, 157, CannyParams::default()),
+            (64, 5, CannyParams::default()),
+            (320, 97, blur),
+            (320, 97, CannyParams::default()),
+        ];
+        for (f, &(w, h, params)) in frames.iter().enumerate() {
+            // Shift the content between frames of one size so that the edgels move.
+            let mut data = textured_image(w, h);
+            let shift = f * 7 % data.len();
+            data.rotate_left(shift);
+            let view = GrayView::new(&data, w, h).unwrap();
+            let want = canny_reference(&view, &params).unwrap();
+            let got = ws.canny(&view, &params).unwrap();
+            assert!(w < 6 || h < 6 || got.edgels.len() > 20);
+            assert_eq!(got.edgels, want.edgels, "frame {f} {w}x{h}");
+            assert_eq!(got.index, want.index, "frame {f} {w}x{h}");
+            assert!(ws.state.iter().all(|&s| s == 0), "state not cleared");
+            let floats: Vec<f32> = data.iter().map(|&v| f32::from(v) / 255.0).collect();
+            let view = GrayView::new(&floats, w, h).unwrap();
+            let got = ws.canny(&view, &params).unwrap();
+            assert_eq!(got.edgels, canny_reference(&view, &params).unwrap().edgels);
+        }
+        let (w, h) = (211, 157);
+        let data = textured_image(w, h);
+        let view = GrayView::new(&data, w, h).unwrap();
+        let bad = CannyParams {
+            low: f64::NAN,
+            ..CannyParams::default()
+        };
+        assert!(matches!(
+            ws.canny(&view, &bad),
+            Err(DetectError::InvalidParameter { .. })
+        ));
+        let want = canny_reference(&view, &CannyParams::default()).unwrap();
+        assert_eq!(
+            ws.canny(&view, &CannyParams::default()).unwrap().index,
+            want.index
+        );
+        // A call that stopped half-way (a panic inside) leaves garbage: the next call must not
+        // trust the buffers.
+        ws.busy = true;
+        ws.state.iter_mut().for_each(|s| *s = 2);
+        ws.map.index.iter_mut().for_each(|i| *i = 7);
+        let got = ws.canny(&view, &CannyParams::default()).unwrap();
+        assert_eq!(got.edgels, want.edgels);
+        assert_eq!(got.index, want.index);
+    }
+
+    #[test]
+    fn detect_arcs_with_the_thread_workspace_equals_the_allocating_steps() {
+        let (w, h) = (320, 240);
+        let mut ws = EdgeWorkspace::new();
+        for (k, (cx, cy)) in [(150.0, 120.0), (170.0, 110.0), (150.0, 120.0)]
+            .into_iter()
+            .enumerate()
+        {
+            let data = disc_image(w, h, cx, cy, 90.0 + 5.0 * k as f64, 60.0);
+            let view = GrayView::new(&data, w, h).unwrap();
+            let (cp, lp, ap) = (
+                CannyParams::default(),
+                LinkParams::default(),
+                ArcParams::default(),
+            );
+            let map = canny(&view, &cp).unwrap();
+            let chains = link_edges(&map, &lp).unwrap();
+            let want = split_arcs(&map, &chains, &ap).unwrap();
+            assert!(want.len() >= 4, "{} arcs", want.len());
+            assert_eq!(detect_arcs(&view, &cp, &lp, &ap).unwrap(), want);
+            assert_eq!(
+                detect_arcs_with(&mut ws, &view, &cp, &lp, &ap).unwrap(),
+                want
+            );
         }
     }
 

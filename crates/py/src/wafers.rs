@@ -5,7 +5,9 @@
 //! front is `autoteach.detect.detect_wafers`.
 
 use autoteach_detect::edges::{GrayView, Pixel};
-use autoteach_detect::wafers::{DetectParams, WaferEdge, WaferPrior, detect_wafers};
+use autoteach_detect::wafers::{
+    DetectParams, RimOffsetPrior, WaferEdge, WaferPrior, detect_wafers,
+};
 use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -135,6 +137,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("share_rim_shape", p.share_rim_shape)?;
     d.set_item("share_rim_centre", p.share_rim_centre)?;
     d.set_item("joint_band_fit", p.joint_band_fit)?;
+    d.set_item("join_border_cut_arcs", p.join_border_cut_arcs)?;
     Ok(d)
 }
 
@@ -144,10 +147,11 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
 #[pyo3(signature = (
     image, *, canny_low=6.0, canny_high=15.0, blur_sigma=0.0, min_arc_points=16,
     residual_threshold=0.25, max_gap=60.0, up=(0.0, -1.0), max_rim_offset=10.0,
-    max_rim_axis_difference=0.03, min_contrast_ratio=0.45, semi_major_range=None,
+    max_rim_axis_difference=0.10, min_contrast_ratio=0.45, semi_major_range=None,
     semi_minor_range=None, min_coverage=None, min_rim_separation=None, max_arc_deviation=None,
     max_arc_residual_ratio=None, max_unpaired_residual=None, band_refinement=None,
-    share_rim_shape=None, share_rim_centre=None, joint_band_fit=None, inflection_sigmas=None
+    share_rim_shape=None, share_rim_centre=None, joint_band_fit=None, inflection_sigmas=None,
+    join_border_cut_arcs=None, thickness_ratio=None, focal_length=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -175,6 +179,9 @@ fn wafer_detect(
     share_rim_centre: Option<bool>,
     joint_band_fit: Option<bool>,
     inflection_sigmas: Option<f64>,
+    join_border_cut_arcs: Option<bool>,
+    thickness_ratio: Option<f64>,
+    focal_length: Option<f64>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let mut params = DetectParams::default();
     // `None` keeps the library default (`wafer_detect_defaults`).
@@ -194,6 +201,7 @@ fn wafer_detect(
         (&mut params.share_rim_shape, share_rim_shape),
         (&mut params.share_rim_centre, share_rim_centre),
         (&mut params.joint_band_fit, joint_band_fit),
+        (&mut params.join_border_cut_arcs, join_border_cut_arcs),
     ] {
         if let Some(v) = value {
             *slot = v;
@@ -215,6 +223,18 @@ fn wafer_detect(
             semi_major: a.unwrap_or((0.0, f64::MAX)),
             semi_minor: b.unwrap_or((0.0, f64::MAX)),
         }),
+    };
+    params.rim_offset = match (thickness_ratio, focal_length) {
+        (None, None) => None,
+        (Some(thickness_ratio), Some(focal_length)) => Some(RimOffsetPrior {
+            thickness_ratio,
+            focal_length,
+        }),
+        _ => {
+            return Err(errors::invalid_input(
+                "thickness_ratio and focal_length go together (the rim offset prior needs both)",
+            ));
+        }
     };
     let ndim = image
         .getattr("ndim")

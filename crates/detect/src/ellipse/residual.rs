@@ -100,9 +100,42 @@ pub(crate) fn foot_angles(
     start: &[(f64, f64)],
     angles: &mut Vec<(f64, f64)>,
 ) -> usize {
+    let mut ok = Vec::new();
+    certified_foot_angles(e, points, start, angles, &mut ok);
+    solve_uncertified(e, points, angles, &ok)
+}
+
+/// The Newton passes and the certifying step of [`foot_angles`] without the general solver:
+/// `angles` receives the angles, `ok` whether each is certified (exactly [`foot_angles`]'s
+/// angle); the others are unfinished until [`solve_uncertified`].
+pub(crate) fn certified_foot_angles(
+    e: &Ellipse,
+    points: &[Vector2<f64>],
+    start: &[(f64, f64)],
+    angles: &mut Vec<(f64, f64)>,
+    ok: &mut Vec<bool>,
+) {
     // Compiled for the best instruction set the CPU has (AVX2 + FMA where available), chosen
     // at run time: the passes below are independent per point and vectorise.
-    pulp::Arch::new().dispatch(|| foot_angles_impl(e, points, start, angles))
+    pulp::Arch::new().dispatch(|| foot_angles_impl(e, points, start, angles, ok))
+}
+
+/// Completes [`certified_foot_angles`]: the points not marked in `ok` get their angle from the
+/// general solver [`Ellipse::parameter_of`]. Returns how many did.
+pub(crate) fn solve_uncertified(
+    e: &Ellipse,
+    points: &[Vector2<f64>],
+    angles: &mut [(f64, f64)],
+    ok: &[bool],
+) -> usize {
+    let mut general = 0;
+    for ((t, ok), p) in angles.iter_mut().zip(ok).zip(points) {
+        if !ok {
+            *t = e.parameter_of(p).sin_cos();
+            general += 1;
+        }
+    }
+    general
 }
 
 #[inline(always)]
@@ -111,7 +144,8 @@ fn foot_angles_impl(
     points: &[Vector2<f64>],
     start: &[(f64, f64)],
     angles: &mut Vec<(f64, f64)>,
-) -> usize {
+    ok: &mut Vec<bool>,
+) {
     let (sth, cth) = e.theta.sin_cos();
     let (a, b) = (e.a, e.b);
     let k = (a - b) * (a + b);
@@ -157,8 +191,9 @@ fn foot_angles_impl(
         }
     }
     // Certifying step, branch-free so that it vectorises (`ok` marks the certified points);
-    // the others go to the general solver below.
-    let mut ok = vec![false; n];
+    // the others go to the general solver ([`solve_uncertified`]).
+    ok.clear();
+    ok.resize(n, false);
     for ((((s, c), &u), &v), ok) in ss
         .iter_mut()
         .zip(cs.iter_mut())
@@ -180,14 +215,6 @@ fn foot_angles_impl(
     }
     angles.clear();
     angles.extend(ss.iter().zip(&cs).map(|(&s, &c)| (s, c)));
-    let mut general = 0;
-    for ((t, ok), p) in angles.iter_mut().zip(&ok).zip(points) {
-        if !ok {
-            *t = e.parameter_of(p).sin_cos();
-            general += 1;
-        }
-    }
-    general
 }
 
 /// Signed orthogonal distance `r` from `p` to `e` (positive outside) and its gradient

@@ -822,3 +822,105 @@ fn noise_tolerance_stops_within_a_few_hundredths_of_a_standard_deviation() {
         ));
     }
 }
+
+#[test]
+fn screen_lower_bound_never_exceeds_the_orthogonal_distance() {
+    // Per point, with the foot angle left uncertified (the bound `min(a, b)·|ρ − 1|`) and
+    // certified (the exact distance): never above the exact distance of the general solver.
+    let mut rng = Pcg64::seed_from_u64(21);
+    for e in [
+        Ellipse::new(3.0, -2.0, 300.0, 40.0, 0.7).unwrap(),
+        Ellipse::new(0.0, 0.0, 5.0, 4.9, -1.3).unwrap(),
+        Ellipse::new(1.0, 1.0, 100.0, 3.0, 1.0).unwrap(),
+        // Semi-axes in the other order (b > a): the bound must use the smaller one.
+        Ellipse {
+            cx: 2.0,
+            cy: 5.0,
+            a: 20.0,
+            b: 200.0,
+            theta: 0.3,
+        },
+    ] {
+        let sc = e.theta.sin_cos();
+        let scale = e.a.max(e.b);
+        let mut tight = 0;
+        for _ in 0..3000 {
+            let p = Vector2::new(e.cx, e.cy)
+                + Vector2::new(rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0)) * scale;
+            let exact = e.orthogonal_distance(&p).abs();
+            let t = e.parameter_of(&p).sin_cos();
+            let bound = geometric::screen_lower_bound(&e, sc, &[p], &[t], &[false]);
+            assert!(
+                bound <= exact * (1.0 + 1e-12) + 1e-12,
+                "{e:?} {p:?}: bound {bound} > distance {exact}"
+            );
+            tight += usize::from(bound >= 0.5 * exact);
+            let certified = geometric::screen_lower_bound(&e, sc, &[p], &[t], &[true]);
+            assert!((certified - exact).abs() <= 1e-9 * (1.0 + exact));
+        }
+        // Not vacuous: on the near-circle most points are bounded within a factor of two.
+        if e.a / e.b < 1.1 {
+            assert!(tight > 2000, "{e:?}: {tight}");
+        }
+    }
+}
+
+#[test]
+fn screened_fit_decides_and_fits_as_the_direct_then_geometric_fits() {
+    // Unions of two arcs of the same ellipse, of two different ellipses and of an arc with
+    // clutter: `fit_screened` must reject exactly when the direct fit's mean orthogonal residual
+    // is not under the screen (thresholds just below and above it, where the early rejection on
+    // a lower bound must not decide differently), and otherwise return the geometric fit.
+    let mut rng = Pcg64::seed_from_u64(22);
+    let opts = GeometricFitOptions {
+        max_iterations: 20,
+        ..GeometricFitOptions::default()
+    };
+    let mut rejected_early = 0;
+    for case in 0..60 {
+        let e1 = Ellipse::new(
+            rng.random_range(200.0..900.0),
+            rng.random_range(100.0..500.0),
+            rng.random_range(60.0..400.0),
+            rng.random_range(5.0..60.0),
+            rng.random_range(-0.2..0.2),
+        )
+        .unwrap();
+        let e2 = match case % 3 {
+            0 => e1,
+            1 => Ellipse::new(e1.cx + 3.0, e1.cy + 4.0, e1.a * 1.02, e1.b * 1.3, e1.theta).unwrap(),
+            _ => Ellipse::new(e1.cx + 40.0, e1.cy - 30.0, e1.a * 0.5, e1.b, -e1.theta).unwrap(),
+        };
+        let mut pts = arc(&e1, rng.random_range(-PI..PI), 1.0, 60, 0.3, &mut rng);
+        pts.extend(arc(&e2, rng.random_range(-PI..PI), 1.2, 70, 0.3, &mut rng));
+        let Ok(direct) = fit_ellipse_direct(&pts) else {
+            continue;
+        };
+        let m = direct.residual_mean;
+        let want = fit_ellipse_geometric(&pts, None, &opts);
+        for thr in [0.3 * m, m * (1.0 - 1e-6), m * (1.0 + 1e-6), 3.0 * m] {
+            let got = geometric::fit_screened(&pts, thr, &opts);
+            match (&got, m < thr) {
+                (Ok(None), false) => {}
+                (Ok(Some((fit, angles))), true) => {
+                    let want = want.as_ref().unwrap();
+                    assert_eq!(angles.len(), pts.len());
+                    assert!((params(&fit.ellipse) - params(&want.ellipse)).amax() < 1e-9);
+                }
+                (Err(_), true) => assert!(want.is_err()),
+                _ => panic!("case {case}: threshold {thr}, direct mean {m}: got {got:?}"),
+            }
+            // How often the bound alone rejects (the screen's shortcut is exercised).
+            let prep = Prepared::new(&pts).unwrap();
+            let d = direct::solve(&prep).unwrap();
+            let (mut angles, mut ok) = (Vec::new(), Vec::new());
+            residual::certified_foot_angles(&d, &prep.centred, &[], &mut angles, &mut ok);
+            let lb =
+                geometric::screen_lower_bound(&d, d.theta.sin_cos(), &prep.centred, &angles, &ok);
+            if ok.contains(&false) && lb >= thr * pts.len() as f64 {
+                rejected_early += 1;
+            }
+        }
+    }
+    assert!(rejected_early > 5, "{rejected_early}");
+}

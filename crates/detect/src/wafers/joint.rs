@@ -119,6 +119,24 @@ fn target(reference: &Ellipse, up: Vector2<f64>, g: &Vector6<f64>) -> Option<Ell
     .filter(|e| (e.a - reference.a).abs() < 1e-9 * reference.a.max(1.0))
 }
 
+/// A Gaussian prior on the offset `s` along `up` ([`super::rim_prior`]): the residual
+/// `weight·(s − mean)` joins the grey-level residuals, `weight = σ_n/σ_s` (grey-level noise over
+/// the prior's standard deviation in pixels) so that it counts as one whitened observation.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct OffsetPrior {
+    /// Prior mean of `s` (pixels).
+    pub mean: f64,
+    /// Prior standard deviation of `s` (pixels).
+    pub sigma: f64,
+}
+
+/// The prior's residual and its weight (`∂r/∂s`): see [`OffsetPrior`].
+#[derive(Debug, Clone, Copy)]
+struct PriorTerm {
+    mean: f64,
+    weight: f64,
+}
+
 /// Output buffers of [`profile_residuals`]: residuals, local and global Jacobian rows.
 #[cfg(test)]
 type Rows<'a> = (
@@ -270,12 +288,14 @@ fn profile_block(
 
 /// Evaluates all profiles at the globals `g` into `out` (cost and normal equations in one
 /// pass, so an accepted Levenberg–Marquardt step needs no second pass; `out`'s buffers are
-/// reused). `None` if the target is no ellipse or a profile's ray misses it.
+/// reused), plus the offset prior's residual if any. `None` if the target is no ellipse or a
+/// profile's ray misses it.
 fn evaluate(
     profiles: &[Profile],
     reference: &Ellipse,
     up: Vector2<f64>,
     g: &Vector6<f64>,
+    prior: Option<PriorTerm>,
     out: &mut Evaluation,
 ) -> Option<()> {
     let e = target(reference, up, g)?;
@@ -287,6 +307,13 @@ fn evaluate(
         let block = profile_block(pr, &e, up, g, &mut cg, &mut rg)?;
         cost += block.cost;
         out.blocks.push(block);
+    }
+    if let Some(PriorTerm { mean, weight }) = prior {
+        // r = w·(s − mean), ∂r/∂s = w.
+        let r = weight * (g[0] - mean);
+        cost += r * r;
+        cg[0][0] += weight * weight;
+        rg[0] += weight * r;
     }
     out.cg = Matrix6::from_fn(|i, m| if m <= i { cg[i][m] } else { cg[m][i] });
     out.rg = Vector6::from(rg);
@@ -305,9 +332,10 @@ fn solve(
     reference: &Ellipse,
     up: Vector2<f64>,
     mut g: Vector6<f64>,
+    prior: Option<PriorTerm>,
 ) -> Option<Solution> {
     let mut cur = Evaluation::default();
-    evaluate(profiles, reference, up, &g, &mut cur)?;
+    evaluate(profiles, reference, up, &g, prior, &mut cur)?;
     let mut trial = Evaluation::default();
     let mut lambda = 1e-3;
     let mut inverses: Vec<Matrix3<f64>> = Vec::with_capacity(profiles.len());
@@ -353,7 +381,7 @@ fn solve(
             let accepted = g_new[2] > 0.2
                 && g_new[2] < 5.0
                 && g_new[1] > 0.0
-                && evaluate(profiles, reference, up, &g_new, &mut trial).is_some()
+                && evaluate(profiles, reference, up, &g_new, prior, &mut trial).is_some()
                 && trial.cost < cur.cost;
             if accepted {
                 let (cost, c) = (cur.cost, trial.cost);
@@ -421,6 +449,13 @@ fn angle_range(e: &Ellipse, points: &[Vector2<f64>]) -> Option<(f64, f64)> {
 /// image direction of the wafer normal; `sigma0` a starting blur (pixels). `None` when fewer
 /// than [`MIN_PROFILES`] band profiles are usable or the fit fails; the caller decides whether
 /// to keep the result.
+///
+/// With `prior`, the offset `s` of the target's centre from the reference's along `up` gets the
+/// Gaussian prior [`OffsetPrior`] (from the wafer's thickness, [`super::rim_prior`]): near the
+/// ends of the front arc the band's far edge turns into the wafer's side contour, and there the
+/// offset and `b` trade off against each other (both move the far edge the same way); the prior
+/// pins the offset and leaves `b` to the data. Its weight is the grey-level noise (the median
+/// RMS of the per-profile band fits, corrected for their 6 unknowns) over the prior's σ.
 pub(super) fn fit_partner<T: Pixel>(
     image: &GrayView<'_, T>,
     reference: &Ellipse,
@@ -428,6 +463,7 @@ pub(super) fn fit_partner<T: Pixel>(
     points: &[Vector2<f64>],
     up: Vector2<f64>,
     sigma0: f64,
+    prior: Option<OffsetPrior>,
 ) -> Option<PartnerFit> {
     let (t_lo, t_hi) = angle_range(reference, points)?;
     let s0 = (current.cx - reference.cx) * up.x + (current.cy - reference.cy) * up.y;
@@ -436,6 +472,7 @@ pub(super) fn fit_partner<T: Pixel>(
     let (st, ct) = reference.theta.sin_cos();
     let mut profiles = Vec::with_capacity(PROFILES);
     let mut levels = Vec::new();
+    let mut noise = Vec::new();
     let mut buf = Vec::new();
     for k in 0..PROFILES {
         let t = t_lo + (t_hi - t_lo) * k as f64 / (PROFILES - 1) as f64;
@@ -461,11 +498,15 @@ pub(super) fn fit_partner<T: Pixel>(
         };
         q0[4] = t2;
         q0[5] = sigma0;
-        let Some((q, _)) = band::fit(&buf, q0, false) else {
+        let Some((q, rms)) = band::fit(&buf, q0, false) else {
             continue;
         };
         if !(q.iter().all(|x| x.is_finite()) && q[3].abs() <= 1.5) {
             continue;
+        }
+        let n = buf.len() as f64;
+        if n > 6.0 && rms.is_finite() {
+            noise.push(rms * (n / (n - 6.0)).sqrt());
         }
         if !buf.iter().any(|s| s.1.is_infinite()) {
             levels.push(q[1]);
@@ -486,9 +527,23 @@ pub(super) fn fit_partner<T: Pixel>(
     } else {
         super::median(&mut levels)
     };
+    let prior = match prior {
+        Some(OffsetPrior { mean, sigma }) => {
+            let sigma_n = super::median(&mut noise);
+            if !(sigma > 0.0 && sigma_n > 0.0 && mean.is_finite()) {
+                return None;
+            }
+            g[0] = mean;
+            Some(PriorTerm {
+                mean,
+                weight: sigma_n / sigma,
+            })
+        }
+        None => None,
+    };
     let mut result = None;
     for _ in 0..3 {
-        let (g1, cost, schur, costs) = solve(&mut profiles, reference, up, g)?;
+        let (g1, cost, schur, costs) = solve(&mut profiles, reference, up, g, prior)?;
         g = g1;
         let n_samples: usize = profiles.iter().map(|p| p.samples.len()).sum();
         result = Some((g, cost, schur, n_samples, profiles.len()));
@@ -653,7 +708,7 @@ mod tests {
         let close = |x: f64, y: f64, scale: f64| (x - y).abs() <= 1e-12 * scale.max(1.0);
         let g0 = Vector6::new(-2.5, 39.8, 1.1, 230.0, 20.0, 0.0);
         let mut ev = Evaluation::default();
-        evaluate(&profiles, &reference, up, &g0, &mut ev).unwrap();
+        evaluate(&profiles, &reference, up, &g0, None, &mut ev).unwrap();
         let (blocks, cg, rg, total, _) = separate(&profiles, &g0);
         assert!(close(ev.cost, total, total));
         assert_eq!(ev.blocks.len(), blocks.len());
@@ -667,7 +722,7 @@ mod tests {
         assert!((ev.rg - rg).norm() <= 1e-12 * rg.norm());
         // At the solution.
         let mut solved = synthetic_profiles(&reference, up, &truth);
-        let (g, cost, schur, costs) = solve(&mut solved, &reference, up, g0).unwrap();
+        let (g, cost, schur, costs) = solve(&mut solved, &reference, up, g0, None).unwrap();
         assert!(cost < total, "{cost} vs {total}");
         assert!((g[1] - truth[1]).abs() < 0.05, "{g:?}");
         let (blocks, _, _, total, schur_ref) = separate(&solved, &g);
@@ -676,6 +731,59 @@ mod tests {
             assert!(close(*c, b.3, b.3));
         }
         assert!((schur - schur_ref).norm() <= 1e-12 * schur_ref.norm());
+    }
+
+    #[test]
+    fn offset_prior_gradient_matches_finite_differences_and_pins_the_offset() {
+        // The cost's gradient with respect to the globals, with the locals held, is 2·J_gᵀr: the
+        // evaluation's `rg` (band residuals and the prior's residual) against central finite
+        // differences of its cost.
+        let reference = Ellipse::new(620.0, 310.0, 300.0, 40.0, 0.03).unwrap();
+        let up = Vector2::new(0.03, -1.0).normalize();
+        let truth = Vector6::new(-3.0, 39.2, 0.9, 330.0, 30.0, -20.0);
+        let profiles = synthetic_profiles(&reference, up, &truth);
+        let prior = PriorTerm {
+            mean: -2.6,
+            weight: 7.0,
+        };
+        let g0 = Vector6::new(-2.8, 39.5, 1.05, 300.0, 25.0, -10.0);
+        let cost = |g: &Vector6<f64>| {
+            let mut ev = Evaluation::default();
+            evaluate(&profiles, &reference, up, g, Some(prior), &mut ev).unwrap();
+            ev.cost
+        };
+        let mut ev = Evaluation::default();
+        evaluate(&profiles, &reference, up, &g0, Some(prior), &mut ev).unwrap();
+        let mut plain = Evaluation::default();
+        evaluate(&profiles, &reference, up, &g0, None, &mut plain).unwrap();
+        let r = prior.weight * (g0[0] - prior.mean);
+        assert!((ev.cost - plain.cost - r * r).abs() < 1e-9 * ev.cost);
+        assert!(
+            (ev.cg[(0, 0)] - plain.cg[(0, 0)] - prior.weight.powi(2)).abs() < 1e-9 * ev.cg[(0, 0)]
+        );
+        for k in 0..6 {
+            let h = [1e-5, 1e-5, 1e-6, 1e-4, 1e-4, 1e-4][k];
+            let (mut gp, mut gm) = (g0, g0);
+            gp[k] += h;
+            gm[k] -= h;
+            let fd = (cost(&gp) - cost(&gm)) / (2.0 * h);
+            let an = 2.0 * ev.rg[k];
+            assert!(
+                (fd - an).abs() < 1e-5 * (1.0 + fd.abs().max(an.abs())),
+                "k={k}: fd {fd} vs analytic {an}"
+            );
+        }
+        // A tight prior pins `s` at its mean; without it the data put `s` at the truth.
+        let mut free = synthetic_profiles(&reference, up, &truth);
+        let (g, ..) = solve(&mut free, &reference, up, g0, None).unwrap();
+        assert!((g[0] - truth[0]).abs() < 0.05, "{g:?}");
+        let mut pinned = synthetic_profiles(&reference, up, &truth);
+        let tight = PriorTerm {
+            mean: -2.6,
+            weight: 1e4,
+        };
+        let (g, ..) = solve(&mut pinned, &reference, up, g0, Some(tight)).unwrap();
+        assert!((g[0] - tight.mean).abs() < 0.01, "{g:?}");
     }
 
     #[test]
@@ -703,7 +811,7 @@ mod tests {
         )
         .unwrap();
         let points = lower.sample(200, 0.5, std::f64::consts::PI - 0.5).unwrap();
-        let fit = fit_partner(&view, &upper, &start, &points, up, 0.9).unwrap();
+        let fit = fit_partner(&view, &upper, &start, &points, up, 0.9, None).unwrap();
         let e = fit.ellipse;
         let centre = (e.cx - lower.cx).hypot(e.cy - lower.cy);
         assert!(centre < 0.25, "centre error {centre}: {e:?} vs {lower:?}");
