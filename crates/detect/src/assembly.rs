@@ -112,6 +112,21 @@ pub struct Segment {
     pub polarity: i8,
 }
 
+impl Segment {
+    /// The segment of the two arcs `i` and `j` of `arcs` with the fit `fit` of their union
+    /// (points in that order; the polarity is the arcs' shared one).
+    pub(crate) fn of_pair(arcs: &[Arc], i: usize, j: usize, fit: EllipseFit) -> Self {
+        let mut points = arcs[i].points.clone();
+        points.extend_from_slice(&arcs[j].points);
+        Self {
+            arcs: vec![i, j],
+            points,
+            fit,
+            polarity: arcs[i].polarity,
+        }
+    }
+}
+
 /// A part being combined: an arc or a segment.
 struct Part<'a> {
     points: &'a [Vector2<f64>],
@@ -401,14 +416,7 @@ pub fn merge_arcs(arcs: &[Arc], params: &AssemblyParams) -> Result<(Vec<Segment>
             };
             used[i] = true;
             used[j] = true;
-            let mut points = arcs[i].points.clone();
-            points.extend_from_slice(&arcs[j].points);
-            segments.push(Segment {
-                arcs: vec![i, j],
-                points,
-                fit,
-                polarity: arcs[i].polarity,
-            });
+            segments.push(Segment::of_pair(arcs, i, j, fit));
         }
     }
     let rest = (0..n).filter(|&i| !used[i]).collect();

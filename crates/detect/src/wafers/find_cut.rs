@@ -106,14 +106,7 @@ pub(super) fn border_cut_pairs(
         }
         used.insert(i);
         used.insert(j);
-        let mut points = arcs[i].points.clone();
-        points.extend_from_slice(&arcs[j].points);
-        out.push(Segment {
-            arcs: vec![i, j],
-            points,
-            fit,
-            polarity: arcs[i].polarity,
-        });
+        out.push(Segment::of_pair(arcs, i, j, fit));
     }
     out
 }
@@ -227,7 +220,7 @@ mod tests {
             852002133,
         );
         let view = GrayView::new(&data, w, h).unwrap();
-        let (_, rim, e, _) = rims
+        let (_, _, e, _) = rims
             .iter()
             .find(|(wafer, rim, _, _)| *wafer == 1 && *rim == Rim::Upper)
             .unwrap();
@@ -238,18 +231,7 @@ mod tests {
                 ..DetectParams::default()
             };
             let dets = detect_wafers(&view, &params).unwrap();
-            let hit = dets
-                .iter()
-                .any(|d| super::super::tests::matches_rim(d, *rim, e, 1.0, 0.01, 0.01));
-            let wrong = dets
-                .iter()
-                .filter(|d| {
-                    !rims.iter().any(|(_, r, t, _)| {
-                        super::super::tests::matches_rim(d, *r, t, 3.0, 0.05, 0.05)
-                    })
-                })
-                .count();
-            (hit, wrong)
+            super::super::tests::hit_and_wrong(&dets, &rims, 1, Rim::Upper)
         };
         assert_eq!(run(false), (false, 0));
         assert_eq!(run(true), (true, 0));

@@ -482,6 +482,30 @@ mod tests {
             && (d.ellipse.b - e.b).abs() < tol_b * e.b
     }
 
+    /// Whether `dets` has a hit (1 px, 1 %) on the true rim `rim` of wafer `wafer` (0 = target)
+    /// of `rims`, and how many detections are wrong (within 3 px and 5 % of no true rim).
+    pub(super) fn hit_and_wrong(
+        dets: &[WaferEdge],
+        rims: &[(usize, Rim, Ellipse, f64)],
+        wafer: usize,
+        rim: Rim,
+    ) -> (bool, usize) {
+        let (_, _, e, _) = rims
+            .iter()
+            .find(|(w, r, _, _)| *w == wafer && *r == rim)
+            .expect("the scene has that rim");
+        let hit = dets.iter().any(|d| matches_rim(d, rim, e, 1.0, 0.01, 0.01));
+        let wrong = dets
+            .iter()
+            .filter(|d| {
+                !rims
+                    .iter()
+                    .any(|(_, r, t, _)| matches_rim(d, *r, t, 3.0, 0.05, 0.05))
+            })
+            .count();
+        (hit, wrong)
+    }
+
     /// Renders target slot 5 and a disturbance `k` slots above.
     pub(crate) fn scene(k: usize, gain: f64, seed: u64) -> Rendered {
         let t_wc = camera_pose(-0.48, 0.02, 0.09, 0.03, 0.14);
@@ -922,22 +946,7 @@ mod tests {
         let view = GrayView::new(&data, w, h).unwrap();
         let found = |params: &DetectParams| {
             let dets = detect_wafers(&view, params).unwrap();
-            let (_, rim, e, _) = rims
-                .iter()
-                .find(|(wafer, rim, _, _)| *wafer == 0 && *rim == Rim::Lower)
-                .unwrap();
-            let hit = dets
-                .iter()
-                .any(|d| matches_rim(d, *rim, e, 1.0, 0.01, 0.01));
-            let wrong = dets
-                .iter()
-                .filter(|d| {
-                    !rims
-                        .iter()
-                        .any(|(_, r, e, _)| matches_rim(d, *r, e, 3.0, 0.05, 0.05))
-                })
-                .count();
-            (hit, wrong)
+            hit_and_wrong(&dets, &rims, 0, Rim::Lower)
         };
         // The pairing gate of the session this test was written in: with the wider default
         // gate the rim found without the inflection rule is paired with the upper rim and
@@ -975,27 +984,13 @@ mod tests {
             1803683967,
         );
         let view = GrayView::new(&data, w, h).unwrap();
-        let (_, rim, e, _) = rims
-            .iter()
-            .find(|(wafer, rim, _, _)| *wafer == 1 && *rim == Rim::Lower)
-            .unwrap();
         let run = |gate: f64| {
             let params = DetectParams {
                 max_rim_axis_difference: gate,
                 ..DetectParams::default()
             };
             let dets = detect_wafers(&view, &params).unwrap();
-            let hit = dets
-                .iter()
-                .any(|d| matches_rim(d, *rim, e, 1.0, 0.01, 0.01));
-            let wrong = dets
-                .iter()
-                .filter(|d| {
-                    !rims
-                        .iter()
-                        .any(|(_, r, t, _)| matches_rim(d, *r, t, 3.0, 0.05, 0.05))
-                })
-                .count();
+            let (hit, wrong) = hit_and_wrong(&dets, &rims, 1, Rim::Lower);
             (hit, wrong, dets.len())
         };
         let (hit, wrong, n) = run(0.03);
