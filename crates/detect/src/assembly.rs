@@ -575,9 +575,26 @@ pub fn assemble(arcs: &[Arc], params: &AssemblyParams) -> Result<Vec<Segment>> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::edges::Quadrant;
+
+    /// A synthetic arc of `points` (unit normals along +y, contrast 50, curvature 0.01, turn 1).
+    pub(crate) fn arc_from_points(
+        points: Vec<Vector2<f64>>,
+        quadrant: Quadrant,
+        polarity: i8,
+    ) -> Arc {
+        Arc {
+            normals: vec![Vector2::new(0.0, 1.0); points.len()],
+            points,
+            contrast: 50.0,
+            quadrant,
+            polarity,
+            curvature: 0.01,
+            turn: 1.0,
+        }
+    }
 
     /// Quarter arc `[t0, t1]` (eccentric angle) of `e` with a small deterministic wobble.
     fn arc(e: &Ellipse, t0: f64, t1: f64, quadrant: Quadrant, polarity: i8) -> Arc {
@@ -590,15 +607,7 @@ mod tests {
                 p + Vector2::new(w, -w)
             })
             .collect();
-        Arc {
-            normals: vec![Vector2::new(0.0, 1.0); n],
-            points,
-            contrast: 50.0,
-            quadrant,
-            polarity,
-            curvature: 0.01,
-            turn: 1.0,
-        }
+        arc_from_points(points, quadrant, polarity)
     }
 
     #[test]

@@ -138,15 +138,7 @@ mod tests {
                 e.point_at(t) + Vector2::repeat(0.04 * (((k * 7919) % 13) as f64 / 6.0 - 1.0))
             })
             .collect();
-        Arc {
-            normals: vec![Vector2::new(0.0, 1.0); n],
-            points,
-            contrast: 50.0,
-            quadrant,
-            polarity: -1,
-            curvature: 0.01,
-            turn: 1.0,
-        }
+        crate::assembly::tests::arc_from_points(points, quadrant, -1)
     }
 
     #[test]

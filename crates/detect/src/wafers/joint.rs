@@ -627,6 +627,15 @@ mod tests {
         assert!(ray_hit(&e, far, Vector2::new(1.0, 0.0), 0.0).is_none());
     }
 
+    /// The reference rim, `up` and the true globals of the synthetic tests.
+    fn synthetic_case() -> (Ellipse, Vector2<f64>, Vector6<f64>) {
+        (
+            Ellipse::new(620.0, 310.0, 300.0, 40.0, 0.03).unwrap(),
+            Vector2::new(0.03, -1.0).normalize(),
+            Vector6::new(-3.0, 39.2, 0.9, 330.0, 30.0, -20.0),
+        )
+    }
+
     /// Synthetic profiles across the band between `reference` and the target `g` (band model
     /// samples with a deterministic wobble; the brightest band top clipped), locals perturbed.
     fn synthetic_profiles(reference: &Ellipse, up: Vector2<f64>, g: &Vector6<f64>) -> Vec<Profile> {
@@ -668,9 +677,7 @@ mod tests {
         // rows of `profile_residuals` accumulated separately (the pre-fusion code path), at a
         // start and at the solver's solution; the solver's per-profile costs and Schur
         // complement against a fresh separate evaluation there.
-        let reference = Ellipse::new(620.0, 310.0, 300.0, 40.0, 0.03).unwrap();
-        let up = Vector2::new(0.03, -1.0).normalize();
-        let truth = Vector6::new(-3.0, 39.2, 0.9, 330.0, 30.0, -20.0);
+        let (reference, up, truth) = synthetic_case();
         let profiles = synthetic_profiles(&reference, up, &truth);
         assert!(
             profiles
@@ -738,9 +745,7 @@ mod tests {
         // The cost's gradient with respect to the globals, with the locals held, is 2·J_gᵀr: the
         // evaluation's `rg` (band residuals and the prior's residual) against central finite
         // differences of its cost.
-        let reference = Ellipse::new(620.0, 310.0, 300.0, 40.0, 0.03).unwrap();
-        let up = Vector2::new(0.03, -1.0).normalize();
-        let truth = Vector6::new(-3.0, 39.2, 0.9, 330.0, 30.0, -20.0);
+        let (reference, up, truth) = synthetic_case();
         let profiles = synthetic_profiles(&reference, up, &truth);
         let prior = PriorTerm {
             mean: -2.6,

@@ -628,6 +628,18 @@ mod tests {
     /// gain, lighting gradient and noise seed.
     type Scenario = (f64, f64, f64, f64, f64, f64, [f64; 2], u64);
 
+    /// Benchmark image 3 (seed 3; disturbance 4 slots above, above the camera).
+    const IMAGE_3: Scenario = (
+        -0.48872974352636195,
+        0.027327700964881643,
+        0.02151730038312356,
+        1.2417905739337414,
+        6.871219167392354,
+        0.5908527135042578,
+        [0.0963000404567369, 0.2588783128448127],
+        2513255689,
+    );
+
     /// Renders one benchmark scene (target in slot 5, a disturbance `k` slots above, 10 mm
     /// pitch) and detects its rims. Returns the detections and the renderer's true ellipses
     /// `(wafer, rim, ellipse)`.
@@ -731,20 +743,7 @@ mod tests {
             "image 146: the minor axes no longer mislead: {eu:?} {el:?}"
         );
         assert!(view_from_above(&eu, &pu, &el, &pl, up), "image 146");
-        let ((eu, pu), (el, pl)) = pair(
-            4,
-            (
-                -0.48872974352636195,
-                0.027327700964881643,
-                0.02151730038312356,
-                1.2417905739337414,
-                6.871219167392354,
-                0.5908527135042578,
-                [0.0963000404567369, 0.2588783128448127],
-                2513255689,
-            ),
-            1,
-        );
+        let ((eu, pu), (el, pl)) = pair(4, IMAGE_3, 1);
         assert!(!view_from_above(&eu, &pu, &el, &pl, up), "image 3");
     }
 
@@ -945,20 +944,7 @@ mod tests {
     #[test]
     fn lower_rim_of_a_front_arc_pair_seen_from_below_is_fitted_with_its_upper_rim() {
         for (what, k, s) in [
-            (
-                "image 3",
-                4,
-                (
-                    -0.48872974352636195,
-                    0.027327700964881643,
-                    0.02151730038312356,
-                    1.2417905739337414,
-                    6.871219167392354,
-                    0.5908527135042578,
-                    [0.0963000404567369, 0.2588783128448127],
-                    2513255689,
-                ),
-            ),
+            ("image 3", 4, IMAGE_3),
             (
                 "image 63's camera, k = 5",
                 5,
