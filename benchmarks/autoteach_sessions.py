@@ -40,6 +40,12 @@ def main() -> None:
     ap.add_argument("--no-baseline", dest="baseline", action="store_false")
     ap.add_argument("--json", action="store_true")
     ap.add_argument(
+        "--no-rim-offset-prior",
+        dest="rim_offset_prior",
+        action="store_false",
+        help="detect front end without the detector's prior on the offset between a wafer's two rims",
+    )
+    ap.add_argument(
         "--bias",
         action="store_true",
         help="instead: signed normal offset of the detected edge points from the true rims",
@@ -60,10 +66,10 @@ def main() -> None:
         ukf_diagnosis(args.seeds, args.frames)
         return
     if args.bias:
-        edge_bias(args.seeds, args.frames)
+        edge_bias(args.seeds, args.frames, args.rim_offset_prior)
         return
     if args.noise_model:
-        noise_model(args.seeds, args.frames)
+        noise_model(args.seeds, args.frames, args.rim_offset_prior)
         return
     fronts = ("simulated", "detect") if args.frontend == "both" else (args.frontend,)
     rows = []
@@ -73,7 +79,9 @@ def main() -> None:
         sim_s = time.perf_counter() - t0
         for front in fronts:
             t0 = time.perf_counter()
-            r = autoteach(session, frontend=front, seed=seed, baseline=args.baseline)
+            r = autoteach(
+                session, frontend=front, seed=seed, baseline=args.baseline, rim_offset_prior=args.rim_offset_prior
+            )
             stats = r.frontend_stats.get("gated", {})
             rows.append(
                 {
@@ -122,7 +130,7 @@ def main() -> None:
         )
 
 
-def edge_bias(seeds: list[int], frames: int) -> None:
+def edge_bias(seeds: list[int], frames: int, rim_offset_prior: bool = True) -> None:
     """Signed normal offset (pixels, + outside the ellipse) of detected edge points from the true rims.
 
     Every edge point of ``detect_wafers`` on the rendered frames is assigned to the nearest true
@@ -133,13 +141,13 @@ def edge_bias(seeds: list[int], frames: int) -> None:
     """
     import numpy as np
 
-    from autoteach.pipeline import _pinhole_k, band_width, detect_all
+    from autoteach.pipeline import _pinhole_k, band_width, detect_all, detector_options
 
     rows = []
     for seed in seeds:
         s = simulate_session(seed=seed, frames=frames, render=True)
         k, r, h = _pinhole_k(s.camera), s.config.wafer_radius, s.config.wafer_thickness
-        det = detect_all(s.images)
+        det = detect_all(s.images, **(detector_options(k, r, h) if rim_offset_prior else {}))
         rims = []
         for t in np.asarray(s.wafer_poses, dtype=np.float64):
             for sign in (0.5, -0.5):
@@ -194,7 +202,7 @@ def edge_bias(seeds: list[int], frames: int) -> None:
                 )
 
 
-def noise_model(seeds: list[int], frames: int) -> None:
+def noise_model(seeds: list[int], frames: int, rim_offset_prior: bool = True) -> None:
     """RMS normal offset of the points the pipeline feeds the solver from the true rims, by band width.
 
     Runs the detect front end without the band filter and without band weights
@@ -212,7 +220,14 @@ def noise_model(seeds: list[int], frames: int) -> None:
     rows = []
     for seed in seeds:
         s = simulate_session(seed=seed, frames=frames, render=True)
-        r = autoteach(s, frontend="detect", seed=seed, min_band_px=0.0, band_weights=False)
+        r = autoteach(
+            s,
+            frontend="detect",
+            seed=seed,
+            min_band_px=0.0,
+            band_weights=False,
+            rim_offset_prior=rim_offset_prior,
+        )
         k, rad, h = _pinhole_k(s.camera), s.config.wafer_radius, s.config.wafer_thickness
         true_slots = [int(v) for v in s.wafer_slots]
         c0 = np.diag([1.0, 1.0, -rad * rad])

@@ -23,11 +23,14 @@ def session():
 
 @pytest.fixture(scope="module")
 def detections(session):
-    return pipeline.detect_all(session.images)
+    cfg = session.config
+    return pipeline.detect_all(
+        session.images, **pipeline.detector_options(_k(session), cfg.wafer_radius, cfg.wafer_thickness)
+    )
 
 
 def _run(session, detections, monkeypatch, **kw):
-    monkeypatch.setattr(pipeline, "detect_all", lambda images, progress=False: detections)
+    monkeypatch.setattr(pipeline, "detect_all", lambda images, progress=False, **options: detections)
     return autoteach(session, frontend="detect", seed=3, **kw)
 
 
@@ -102,6 +105,30 @@ def test_detect_frontend_is_robust_to_missed_detections_and_false_arcs(session, 
         assert np.all(np.isnan(r.wafer_params[w]))
     assert len(sparse) <= 2
     assert r.errors["wafer_center_mm"] < 1.0
+
+
+def test_detector_options_carry_the_wafer_and_camera(session, monkeypatch):
+    cfg = session.config
+    k = _k(session)
+    opts = pipeline.detector_options(k, cfg.wafer_radius, cfg.wafer_thickness)
+    assert opts == pytest.approx(
+        {"thickness_ratio": cfg.wafer_thickness / cfg.wafer_radius, "focal_length": 0.5 * (k[0, 0] + k[1, 1])}
+    )
+    for radius, thickness, f in ((0.0, 0.001, 1000.0), (0.15, np.nan, 1000.0), (0.15, 0.001, -1.0)):
+        with pytest.raises(InvalidInputError, match="finite and positive"):
+            pipeline.detector_options(np.diag([f, f, 1.0]), radius, thickness)
+    # the detect front end hands them to the detector, unless told not to
+    seen = []
+
+    def fake(images, progress=False, **options):
+        seen.append(options)
+        raise InvalidInputError("stop here")
+
+    monkeypatch.setattr(pipeline, "detect_all", fake)
+    for prior in (True, False):
+        with pytest.raises(InvalidInputError, match="stop here"):
+            autoteach(session, frontend="detect", seed=3, rim_offset_prior=prior)
+    assert seen == [opts, {}]
 
 
 def test_no_detection_in_any_frame_is_a_clear_error(session, monkeypatch):

@@ -559,6 +559,7 @@ def wafer_detect(
     join_border_cut_arcs: bool | None = None,
     thickness_ratio: float | None = None,
     focal_length: float | None = None,
+    restart_turn_at_cuts: bool | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 

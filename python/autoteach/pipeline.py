@@ -399,6 +399,25 @@ def _overlap(a: np.ndarray, b: np.ndarray, margin: float) -> bool:
     return bool(a[0] - margin <= b[2] and b[0] - margin <= a[2] and a[1] - margin <= b[3] and b[1] - margin <= a[3])
 
 
+def detector_options(k: np.ndarray, radius: float, thickness: float) -> dict[str, float]:
+    """Keyword options of :func:`autoteach.detect.detect_wafers` that the pipeline knows.
+
+    The wafer's thickness-to-radius ratio and the camera's focal length (pixels, the mean of
+    ``fx`` and ``fy`` of ``k``) give the detector's prior on the image offset between a wafer's
+    two rims (``thickness_ratio``, ``focal_length``; 000_3b1454b2b2194811.txt §3.2, the rims
+    are the images of two parallel circles a thickness apart, eqs. (3.1)–(3.2)).
+
+    Raises:
+        InvalidInputError: a radius, thickness or focal length that is not finite and positive.
+
+    """
+    f = 0.5 * (float(k[0, 0]) + float(k[1, 1]))
+    for name, v in (("wafer radius", radius), ("wafer thickness", thickness), ("focal length", f)):
+        if not (math.isfinite(v) and v > 0.0):
+            raise InvalidInputError(f"the {name} must be finite and positive, got {v!r}")
+    return {"thickness_ratio": thickness / radius, "focal_length": f}
+
+
 def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, **options: Any) -> list[list[Any]]:
     """:func:`autoteach.detect.detect_wafers` on every image (threads: the detector releases the GIL)."""
     from concurrent.futures import ThreadPoolExecutor
@@ -902,6 +921,7 @@ def autoteach(
     motion_sigma: tuple[float, ...] = (2e-5, 2e-5, 2e-5, 2e-5, 2e-5, 2e-5),
     estimate_mount: bool = False,
     estimate_links: tuple[str, ...] = (),
+    rim_offset_prior: bool = True,
     seed: int = 0,
     progress: bool = False,
 ) -> AutoTeachResult:
@@ -978,6 +998,9 @@ def autoteach(
             between consecutive frames.
         estimate_mount: also estimate a correction of the camera mount ``T_ec`` (chain mode).
         estimate_links: link lengths to calibrate, among ``"l1"``, ``"l2"``, ``"l4"``.
+        rim_offset_prior: detect front end: give the detector the wafer's thickness ratio and
+            the focal length (:func:`detector_options`), its prior on the offset between a
+            wafer's two rims.
         seed: seed of the simulated front end's noise and odometry.
         progress: progress bars on stderr.
 
@@ -1039,7 +1062,8 @@ def autoteach(
             WaferRobot(params=params, base=base_world).camera_pose(session.joints_encoder), dtype=np.float64
         )
         t1 = time.perf_counter()
-        detections = detect_all(session.images, progress=progress)
+        options = detector_options(k, radius, thickness) if rim_offset_prior else {}
+        detections = detect_all(session.images, progress=progress, **options)
         timings["detect_s"] = time.perf_counter() - t1
         obs = detect_frontend(
             session,

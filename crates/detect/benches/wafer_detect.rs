@@ -12,6 +12,10 @@
 //! validation and rim pairing of `detect_wafers` (total without band refinement minus the
 //! stages before it) and the band refinement (total minus total without it). With
 //! `AUTOTEACH_DETECT_PROFILE=only` it prints the profile and skips the criterion benches.
+//! `AUTOTEACH_DETECT_IMAGES=<file>` profiles the frames of a raw file instead (consecutive
+//! 1280×720 8-bit grey frames, e.g. the 210 images of `benchmarks/wafer_detection.py` written
+//! with numpy's `tofile`), once each; `AUTOTEACH_DETECT_PROFILE=detect` then only times
+//! `detect_wafers` over them (`AUTOTEACH_DETECT_REPEATS` passes, default 3; for `perf record`).
 
 use autoteach_detect::assembly::{AssemblyParams, assemble, merge_arcs, merge_segments};
 use autoteach_detect::edges::{
@@ -94,9 +98,46 @@ fn ms<R>(f: impl FnOnce() -> R) -> (f64, R) {
     (1e3 * t.elapsed().as_secs_f64(), r)
 }
 
+/// The frames of `AUTOTEACH_DETECT_IMAGES` (raw 1280×720 8-bit frames), if set.
+fn frames_from_file() -> Option<Vec<Vec<u8>>> {
+    let path = std::env::var("AUTOTEACH_DETECT_IMAGES").ok()?;
+    let raw = std::fs::read(&path).expect("AUTOTEACH_DETECT_IMAGES: readable file");
+    let n = 1280 * 720;
+    assert!(
+        !raw.is_empty() && raw.len() % n == 0,
+        "{path}: not a whole number of 1280x720 8-bit frames"
+    );
+    Some(raw.chunks_exact(n).map(<[u8]>::to_vec).collect())
+}
+
+/// `detect_wafers` alone over the frames of `AUTOTEACH_DETECT_IMAGES` (for `perf record`).
+fn detect_only(images: &[Vec<u8>]) {
+    let p = DetectParams::default();
+    let repeats: usize = std::env::var("AUTOTEACH_DETECT_REPEATS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(3);
+    let mut t = Vec::new();
+    let mut rims = 0;
+    for _ in 0..repeats {
+        rims = 0;
+        for data in images {
+            let view = GrayView::new(data, 1280, 720).expect("image");
+            let (dt, found) = ms(|| detect_wafers(&view, &p).expect("detect"));
+            rims += found.len();
+            t.push(dt);
+        }
+    }
+    println!(
+        "detect_wafers: {} frames x {repeats}, {} rayon thread(s), {rims} rims per pass; median {:.2} ms per image",
+        images.len(),
+        rayon::current_num_threads(),
+        median(&mut t)
+    );
+}
+
 /// The per-stage profile (see the module documentation).
-fn stage_profile() {
-    let images = scenes();
+fn stage_profile(images: &[Vec<u8>], repeats: usize) {
     let p = DetectParams::default();
     let no_band = DetectParams {
         band_refinement: false,
@@ -116,9 +157,9 @@ fn stage_profile() {
     let mut rims = 0;
     // The edge map from a workspace kept across frames, as `detect_wafers` does.
     let mut ws = EdgeWorkspace::new();
-    for _ in 0..4 {
+    for _ in 0..repeats {
         rims = 0;
-        for data in &images {
+        for data in images {
             let view = GrayView::new(data, 1280, 720).expect("image");
             let (t0, map) = ms(|| ws.canny(&view, &p.canny).expect("canny"));
             let (t1, chains) = ms(|| link_edges(map, &p.link).expect("link"));
@@ -138,7 +179,8 @@ fn stage_profile() {
         }
     }
     println!(
-        "stage profile: 10 scenes x 4 repeats, {} rayon thread(s), {rims} rims per pass; median ms per image",
+        "stage profile: {} frames x {repeats} repeats, {} rayon thread(s), {rims} rims per pass; median ms per image",
+        images.len(),
         rayon::current_num_threads()
     );
     for (name, v) in names.iter().zip(&mut t) {
@@ -148,8 +190,12 @@ fn stage_profile() {
 
 fn bench(c: &mut Criterion) {
     if let Ok(v) = std::env::var("AUTOTEACH_DETECT_PROFILE") {
-        stage_profile();
-        if v == "only" {
+        match frames_from_file() {
+            Some(frames) if v == "detect" => detect_only(&frames),
+            Some(frames) => stage_profile(&frames, 1),
+            None => stage_profile(&scenes(), 4),
+        }
+        if v == "only" || v == "detect" {
             return;
         }
     }

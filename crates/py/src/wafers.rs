@@ -122,6 +122,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("blur_sigma", p.canny.blur_sigma)?;
     d.set_item("min_arc_points", p.arcs.min_points)?;
     d.set_item("inflection_sigmas", p.arcs.inflection_sigmas)?;
+    d.set_item("restart_turn_at_cuts", p.arcs.restart_turn_at_cuts)?;
     d.set_item("residual_threshold", p.assembly.residual_threshold)?;
     d.set_item("max_gap", p.assembly.max_gap)?;
     d.set_item("up", (p.up[0], p.up[1]))?;
@@ -151,7 +152,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     semi_minor_range=None, min_coverage=None, min_rim_separation=None, max_arc_deviation=None,
     max_arc_residual_ratio=None, max_unpaired_residual=None, band_refinement=None,
     share_rim_shape=None, share_rim_centre=None, joint_band_fit=None, inflection_sigmas=None,
-    join_border_cut_arcs=None, thickness_ratio=None, focal_length=None
+    join_border_cut_arcs=None, thickness_ratio=None, focal_length=None, restart_turn_at_cuts=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -182,6 +183,7 @@ fn wafer_detect(
     join_border_cut_arcs: Option<bool>,
     thickness_ratio: Option<f64>,
     focal_length: Option<f64>,
+    restart_turn_at_cuts: Option<bool>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let mut params = DetectParams::default();
     // `None` keeps the library default (`wafer_detect_defaults`).
@@ -202,6 +204,7 @@ fn wafer_detect(
         (&mut params.share_rim_centre, share_rim_centre),
         (&mut params.joint_band_fit, joint_band_fit),
         (&mut params.join_border_cut_arcs, join_border_cut_arcs),
+        (&mut params.arcs.restart_turn_at_cuts, restart_turn_at_cuts),
     ] {
         if let Some(v) = value {
             *slot = v;

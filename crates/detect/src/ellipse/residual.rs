@@ -34,6 +34,66 @@ pub(crate) struct Foot {
 /// Most Newton passes over all points in [`foot_angles`] before the certifying step.
 const MAX_NEWTON_PASSES: usize = 8;
 
+/// Most scratch vectors of each kind kept per thread (see [`scratch`]).
+const SCRATCH_KEPT: usize = 16;
+
+thread_local! {
+    /// Per-thread scratch vectors of the per-point passes (structure-of-arrays buffers and
+    /// Jacobian columns), so that a fitting iteration does not allocate and free them.
+    static SCRATCH: std::cell::RefCell<Vec<Vec<f64>>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// As [`SCRATCH`], for the four-lane buffers of [`conic_normal_equations`].
+    static SCRATCH_LANES: std::cell::RefCell<Vec<Vec<[f64; 4]>>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Scratch vectors kept per thread between calls (taken with [`Scratch::take`], returned on
+/// drop): the buffers' contents never carry over (every taken vector is empty), only their
+/// capacity. Nested takes simply get fresh vectors when the pool is empty.
+mod scratch {
+    use super::{SCRATCH, SCRATCH_KEPT, SCRATCH_LANES};
+    use std::cell::RefCell;
+    use std::thread::LocalKey;
+
+    /// Element types with a per-thread pool.
+    pub(super) trait Pooled: Sized + 'static {
+        /// The thread's pool of this type.
+        fn pool() -> &'static LocalKey<RefCell<Vec<Vec<Self>>>>;
+    }
+    impl Pooled for f64 {
+        fn pool() -> &'static LocalKey<RefCell<Vec<Vec<Self>>>> {
+            &SCRATCH
+        }
+    }
+    impl Pooled for [f64; 4] {
+        fn pool() -> &'static LocalKey<RefCell<Vec<Vec<Self>>>> {
+            &SCRATCH_LANES
+        }
+    }
+
+    /// An empty vector with at least `capacity`, from the thread's pool when it has one.
+    pub(super) fn take<T: Pooled>(capacity: usize) -> Vec<T> {
+        let mut v = T::pool()
+            .try_with(|p| p.try_borrow_mut().ok().and_then(|mut p| p.pop()))
+            .ok()
+            .flatten()
+            .unwrap_or_default();
+        v.clear();
+        v.reserve(capacity);
+        v
+    }
+
+    /// Returns `v` to the thread's pool (dropped if the pool is full or gone).
+    pub(super) fn give<T: Pooled>(v: Vec<T>) {
+        let _ = T::pool().try_with(|p| {
+            if let Ok(mut p) = p.try_borrow_mut()
+                && p.len() < SCRATCH_KEPT
+            {
+                p.push(v);
+            }
+        });
+    }
+}
+
 impl Foot {
     /// `(sin t, cos t)` of the foot point.
     #[cfg(test)]
@@ -152,15 +212,15 @@ fn foot_angles_impl(
     let reach = a.min(b).powi(2) / a.max(b);
     // Structure of arrays, so that the passes below compile to vector code.
     let n = points.len();
-    let mut us = Vec::with_capacity(n);
-    let mut vs = Vec::with_capacity(n);
+    let mut us: Vec<f64> = scratch::take(n);
+    let mut vs: Vec<f64> = scratch::take(n);
     for p in points {
         let (dx, dy) = (p.x - e.cx, p.y - e.cy);
         us.push(cth * dx + sth * dy);
         vs.push(-sth * dx + cth * dy);
     }
-    let mut ss = Vec::with_capacity(n);
-    let mut cs = Vec::with_capacity(n);
+    let mut ss: Vec<f64> = scratch::take(n);
+    let mut cs: Vec<f64> = scratch::take(n);
     for (i, (&u, &v)) in us.iter().zip(&vs).enumerate() {
         let (s, c) = start.get(i).copied().unwrap_or((v / b, u / a));
         // A zero vector gives NaN here, which the certificate below sends to the general solver.
@@ -215,6 +275,9 @@ fn foot_angles_impl(
     }
     angles.clear();
     angles.extend(ss.iter().zip(&cs).map(|(&s, &c)| (s, c)));
+    for v in [us, vs, ss, cs] {
+        scratch::give(v);
+    }
 }
 
 /// Signed orthogonal distance `r` from `p` to `e` (positive outside) and its gradient
@@ -309,11 +372,20 @@ struct NormalAcc<const K: usize> {
     r: Vec<f64>,
 }
 
+impl<const K: usize> Drop for NormalAcc<K> {
+    fn drop(&mut self) {
+        for c in &mut self.cols {
+            scratch::give(std::mem::take(c));
+        }
+        scratch::give(std::mem::take(&mut self.r));
+    }
+}
+
 impl<const K: usize> NormalAcc<K> {
     fn new(capacity: usize) -> Self {
         NormalAcc {
-            cols: std::array::from_fn(|_| Vec::with_capacity(capacity)),
-            r: Vec::with_capacity(capacity),
+            cols: std::array::from_fn(|_| scratch::take(capacity)),
+            r: scratch::take(capacity),
         }
     }
 
@@ -428,11 +500,12 @@ fn conic_normal_equations(
     // Foot points, weights w² and w·r, four lanes wide (zero-padded: a zero weight adds
     // nothing).
     let lanes = n.div_ceil(4);
-    let mut xs = vec![[0.0f64; 4]; lanes];
-    let mut ys = vec![[0.0f64; 4]; lanes];
-    let mut w2 = vec![[0.0f64; 4]; lanes];
-    let mut wr = vec![[0.0f64; 4]; lanes];
-    let mut rr = vec![[0.0f64; 4]; lanes];
+    let zeros = || {
+        let mut v: Vec<[f64; 4]> = scratch::take(lanes);
+        v.resize(lanes, [0.0; 4]);
+        v
+    };
+    let (mut xs, mut ys, mut w2, mut wr, mut rr) = (zeros(), zeros(), zeros(), zeros(), zeros());
     for (i, (p, &(st, ct))) in points.iter().zip(angles).enumerate() {
         let (dx, dy) = (p.x - e.cx, p.y - e.cy);
         let u = cth * dx + sth * dy;
@@ -497,6 +570,9 @@ fn conic_normal_equations(
     let total = |m: &[f64; 4]| (m[0] + m[1]) + (m[2] + m[3]);
     let mom: [f64; 15] = std::array::from_fn(|k| total(&mom[k]));
     let lin: [f64; 8] = std::array::from_fn(|k| total(&lin[k]));
+    for v in [xs, ys, w2, wr, rr] {
+        scratch::give(v);
+    }
     // Monomial m_k = x^MONO[k].0 · y^MONO[k].1, and the index in `mom` of x^j y^k.
     const MONO: [(usize, usize); 6] = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)];
     let index = |j: usize, k: usize| {
@@ -591,13 +667,11 @@ pub(crate) fn accumulate_sampson(
         )
     };
     // 1/‖∇f‖ in a separate, vectorisable pass (square roots and divisions dominate otherwise).
-    let inv_norms: Vec<f64> = points
-        .iter()
-        .map(|p| {
-            let (gx, gy) = grad(p);
-            1.0 / (gx * gx + gy * gy).sqrt()
-        })
-        .collect();
+    let mut inv_norms: Vec<f64> = scratch::take(points.len());
+    inv_norms.extend(points.iter().map(|p| {
+        let (gx, gy) = grad(p);
+        1.0 / (gx * gx + gy * gy).sqrt()
+    }));
     let mut acc = NormalAcc::<6>::new(points.len());
     for (p, &w) in points.iter().zip(&inv_norms) {
         if !w.is_finite() {
@@ -614,6 +688,7 @@ pub(crate) fn accumulate_sampson(
         let g: [f64; 6] = std::array::from_fn(|k| m[k] * w - h[k] * fw3);
         acc.add(&g, r);
     }
+    scratch::give(inv_norms);
     acc.finish()
 }
 

@@ -206,6 +206,65 @@ fn normal_equations(
     (out, Vector6::from(g), cost)
 }
 
+/// `m⁻¹·rhs` by the Cholesky factorisation of the symmetric `m` (its lower triangle), `None`
+/// when `m` is not positive definite: the same operations, in the same order, as nalgebra's
+/// `m.cholesky()` followed by `solve(rhs)` (column-oriented factorisation with the updates
+/// `L[i][j] ← (−L[j][k])·L[i][k] + L[i][j]`, division of the column below the diagonal by the
+/// square root, forward substitution with column updates, back substitution with dot products
+/// summed from +0), so the result is bit-identical — written out for the fixed size, where
+/// nalgebra's generic column views cost more than the arithmetic (a test compares both).
+#[inline]
+pub(super) fn cholesky_solve(m: &Matrix6<f64>, rhs: &Vector6<f64>) -> Option<Vector6<f64>> {
+    const N: usize = 6;
+    // l[c][r]: column-major like nalgebra, only r ≥ c is used.
+    let mut l = [[0.0f64; N]; N];
+    for (c, col) in l.iter_mut().enumerate() {
+        for (r, x) in col.iter_mut().enumerate().skip(c) {
+            *x = m[(r, c)];
+        }
+    }
+    for j in 0..N {
+        let (done, rest) = l.split_at_mut(j);
+        let col = &mut rest[0];
+        for prev in done.iter() {
+            // nalgebra's `axpy`: `(factor·x)·1 + 1·y`, the same value as `y + factor·x`.
+            let factor = -prev[j];
+            for (y, x) in col[j..].iter_mut().zip(&prev[j..]) {
+                *y += factor * x;
+            }
+        }
+        let diag = col[j];
+        // nalgebra's `try_sqrt`: zero, negative or NaN is not positive definite.
+        if diag == 0.0 || !(diag >= 0.0) {
+            return None;
+        }
+        let denom = diag.sqrt();
+        col[j] = denom;
+        for y in &mut col[j + 1..] {
+            *y /= denom;
+        }
+    }
+    let mut b = [0.0f64; N];
+    b.copy_from_slice(rhs.as_slice());
+    // L·y = b.
+    for i in 0..N {
+        let coeff = b[i] / l[i][i];
+        b[i] = coeff;
+        for r in i + 1..N {
+            b[r] += -coeff * l[i][r];
+        }
+    }
+    // Lᵀ·x = y.
+    for i in (0..N).rev() {
+        let mut dot = 0.0;
+        for r in i + 1..N {
+            dot += l[i][r] * b[r];
+        }
+        b[i] = (b[i] - dot) / l[i][i];
+    }
+    Some(Vector6::from(b))
+}
+
 /// Levenberg–Marquardt fit of the band model to `samples` from `p0`; `sigma_free` fits σ,
 /// else keeps `p0[5]`. Returns the parameters and the RMS residual (σ stays in (0.2, 5));
 /// `None` if no sample is left.
@@ -231,11 +290,10 @@ pub(super) fn fit(
             for i in 0..k {
                 damped[(i, i)] += lambda * a[(i, i)].max(1e-12);
             }
-            let Some(ch) = damped.cholesky() else {
+            let Some(step) = cholesky_solve(&damped, &(-g)) else {
                 lambda *= 10.0;
                 continue;
             };
-            let step = ch.solve(&(-g));
             let mut q = p;
             for i in 0..k {
                 q[i] += step[i];
@@ -304,6 +362,55 @@ mod tests {
         assert_eq!(cdf_and_density(-60.0).0, 0.0);
         assert_eq!(cdf_and_density(60.0).0, 1.0);
         assert!(cdf_and_density(f64::INFINITY).0 == 1.0);
+    }
+
+    #[test]
+    fn cholesky_solve_is_bit_identical_to_nalgebra() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        let mut solved = 0;
+        for case in 0..4000 {
+            // Random Gram matrices (SPD), some with the identity row/column of a fixed σ, some
+            // indefinite or singular, over a wide range of scales and damping.
+            let jac = nalgebra::SMatrix::<f64, 8, 6>::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            let scale = 10f64.powf(rng.random_range(-6.0..6.0));
+            let mut m = jac.transpose() * jac * scale;
+            if case % 3 == 1 {
+                for i in 0..6 {
+                    m[(5, i)] = 0.0;
+                    m[(i, 5)] = 0.0;
+                }
+                m[(5, 5)] = 1.0;
+            }
+            if case % 7 == 3 {
+                m[(2, 2)] = -m[(2, 2)];
+            }
+            if case % 11 == 5 {
+                m.row_mut(4).fill(0.0);
+                m.column_mut(4).fill(0.0);
+            }
+            let lambda = 10f64.powf(rng.random_range(-9.0..3.0));
+            for i in 0..6 {
+                m[(i, i)] += lambda * m[(i, i)].max(1e-12);
+            }
+            // An upper triangle that differs from the lower must not be read.
+            let mut dirty = m;
+            dirty[(0, 3)] = f64::NAN;
+            let rhs = Vector6::from_fn(|_, _| rng.random_range(-1e3..1e3));
+            let reference = m.cholesky().map(|ch| ch.solve(&rhs));
+            let ours = cholesky_solve(&dirty, &rhs);
+            match (reference, ours) {
+                (Some(x), Some(y)) => {
+                    solved += 1;
+                    for i in 0..6 {
+                        assert_eq!(x[i].to_bits(), y[i].to_bits(), "case {case}: {x} vs {y}");
+                    }
+                }
+                (None, None) => {}
+                (x, y) => panic!("case {case}: nalgebra {x:?}, ours {y:?}"),
+            }
+        }
+        assert!(solved > 2500, "{solved}");
     }
 
     #[test]

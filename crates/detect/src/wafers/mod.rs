@@ -964,6 +964,48 @@ mod tests {
     }
 
     #[test]
+    fn thin_rim_whose_edge_runs_into_a_slot_tooth_is_found() {
+        // Image 21 of the wafer benchmark (seed 3): the disturbance wafer two slots above is
+        // seen nearly edge-on (b ≈ 6–7 px); the edge chains of both its rims run on into the
+        // edges of a slot tooth at the rims' tips. The junction's turn made each rim's first own
+        // polygon vertex an "inflection", the flat side after it was dropped as straight, and
+        // each rim kept one half of its front arc only (no pair to assemble). With
+        // `ArcParams::restart_turn_at_cuts` the side stays whole and the lower rim is found. (The
+        // upper rim is assembled too, but its band-refined and pair-refitted fit comes out 2.6 %
+        // wide in `a`, a wrong detection: why the rule is not on by default.)
+        let (data, w, h, rims) = benchmark_scene(
+            2,
+            (
+                -0.44809058707584226,
+                0.0016300531170131208,
+                0.027998583250999902,
+            ),
+            -0.3378130548076417,
+            9.36382531316487,
+            1.064917845033475,
+            [0.27888932975209585, -0.29931095175366157],
+            2126867412,
+        );
+        let view = GrayView::new(&data, w, h).unwrap();
+        let run = |restart: bool| {
+            let mut params = DetectParams::default();
+            params.arcs.restart_turn_at_cuts = restart;
+            let dets = detect_wafers(&view, &params).unwrap();
+            let (_, _, e, _) = rims
+                .iter()
+                .find(|(w, r, _, _)| *w == 1 && *r == Rim::Lower)
+                .expect("the scene has that rim");
+            let near = dets
+                .iter()
+                .any(|d| matches_rim(d, Rim::Lower, e, 3.0, 0.05, 0.05));
+            let (hit, _) = hit_and_wrong(&dets, &rims, 1, Rim::Lower);
+            (near, hit)
+        };
+        assert_eq!(run(false), (false, false));
+        assert_eq!(run(true), (true, true));
+    }
+
+    #[test]
     fn front_arc_rim_is_paired_despite_its_off_fit() {
         // Image 120 of the wafer benchmark (seed 3): the lower rim of the disturbance wafer one
         // slot above is assembled from its front arc alone, b +7 % and a +3 % off; with a 3 %
