@@ -212,6 +212,10 @@ def test_python_defaults_are_the_library_defaults() -> None:
     ("kwargs", "match"),
     [
         ({"max_unpaired_residual": 0.0}, "max_unpaired_residual"),
+        ({"max_relative_sigma_b": 0.0}, "max_relative_sigma_b"),
+        ({"max_relative_sigma_b": math.nan}, "max_relative_sigma_b"),
+        ({"max_centre_sigma": 0.0}, "max_centre_sigma"),
+        ({"max_centre_sigma": math.nan}, "max_centre_sigma"),
         ({"min_coverage": 1.5}, "min_coverage"),
         ({"max_arc_deviation": math.nan}, "max_arc_deviation"),
         ({"min_rim_separation": 1.0}, "min_rim_separation"),

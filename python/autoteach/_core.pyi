@@ -560,6 +560,8 @@ def wafer_detect(
     thickness_ratio: float | None = None,
     focal_length: float | None = None,
     restart_turn_at_cuts: bool | None = None,
+    max_relative_sigma_b: float | None = None,
+    max_centre_sigma: float | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 

@@ -234,7 +234,9 @@ def detect_wafers(
     join_border_cut_arcs: bool = True,
     thickness_ratio: float | None = None,
     focal_length: float | None = None,
-    restart_turn_at_cuts: bool = False,
+    restart_turn_at_cuts: bool = True,
+    max_relative_sigma_b: float = 0.005,
+    max_centre_sigma: float = 1.0,
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -290,8 +292,15 @@ def detect_wafers(
         restart_turn_at_cuts: A cut vertex (corner, inflection, quadrant change) starts a new
             piece whose first turn is not compared with the cut's own turn for an inflection,
             so the side after a foreign contour's junction at a rim's tip is kept (thin rims
-            running into slot-tooth edges). Off by default: it recovers thin rims whose minor
-            axis still fits 1–5 % off (recall up, precision down on the wafer benchmark).
+            running into slot-tooth edges). On by default (with ``max_relative_sigma_b``, which
+            rejects the recovered thin rims whose minor axis the fit leaves uncertain).
+        max_relative_sigma_b: A rim is reported only when the standard deviation of its
+            minor axis (from the fit's covariance) is at most this fraction of ``b``: thin rims
+            seen along the front arc only, whose ``a``, ``b`` and centre trade off, and
+            clutter. ``math.inf`` disables.
+        max_centre_sigma: A rim whose centre standard deviation ``sqrt(var(cx) + var(cy))``
+            (from its fit's covariance) is over this (pixels) is rejected: its points do not
+            determine an ellipse (a short or nearly straight arc); ``math.inf`` disables.
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -335,6 +344,8 @@ def detect_wafers(
         thickness_ratio=None if thickness_ratio is None else float(thickness_ratio),
         focal_length=None if focal_length is None else float(focal_length),
         restart_turn_at_cuts=bool(restart_turn_at_cuts),
+        max_relative_sigma_b=float(max_relative_sigma_b),
+        max_centre_sigma=float(max_centre_sigma),
     )
     return [
         WaferEdge(

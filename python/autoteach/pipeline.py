@@ -419,13 +419,25 @@ def detector_options(k: np.ndarray, radius: float, thickness: float) -> dict[str
 
 
 def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, **options: Any) -> list[list[Any]]:
-    """:func:`autoteach.detect.detect_wafers` on every image (threads: the detector releases the GIL)."""
+    """:func:`autoteach.detect.detect_wafers` on every image (threads: the detector releases the GIL).
+
+    Unless ``options`` say otherwise, the detector runs with the arc rule and rim screen of the
+    session the Table 5.1 figures were measured with (``restart_turn_at_cuts=False``,
+    ``max_relative_sigma_b=inf``, ``max_centre_sigma=inf``; the detector's defaults changed in session 10 for the wafer
+    benchmark), so the hand-eye pipeline is unchanged until it is re-measured with them.
+    """
     from concurrent.futures import ThreadPoolExecutor
 
     from tqdm import tqdm
 
     from autoteach.detect import detect_wafers
 
+    options = {
+        "restart_turn_at_cuts": False,
+        "max_relative_sigma_b": math.inf,
+        "max_centre_sigma": math.inf,
+        **options,
+    }
     images = np.asarray(images)
     if images.ndim != 3 or images.shape[0] == 0 or not images.any():
         raise InvalidInputError("the session has no images: the detection front end cannot run")

@@ -859,10 +859,11 @@ pub struct ArcParams {
     /// rim's edge running on into a slot tooth's edge: a quadrant change at the junction), the
     /// junction's turn, opposite to the rim's, makes the rim's first own vertex an
     /// "inflection", and the side between them is cut off (and dropped as straight on a flat
-    /// rim). Default false: on the wafer benchmark it recovers rims (recall 0.8495 → 0.8625 on
-    /// seed 3, 0.8382 → 0.8574 on seed 4) but most recovered thin disturbance rims (b 5–10 px)
-    /// fit 1–5 % off in `b` after the band refinement, so precision drops (0.9215 → 0.9058,
-    /// 0.9268 → 0.9225).
+    /// rim). Default true: on the wafer benchmark it recovers rims (recall 0.8698 → 0.8857 on
+    /// seed 3, 0.8500 → 0.8662 on seed 4), but many recovered thin disturbance rims (b 5–10 px,
+    /// seen along the front arc only) fit 1–5 % off in `b`, so on its own precision drops
+    /// (0.9435 → 0.9301, 0.9398 → 0.9320); with the `σ_b` test of
+    /// `DetectParams::max_relative_sigma_b` (which rejects most of those near-misses) both rise.
     pub restart_turn_at_cuts: bool,
 }
 
@@ -875,7 +876,7 @@ impl Default for ArcParams {
             straight_tolerance: 1.5,
             max_curvature: 0.25,
             inflection_sigmas: 0.0,
-            restart_turn_at_cuts: false,
+            restart_turn_at_cuts: true,
         }
     }
 }
@@ -1872,7 +1873,11 @@ mod tests {
         // polygon vertex an inflection: the arc starts there, tens of pixels into the rim (on
         // the noisy edges of the benchmark image, far enough in that the rest of the flat side
         // is dropped as straight).
-        let (lo, _) = left_half(&ArcParams::default());
+        let plain = ArcParams {
+            restart_turn_at_cuts: false,
+            ..ArcParams::default()
+        };
+        let (lo, _) = left_half(&plain);
         assert!(lo > tip + 20.0, "{lo} vs tip {tip}");
         // With it the left half is one arc from the tip (the junction vertex) to the bottom,
         // and no point of the tooth edge is on it.

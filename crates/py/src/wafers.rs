@@ -134,6 +134,8 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("max_arc_deviation", p.max_arc_deviation)?;
     d.set_item("max_arc_residual_ratio", p.max_arc_residual_ratio)?;
     d.set_item("max_unpaired_residual", p.max_unpaired_residual)?;
+    d.set_item("max_relative_sigma_b", p.max_relative_sigma_b)?;
+    d.set_item("max_centre_sigma", p.max_centre_sigma)?;
     d.set_item("band_refinement", p.band_refinement)?;
     d.set_item("share_rim_shape", p.share_rim_shape)?;
     d.set_item("share_rim_centre", p.share_rim_centre)?;
@@ -152,7 +154,8 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     semi_minor_range=None, min_coverage=None, min_rim_separation=None, max_arc_deviation=None,
     max_arc_residual_ratio=None, max_unpaired_residual=None, band_refinement=None,
     share_rim_shape=None, share_rim_centre=None, joint_band_fit=None, inflection_sigmas=None,
-    join_border_cut_arcs=None, thickness_ratio=None, focal_length=None, restart_turn_at_cuts=None
+    join_border_cut_arcs=None, thickness_ratio=None, focal_length=None, restart_turn_at_cuts=None,
+    max_relative_sigma_b=None, max_centre_sigma=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -184,6 +187,8 @@ fn wafer_detect(
     thickness_ratio: Option<f64>,
     focal_length: Option<f64>,
     restart_turn_at_cuts: Option<bool>,
+    max_relative_sigma_b: Option<f64>,
+    max_centre_sigma: Option<f64>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let mut params = DetectParams::default();
     // `None` keeps the library default (`wafer_detect_defaults`).
@@ -198,6 +203,8 @@ fn wafer_detect(
     set(&mut params.max_arc_residual_ratio, max_arc_residual_ratio);
     set(&mut params.max_unpaired_residual, max_unpaired_residual);
     set(&mut params.arcs.inflection_sigmas, inflection_sigmas);
+    set(&mut params.max_relative_sigma_b, max_relative_sigma_b);
+    set(&mut params.max_centre_sigma, max_centre_sigma);
     for (slot, value) in [
         (&mut params.band_refinement, band_refinement),
         (&mut params.share_rim_shape, share_rim_shape),

@@ -644,11 +644,20 @@ mod tests {
     /// pitch) and detects its rims. Returns the detections and the renderer's true ellipses
     /// `(wafer, rim, ellipse)`.
     fn benchmark_scene(k: usize, s: Scenario) -> (Vec<WaferEdge>, Vec<(usize, Rim, Ellipse)>) {
+        benchmark_scene_with(k, s, &DetectParams::default())
+    }
+
+    /// [`benchmark_scene`] with `params`.
+    fn benchmark_scene_with(
+        k: usize,
+        s: Scenario,
+        params: &DetectParams,
+    ) -> (Vec<WaferEdge>, Vec<(usize, Rim, Ellipse)>) {
         let (x, y, z, yaw, down, gain, gradient, seed) = s;
         let (data, w, h, rims) =
             super::super::tests::benchmark_scene(k, (x, y, z), yaw, down, gain, gradient, seed);
         let view = GrayView::new(&data, w, h).unwrap();
-        let dets = detect_wafers(&view, &DetectParams::default()).unwrap();
+        let dets = detect_wafers(&view, params).unwrap();
         let truth = rims.into_iter().map(|(w, r, e, _)| (w, r, e)).collect();
         (dets, truth)
     }
@@ -870,7 +879,10 @@ mod tests {
 
     /// Benchmark images 202 (target upper rim) and 164 (disturbance upper rim), seed 3: with
     /// the upper rim trimmed by `trim_close_ends` their minor axes were off by +1.81 % and
-    /// −1.76 % (near-misses); untrimmed, +0.11 % and +0.08 %.
+    /// −1.76 % (near-misses); untrimmed, +0.11 % and +0.08 %. (The thin disturbance rim of image
+    /// 164, b ≈ 9 px along the front arc only, has a standard deviation of `b` of 0.59 % of `b`
+    /// from its fit and is dropped by the default `max_relative_sigma_b`: its fit is checked
+    /// with that test off.)
     #[test]
     fn upper_rims_keep_their_points_near_the_ends_of_the_front_arc() {
         let (dets, truth) = benchmark_scene(
@@ -887,7 +899,7 @@ mod tests {
             ),
         );
         assert_found(&dets, &truth, 0, Rim::Upper, "image 202");
-        let (dets, truth) = benchmark_scene(
+        let (dets, truth) = benchmark_scene_with(
             5,
             (
                 -0.511389048509057,
@@ -899,6 +911,10 @@ mod tests {
                 [0.27486913828129195, 0.23941915311242962],
                 2770340650,
             ),
+            &DetectParams {
+                max_relative_sigma_b: f64::INFINITY,
+                ..DetectParams::default()
+            },
         );
         assert_found(&dets, &truth, 1, Rim::Upper, "image 164");
     }
