@@ -561,6 +561,18 @@ mod tests {
             && (d.ellipse.b - e.b).abs() < tol_b * e.b
     }
 
+    /// Whether `d` detects any of the true `rims` ([`matches_rim`] with one tolerance `tol_a`
+    /// for both semi-axes).
+    pub(super) fn matches_any(
+        d: &WaferEdge,
+        rims: &[(usize, Rim, Ellipse, f64)],
+        tol_c: f64,
+        tol_a: f64,
+    ) -> bool {
+        rims.iter()
+            .any(|(_, r, e, _)| matches_rim(d, *r, e, tol_c, tol_a, tol_a))
+    }
+
     /// Whether `dets` has a hit (1 px, 1 %) on the true rim `rim` of wafer `wafer` (0 = target)
     /// of `rims`, and how many detections are wrong (within 3 px and 5 % of no true rim).
     pub(super) fn hit_and_wrong(
@@ -576,11 +588,7 @@ mod tests {
         let hit = dets.iter().any(|d| matches_rim(d, rim, e, 1.0, 0.01, 0.01));
         let wrong = dets
             .iter()
-            .filter(|d| {
-                !rims
-                    .iter()
-                    .any(|(_, r, t, _)| matches_rim(d, *r, t, 3.0, 0.05, 0.05))
-            })
+            .filter(|d| !matches_any(d, rims, 3.0, 0.05))
             .count();
         (hit, wrong)
     }
@@ -966,10 +974,7 @@ mod tests {
         let view = GrayView::new(&data, w, h).unwrap();
         // A detection within 3 px and 5 % of a rim of its kind (a hit or a near miss), and
         // within 1 px and 1 % (a hit).
-        let near = |d: &WaferEdge, tol_c: f64, tol_a: f64| {
-            rims.iter()
-                .any(|(_, rim, e, _)| matches_rim(d, *rim, e, tol_c, tol_a, tol_a))
-        };
+        let near = |d: &WaferEdge, tol_c: f64, tol_a: f64| matches_any(d, &rims, tol_c, tol_a);
         let without = DetectParams {
             max_unpaired_residual: f64::INFINITY,
             ..DetectParams::default()
@@ -1121,10 +1126,7 @@ mod tests {
             1458141713,
         );
         let view = GrayView::new(&data, w, h).unwrap();
-        let near = |d: &WaferEdge, tol_c: f64, tol_a: f64| {
-            rims.iter()
-                .any(|(_, rim, e, _)| matches_rim(d, *rim, e, tol_c, tol_a, tol_a))
-        };
+        let near = |d: &WaferEdge, tol_c: f64, tol_a: f64| matches_any(d, &rims, tol_c, tol_a);
         let mut centre_only = DetectParams {
             max_relative_sigma_b: f64::INFINITY,
             ..DetectParams::default()
