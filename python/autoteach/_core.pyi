@@ -562,6 +562,9 @@ def wafer_detect(
     restart_turn_at_cuts: bool | None = None,
     max_relative_sigma_b: float | None = None,
     max_centre_sigma: float | None = None,
+    keep_flat_run_pieces: bool | None = None,
+    border_pairs_take_arcs: bool | None = None,
+    reflection_inside_rim: bool | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 

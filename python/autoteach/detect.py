@@ -221,7 +221,7 @@ def detect_wafers(
     min_contrast_ratio: float = 0.45,
     semi_major_range: tuple[float, float] | None = None,
     semi_minor_range: tuple[float, float] | None = None,
-    min_coverage: float = 0.15,
+    min_coverage: float = 0.08,
     min_rim_separation: float = 0.5,
     max_arc_deviation: float = 0.6,
     max_arc_residual_ratio: float = 1.5,
@@ -237,6 +237,9 @@ def detect_wafers(
     restart_turn_at_cuts: bool = True,
     max_relative_sigma_b: float = 0.005,
     max_centre_sigma: float = 1.0,
+    keep_flat_run_pieces: bool = True,
+    border_pairs_take_arcs: bool = True,
+    reflection_inside_rim: bool = True,
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -262,7 +265,8 @@ def detect_wafers(
             rim of similar size are rejected as reflections (0 disables).
         semi_major_range: Optional prior ``(low, high)`` on the semi-major axis (pixels).
         semi_minor_range: Optional prior ``(low, high)`` on the semi-minor axis (pixels).
-        min_coverage: Smallest fraction of its ellipse's perimeter a segment's arcs must cover.
+        min_coverage: Smallest fraction of its ellipse's perimeter a segment's arcs must cover
+            (rims whose fit the points leave undetermined are rejected by the two σ tests).
         min_rim_separation: Points of the far lower rim closer to the upper rim than this
             fraction of the widest rim distance are dropped before its refit (0 disables).
         max_arc_deviation: An arc whose median distance (pixels) to its segment's ellipse
@@ -301,6 +305,17 @@ def detect_wafers(
         max_centre_sigma: A rim whose centre standard deviation ``sqrt(var(cx) + var(cy))``
             (from its fit's covariance) is over this (pixels) is rejected: its points do not
             determine an ellipse (a short or nearly straight arc); ``math.inf`` disables.
+        keep_flat_run_pieces: A chain piece that would be dropped as straight is kept when a
+            quadrant-change cut alone joins it to a neighbouring arc of the same convex run and
+            it bends the run's way significantly (3 standard errors of the chain's edge
+            noise): the flat half of a flat rim's front arc between its lowest point and a
+            foreign contour's junction.
+        border_pairs_take_arcs: With ``join_border_cut_arcs``, a pair of arcs cut by the image
+            border may take an arc of one of the assembly's two-arc segments when it fits
+            better (lower mean residual) than that segment, which is then dissolved.
+        reflection_inside_rim: A dim rim counts as a reflection (``min_contrast_ratio``) only
+            when it lies inside the brighter rim on whose face it would be mirrored; ``False``
+            compares it with every brighter rim of about its size.
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -346,6 +361,9 @@ def detect_wafers(
         restart_turn_at_cuts=bool(restart_turn_at_cuts),
         max_relative_sigma_b=float(max_relative_sigma_b),
         max_centre_sigma=float(max_centre_sigma),
+        keep_flat_run_pieces=bool(keep_flat_run_pieces),
+        border_pairs_take_arcs=bool(border_pairs_take_arcs),
+        reflection_inside_rim=bool(reflection_inside_rim),
     )
     return [
         WaferEdge(

@@ -421,10 +421,12 @@ def detector_options(k: np.ndarray, radius: float, thickness: float) -> dict[str
 def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, **options: Any) -> list[list[Any]]:
     """:func:`autoteach.detect.detect_wafers` on every image (threads: the detector releases the GIL).
 
-    Unless ``options`` say otherwise, the detector runs with the arc rule and rim screen of the
-    session the Table 5.1 figures were measured with (``restart_turn_at_cuts=False``,
-    ``max_relative_sigma_b=inf``, ``max_centre_sigma=inf``; the detector's defaults changed in session 10 for the wafer
-    benchmark), so the hand-eye pipeline is unchanged until it is re-measured with them.
+    Unless ``options`` say otherwise, the detector runs with the arc rules and rim screens of
+    the session the Table 5.1 figures were measured with (``restart_turn_at_cuts=False``,
+    ``max_relative_sigma_b=inf``, ``max_centre_sigma=inf``, ``keep_flat_run_pieces=False``,
+    ``min_coverage=0.15``, ``border_pairs_take_arcs=False``, ``reflection_inside_rim=False``; the
+    detector's defaults changed in sessions 10 and 11 for the wafer benchmark), so the hand-eye
+    pipeline is unchanged until it is re-measured with them.
     """
     from concurrent.futures import ThreadPoolExecutor
 
@@ -436,6 +438,10 @@ def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, 
         "restart_turn_at_cuts": False,
         "max_relative_sigma_b": math.inf,
         "max_centre_sigma": math.inf,
+        "keep_flat_run_pieces": False,
+        "min_coverage": 0.15,
+        "border_pairs_take_arcs": False,
+        "reflection_inside_rim": False,
         **options,
     }
     images = np.asarray(images)

@@ -23,6 +23,10 @@
 //! assert_eq!(a.row_to_col, vec![Some(1), Some(0)]);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! The wafer-rim detector ([`wafers::detect_wafers`]) stage by stage on an image of your own
+//! (8-bit grey, raw bytes): `cargo run --release -p autoteach-detect --example wafer_stages --
+//! IMAGE.raw WIDTH HEIGHT` prints the arcs, the assembled elliptic segments and the rims.
 #![deny(missing_docs)]
 
 pub mod assembly;

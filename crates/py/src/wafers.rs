@@ -123,6 +123,9 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("min_arc_points", p.arcs.min_points)?;
     d.set_item("inflection_sigmas", p.arcs.inflection_sigmas)?;
     d.set_item("restart_turn_at_cuts", p.arcs.restart_turn_at_cuts)?;
+    d.set_item("keep_flat_run_pieces", p.arcs.keep_flat_run_pieces)?;
+    d.set_item("border_pairs_take_arcs", p.border_pairs_take_arcs)?;
+    d.set_item("reflection_inside_rim", p.reflection_inside_rim)?;
     d.set_item("residual_threshold", p.assembly.residual_threshold)?;
     d.set_item("max_gap", p.assembly.max_gap)?;
     d.set_item("up", (p.up[0], p.up[1]))?;
@@ -155,7 +158,8 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     max_arc_residual_ratio=None, max_unpaired_residual=None, band_refinement=None,
     share_rim_shape=None, share_rim_centre=None, joint_band_fit=None, inflection_sigmas=None,
     join_border_cut_arcs=None, thickness_ratio=None, focal_length=None, restart_turn_at_cuts=None,
-    max_relative_sigma_b=None, max_centre_sigma=None
+    max_relative_sigma_b=None, max_centre_sigma=None, keep_flat_run_pieces=None,
+    border_pairs_take_arcs=None, reflection_inside_rim=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -189,6 +193,9 @@ fn wafer_detect(
     restart_turn_at_cuts: Option<bool>,
     max_relative_sigma_b: Option<f64>,
     max_centre_sigma: Option<f64>,
+    keep_flat_run_pieces: Option<bool>,
+    border_pairs_take_arcs: Option<bool>,
+    reflection_inside_rim: Option<bool>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let mut params = DetectParams::default();
     // `None` keeps the library default (`wafer_detect_defaults`).
@@ -212,6 +219,9 @@ fn wafer_detect(
         (&mut params.joint_band_fit, joint_band_fit),
         (&mut params.join_border_cut_arcs, join_border_cut_arcs),
         (&mut params.arcs.restart_turn_at_cuts, restart_turn_at_cuts),
+        (&mut params.arcs.keep_flat_run_pieces, keep_flat_run_pieces),
+        (&mut params.border_pairs_take_arcs, border_pairs_take_arcs),
+        (&mut params.reflection_inside_rim, reflection_inside_rim),
     ] {
         if let Some(v) = value {
             *slot = v;

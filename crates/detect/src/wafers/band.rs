@@ -135,6 +135,82 @@ pub(super) fn profile<T: Pixel>(
     (out.len() >= 8).then_some(d)
 }
 
+/// The pixels along the profile through `p` in the direction `n` or `−n`, whichever points to
+/// the brighter side (returned, chosen as in [`profile`]): every pixel whose centre lies in the
+/// strip `T_MIN ≤ t ≤ T_MAX`, `|w| ≤ half_width` (`t` the offset along the direction, `w`
+/// across it) as `(t, grey)` into `out`, sorted by `t`, a saturated pixel as `(t, +∞)`; `None`
+/// if fewer than 8 pixels remain.
+///
+/// Unlike the interpolated samples of [`profile`], each value is one pixel's own measurement:
+/// a bilinear sample under the clip level with a saturated pixel among its four neighbours is
+/// only a lower bound of the interpolated radiance, yet would be fitted as exact, pulling the
+/// fitted band level (and with it a narrow band's far edge) down; a pixel is either exact or
+/// censored (saturated).
+pub(super) fn pixel_profile<T: Pixel>(
+    img: &GrayView<'_, T>,
+    p: Vector2<f64>,
+    n: Vector2<f64>,
+    half_width: f64,
+    out: &mut Vec<(f64, f64)>,
+) -> Option<Vector2<f64>> {
+    let ahead = bilinear(img, p.x + 1.5 * n.x, p.y + 1.5 * n.y)?;
+    let behind = bilinear(img, p.x - 1.5 * n.x, p.y - 1.5 * n.y)?;
+    let d = if ahead >= behind { n } else { -n };
+    let m = Vector2::new(-d.y, d.x);
+    out.clear();
+    let (w, h) = (img.width(), img.height());
+    let corners = [
+        p + d * T_MIN + m * half_width,
+        p + d * T_MIN - m * half_width,
+        p + d * T_MAX + m * half_width,
+        p + d * T_MAX - m * half_width,
+    ];
+    let lo = |f: fn(&Vector2<f64>) -> f64| {
+        corners
+            .iter()
+            .map(f)
+            .fold(f64::INFINITY, f64::min)
+            .ceil()
+            .max(0.0)
+    };
+    let hi = |f: fn(&Vector2<f64>) -> f64, size: usize| {
+        corners
+            .iter()
+            .map(f)
+            .fold(f64::NEG_INFINITY, f64::max)
+            .floor()
+            .min((size - 1) as f64)
+    };
+    let (x0, x1) = (lo(|c| c.x), hi(|c| c.x, w));
+    let (y0, y1) = (lo(|c| c.y), hi(|c| c.y, h));
+    if !(x0 <= x1 && y0 <= y1) {
+        return None;
+    }
+    let data = img.data();
+    for y in y0 as usize..=y1 as usize {
+        for x in x0 as usize..=x1 as usize {
+            let r = Vector2::new(x as f64 - p.x, y as f64 - p.y);
+            let (t, across) = (r.dot(&d), r.dot(&m));
+            if !((T_MIN..=T_MAX).contains(&t) && across.abs() <= half_width) {
+                continue;
+            }
+            let Some(v) = data.get(y * w + x).map(|q| q.grey()) else {
+                continue;
+            };
+            out.push((
+                t,
+                if v < CLIP {
+                    f64::from(v)
+                } else {
+                    f64::INFINITY
+                },
+            ));
+        }
+    }
+    out.sort_by(|a, b| a.0.total_cmp(&b.0));
+    (out.len() >= 8).then_some(d)
+}
+
 /// A starting point for [`fit`] from the samples: dark level before the edge, band level
 /// (the brightest sample in `[−1, 4]`, or 1.3× the clip level if the band top is clipped),
 /// far level, `t₁ = 0`, `t₂` where the profile falls back below the middle of band and far
@@ -411,6 +487,51 @@ mod tests {
             }
         }
         assert!(solved > 2500, "{solved}");
+    }
+
+    #[test]
+    fn pixel_profile_takes_each_pixel_of_the_strip_once() {
+        // A planar image `v = 12x + 2y + 10` (saturated above the clip level): every pixel whose
+        // centre lies in the strip is returned once, at its own offset along the direction,
+        // with its own value (or +∞ if saturated), against a brute-force enumeration.
+        let (w, h) = (40usize, 30usize);
+        let data: Vec<u8> = (0..w * h)
+            .map(|i| (12 * (i % w) + 2 * (i / w) + 10).min(255) as u8)
+            .collect();
+        let img = GrayView::new(&data, w, h).unwrap();
+        let p = Vector2::new(17.3, 12.6);
+        let n = Vector2::new(0.8, -0.6);
+        let mut out = Vec::new();
+        let d = pixel_profile(&img, p, n, 1.0, &mut out).unwrap();
+        // The brighter side is along +n here (12·0.8 − 2·0.6 > 0).
+        assert_eq!(d, n);
+        let mut expected = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let r = Vector2::new(x as f64, y as f64) - p;
+                let (t, across) = (r.dot(&n), r.x * -n.y + r.y * n.x);
+                if (T_MIN..=T_MAX).contains(&t) && across.abs() <= 1.0 {
+                    let v = data[y * w + x];
+                    expected.push((
+                        t,
+                        if v == 255 {
+                            f64::INFINITY
+                        } else {
+                            f64::from(v)
+                        },
+                    ));
+                }
+            }
+        }
+        assert!(expected.iter().any(|s| s.1.is_infinite()));
+        assert_eq!(out.len(), expected.len());
+        let mut sorted = expected.clone();
+        sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for (a, b) in out.iter().zip(&sorted) {
+            assert!((a.0 - b.0).abs() < 1e-12 && a.1 == b.1, "{a:?} vs {b:?}");
+        }
+        // A strip outside the image.
+        assert!(pixel_profile(&img, Vector2::new(-20.0, -20.0), n, 1.0, &mut out).is_none());
     }
 
     #[test]

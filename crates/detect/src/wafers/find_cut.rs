@@ -45,19 +45,27 @@ fn hidden(e: &Ellipse, start: f64, len: f64, width: f64, height: f64) -> bool {
         })
 }
 
-/// Pairs of the arcs `rest` (left over by the assembly) that are one rim cut by the image
-/// border: each arc has an end at the border, the two are farther apart than
-/// `params.max_gap` (closer pairs were already judged by the assembly), their union passes the
-/// combination rule of §3.2 with no gap limit, and one of the two parts of the fitted ellipse
-/// between the arcs lies outside the `width` × `height` image. Each arc joins at most one pair,
-/// lowest residual first. Returns the pairs as segments.
+/// Pairs of arcs that are one rim cut by the image border: each arc has an end at the border,
+/// the two are farther apart than `params.max_gap` (closer pairs were already judged by the
+/// assembly), their union passes the combination rule of §3.2 with no gap limit, and one of the
+/// two parts of the fitted ellipse between the arcs lies outside the `width` × `height` image.
+///
+/// The arcs offered are those the assembly left over (`rest`) and those of its two-arc
+/// segments (`segments`): the assembly judged only the pairs within its gap limit, so an arc at
+/// the border may have been matched with a nearby piece of clutter (a short foreign arc with a
+/// residual of 0.1–0.2 px) while its own rim's other arc lies across the image. A pair that
+/// takes an arc of a two-arc segment must fit better (a lower mean residual) than that segment,
+/// the rule by which Algorithm 1 chooses between the pairs of an arc; the segment is then
+/// dissolved. Each arc joins at most one pair, lowest residual first. Returns the pairs as
+/// segments and the indices (into `segments`) of the dissolved ones.
 pub(super) fn border_cut_pairs(
     arcs: &[Arc],
     rest: &[usize],
+    segments: &[Segment],
     width: usize,
     height: usize,
     params: &AssemblyParams,
-) -> Vec<Segment> {
+) -> (Vec<Segment>, Vec<usize>) {
     let (w, h) = (width as f64, height as f64);
     let ends_at_border = |k: usize| {
         arcs.get(k).is_some_and(|a| {
@@ -67,15 +75,28 @@ pub(super) fn border_cut_pairs(
                 .any(|p| at_border(p, w, h))
         })
     };
-    let cands: Vec<usize> = rest
+    // Per offered arc: the two-arc segment it belongs to (index, residual), if any.
+    let mut owner = std::collections::HashMap::<usize, (usize, f64)>::new();
+    for (s, seg) in segments.iter().enumerate() {
+        if seg.arcs.len() == 2 {
+            for &k in &seg.arcs {
+                owner.insert(k, (s, seg.fit.residual_mean));
+            }
+        }
+    }
+    let mut cands: Vec<usize> = rest
         .iter()
         .copied()
+        .chain(owner.keys().copied())
         .filter(|&k| ends_at_border(k))
         .collect();
+    cands.sort_unstable();
+    cands.dedup();
     let wide = AssemblyParams {
         max_gap: f64::INFINITY,
         ..*params
     };
+    let beats_owner = |k: usize, r: f64| owner.get(&k).is_none_or(|&(_, rs)| r < rs);
     let mut found: Vec<(f64, usize, usize, EllipseFit)> = Vec::new();
     for (x, &i) in cands.iter().enumerate() {
         for &j in &cands[x + 1..] {
@@ -86,6 +107,10 @@ pub(super) fn border_cut_pairs(
             let Some((fit, ts)) = combine_arcs(a, b, &wide) else {
                 continue;
             };
+            let r = fit.residual_mean;
+            if !(beats_owner(i, r) && beats_owner(j, r)) {
+                continue;
+            }
             let (ta, tb) = ts.split_at(a.points.len());
             let ((sa, la), (sb, lb)) = (extent(ta), extent(tb));
             let e = &fit.ellipse;
@@ -93,22 +118,31 @@ pub(super) fn border_cut_pairs(
             let after_a = (sb - (sa + la)).rem_euclid(TAU);
             let after_b = (sa - (sb + lb)).rem_euclid(TAU);
             if hidden(e, sa + la, after_a, w, h) || hidden(e, sb + lb, after_b, w, h) {
-                found.push((fit.residual_mean, i, j, fit));
+                found.push((r, i, j, fit));
             }
         }
     }
     found.sort_by(|x, y| x.0.total_cmp(&y.0));
     let mut used = std::collections::HashSet::new();
+    let mut dissolved = Vec::new();
     let mut out = Vec::new();
     for (_, i, j, fit) in found {
+        // An arc of a dissolved segment stays free for another pair.
         if used.contains(&i) || used.contains(&j) {
             continue;
         }
         used.insert(i);
         used.insert(j);
+        for k in [i, j] {
+            if let Some(&(s, _)) = owner.get(&k) {
+                dissolved.push(s);
+            }
+        }
         out.push(Segment::of_pair(arcs, i, j, fit));
     }
-    out
+    dissolved.sort_unstable();
+    dissolved.dedup();
+    (out, dissolved)
 }
 
 /// Smallest distance between the end points of two arcs.
@@ -141,16 +175,13 @@ mod tests {
         crate::assembly::tests::arc_from_points(points, quadrant, -1)
     }
 
-    #[test]
-    fn side_arcs_join_only_when_the_part_between_them_is_outside_the_image() {
-        // Upper half of an ellipse (v down: t in (−π, 0)); the side arcs run from the lateral
-        // ends up to where the ellipse leaves the image at v = 2 (its top is at v = −6).
+    /// The upper half of an ellipse (v down: t in (−π, 0)) whose top is at v = −6, and its two
+    /// side arcs from the lateral ends up to where the ellipse leaves the image at v = 2 (right
+    /// arc first).
+    fn top_cut_side_arcs() -> (Ellipse, Vec<Arc>) {
         let e = Ellipse::new(640.0, 40.0, 340.0, 46.0, 0.0).unwrap();
-        let top = |e: &Ellipse| {
-            // Eccentric angle where the upper half reaches v = 2 on the right side.
-            -((e.cy - 2.0) / e.b).asin()
-        };
-        let t = top(&e);
+        // Eccentric angle where the upper half reaches v = 2 on the right side.
+        let t = -((e.cy - 2.0) / e.b).asin();
         let arcs = vec![
             arc_of(&e, -0.05, t, Quadrant::I),
             arc_of(
@@ -160,9 +191,16 @@ mod tests {
                 Quadrant::II,
             ),
         ];
+        (e, arcs)
+    }
+
+    #[test]
+    fn side_arcs_join_only_when_the_part_between_them_is_outside_the_image() {
+        let (e, arcs) = top_cut_side_arcs();
         let params = AssemblyParams::default();
         assert!(end_gap(&arcs[0], &arcs[1]) > 300.0);
-        let found = border_cut_pairs(&arcs, &[0, 1], 1280, 720, &params);
+        let (found, dissolved) = border_cut_pairs(&arcs, &[0, 1], &[], 1280, 720, &params);
+        assert!(dissolved.is_empty());
         assert_eq!(found.len(), 1);
         let f = &found[0].fit.ellipse;
         assert!(
@@ -185,12 +223,56 @@ mod tests {
             ..a.clone()
         };
         let moved = vec![shift(&arcs[0]), shift(&arcs[1])];
-        assert!(border_cut_pairs(&moved, &[0, 1], 1280, 720, &params).is_empty());
+        assert!(
+            border_cut_pairs(&moved, &[0, 1], &[], 1280, 720, &params)
+                .0
+                .is_empty()
+        );
         // Arcs of different polarity, or only one of them offered, are not joined either.
         let mut other = arcs.clone();
         other[1].polarity = 1;
-        assert!(border_cut_pairs(&other, &[0, 1], 1280, 720, &params).is_empty());
-        assert!(border_cut_pairs(&arcs, &[0], 1280, 720, &params).is_empty());
+        assert!(
+            border_cut_pairs(&other, &[0, 1], &[], 1280, 720, &params)
+                .0
+                .is_empty()
+        );
+        assert!(
+            border_cut_pairs(&arcs, &[0], &[], 1280, 720, &params)
+                .0
+                .is_empty()
+        );
+    }
+
+    #[test]
+    fn a_border_pair_takes_its_arc_back_from_a_worse_assembled_pair() {
+        // The two side arcs of a rim cut by the image top (as above), and the assembly's
+        // segment of the right arc with a nearby foreign arc (residual `r`).
+        let (e, mut arcs) = top_cut_side_arcs();
+        let clutter_ellipse = Ellipse::new(900.0, 60.0, 120.0, 30.0, 0.3).unwrap();
+        arcs.push(arc_of(&clutter_ellipse, 0.3, 1.0, Quadrant::IV));
+        let params = AssemblyParams::default();
+        let assembled = |r: f64| {
+            let mut points = arcs[0].points.clone();
+            points.extend_from_slice(&arcs[2].points);
+            let mut fit =
+                crate::ellipse::fit_ellipse(&points, crate::ellipse::FitMethod::Geometric).unwrap();
+            fit.residual_mean = r;
+            vec![Segment::of_pair(&arcs, 0, 2, fit)]
+        };
+        // The border pair fits to ≈ 0.03 px: it beats a segment at 0.15 px and dissolves it.
+        let (found, dissolved) =
+            border_cut_pairs(&arcs, &[1], &assembled(0.15), 1280, 720, &params);
+        assert_eq!(found.len(), 1);
+        assert_eq!(dissolved, vec![0]);
+        let mut pair = found[0].arcs.clone();
+        pair.sort_unstable();
+        assert_eq!(pair, vec![0, 1]);
+        let f = &found[0].fit.ellipse;
+        assert!((f.a - e.a).abs() < 0.01 * e.a && (f.b - e.b).abs() < 0.01 * e.b);
+        // Against a segment that fits better, the assembly's choice stands.
+        let (found, dissolved) =
+            border_cut_pairs(&arcs, &[1], &assembled(1e-4), 1280, 720, &params);
+        assert!(found.is_empty() && dissolved.is_empty());
     }
 
     #[test]
@@ -227,5 +309,46 @@ mod tests {
         };
         assert_eq!(run(false), (false, 0));
         assert_eq!(run(true), (true, 0));
+    }
+
+    /// Image 70 of the wafer benchmark, seed 4: the disturbance wafer 11 slots above, seen from
+    /// below, both rims cut by the image top.
+    fn seed4_image70() -> super::super::tests::Rendered {
+        super::super::tests::benchmark_scene(
+            11,
+            (
+                -0.4801409477299735,
+                0.013631179810025928,
+                0.04411365827789297,
+            ),
+            1.0468379615662577,
+            9.169027578698064,
+            0.5740540256967773,
+            [-0.09573189222721662, -0.1806774082749862],
+            313652561,
+        )
+    }
+
+    #[test]
+    fn rims_cut_by_the_image_top_with_little_coverage_are_found() {
+        // The lower rim's right arc was matched by the assembly with a short foreign arc below
+        // it (a segment with a ≈ 122 px, residual 0.106 px); the border pair of the rim's two
+        // arcs fits to 0.045 px and takes it back. The upper rim's two arcs cover under 0.15 of
+        // its perimeter (the former coverage floor).
+        let (data, w, h, rims) = seed4_image70();
+        let view = GrayView::new(&data, w, h).unwrap();
+        let run = |min_coverage: f64| {
+            let params = DetectParams {
+                min_coverage,
+                ..DetectParams::default()
+            };
+            let dets = detect_wafers(&view, &params).unwrap();
+            (
+                super::super::tests::hit_and_wrong(&dets, &rims, 1, Rim::Upper),
+                super::super::tests::hit_and_wrong(&dets, &rims, 1, Rim::Lower),
+            )
+        };
+        assert_eq!(run(0.08), ((true, 0), (true, 0)));
+        assert_eq!(run(0.15), ((false, 0), (true, 0)));
     }
 }

@@ -88,12 +88,20 @@ pub struct DetectParams {
     /// of wafers one slot apart are kept apart by `max_rim_offset`. Default 0.10.
     pub max_rim_axis_difference: f64,
     /// A segment whose edge contrast is under this fraction of the strongest contrast among
-    /// the rims of about the same size (semi-major within 10 %) is taken for a reflection of a
-    /// neighbouring wafer in a mirror-like wafer face and rejected. 0 disables. Default 0.45.
+    /// the rims of about the same size (semi-major within 10 %) inside whose ellipse it lies
+    /// (most of its points: seen on that wafer's face) is taken for a reflection of a
+    /// neighbouring wafer in the mirror-like face and rejected. 0 disables. Default 0.45.
     pub min_contrast_ratio: f64,
     /// Smallest fraction of the fitted ellipse's perimeter covered by the segment's arcs (the
     /// validation stage of §3.2: a fit supported by too little of its ellipse is a chance
-    /// alignment, e.g. of two straight-ish clutter arcs). Default 0.15.
+    /// alignment, e.g. of two straight-ish clutter arcs). Default 0.08: a rim whose fit its
+    /// points leave undetermined is rejected on the fit's own covariance
+    /// ([`DetectParams::max_centre_sigma`], [`DetectParams::max_relative_sigma_b`]), so the
+    /// coverage only needs to keep out what no fit could confirm. At 0.15 (before those tests)
+    /// it dropped the rims of disturbance wafers high above the camera, seen only as the two
+    /// arcs at the tips of their back arc, joined across the image top (0.09–0.14 of the
+    /// perimeter; on the wafer benchmark 5 rims of seed 3 and 7 of seed 4, no detection
+    /// added that matches no rim).
     pub min_coverage: f64,
     /// Points of the lower rim of a wafer seen from above (the far edge of the side band) whose
     /// distance to the upper rim is under this fraction of the widest distance are dropped and
@@ -137,6 +145,14 @@ pub struct DetectParams {
     /// between them lies outside the image (see [`find_cut`]: the side arcs of a rim whose front
     /// arc runs out of the image top, farther apart than the assembly's `max_gap`). Default true.
     pub join_border_cut_arcs: bool,
+    /// With [`DetectParams::join_border_cut_arcs`], a border pair may also take an arc of one of
+    /// the assembly's two-arc segments when it fits better than that segment (which is then
+    /// dissolved; see [`find_cut::border_cut_pairs`]). Default true.
+    pub border_pairs_take_arcs: bool,
+    /// A dim candidate counts as a reflection (see [`DetectParams::min_contrast_ratio`]) only
+    /// when it lies inside the brighter rim, on whose face it would be mirrored; false compares
+    /// it with every brighter rim of about its size (the rule before session 11). Default true.
+    pub reflection_inside_rim: bool,
     /// A rim is reported only when its fit determines the minor axis to a standard deviation
     /// (from the fit's covariance, [`WaferEdge::covariance`]) of at most this fraction of `b`.
     /// A thin rim (`b` 5–10 px) seen along its front arc only is a half ellipse whose `a`, `b`
@@ -182,7 +198,7 @@ impl Default for DetectParams {
             max_rim_offset: 10.0,
             max_rim_axis_difference: 0.10,
             min_contrast_ratio: 0.45,
-            min_coverage: 0.15,
+            min_coverage: 0.08,
             min_rim_separation: 0.5,
             max_arc_deviation: 0.6,
             band_refinement: true,
@@ -192,6 +208,8 @@ impl Default for DetectParams {
             joint_band_fit: true,
             max_unpaired_residual: 0.15,
             join_border_cut_arcs: true,
+            border_pairs_take_arcs: true,
+            reflection_inside_rim: true,
             max_relative_sigma_b: 0.005,
             max_centre_sigma: 1.0,
             prior: None,
@@ -303,6 +321,7 @@ fn require(ok: bool, what: &'static str, value: f64, reason: &'static str) -> Re
 }
 
 /// A validated rim candidate.
+#[derive(Clone)]
 struct Candidate {
     seg: Segment,
     kind: RimKind,
@@ -322,8 +341,8 @@ struct Candidate {
 ///    corresponding to the upper surface and lower one corresponding to the lower surface"):
 ///    the bright side face lies below the upper rim and above the lower rim, so a segment whose
 ///    gradient (dark → bright) points against `up` is an upper rim, otherwise a lower rim.
-///    Reflections of neighbouring wafers in the mirror-like faces have a fraction of the rim
-///    contrast and are rejected (`min_contrast_ratio`). Upper and lower rims are paired by a
+///    Reflections of neighbouring wafers in the mirror-like faces lie inside the mirroring
+///    wafer's rim with a fraction of its contrast and are rejected (`min_contrast_ratio`). Upper and lower rims are paired by a
 ///    minimum-cost assignment (centre offset + axis differences, the lower rim's centre
 ///    displaced against `up`, within `max_rim_offset` and `max_rim_axis_difference`); the two
 ///    rims of a pair share a `wafer_id`, unpaired rims get their own. Wafer ids are numbered in
@@ -343,13 +362,25 @@ pub fn detect_wafers<T: Pixel>(
     let (s0, v0) = merge_arcs(&arcs, &params.assembly)?;
     let (mut segments, rest) = merge_segments(&arcs, s0, v0, &params.assembly)?;
     if params.join_border_cut_arcs {
-        segments.extend(find_cut::border_cut_pairs(
+        let offered: &[Segment] = if params.border_pairs_take_arcs {
+            &segments
+        } else {
+            &[]
+        };
+        let (cut, dissolved) = find_cut::border_cut_pairs(
             &arcs,
             &rest,
+            offered,
             image.width(),
             image.height(),
             &params.assembly,
-        ));
+        );
+        let mut k = 0;
+        segments.retain(|_| {
+            k += 1;
+            dissolved.binary_search(&(k - 1)).is_err()
+        });
+        segments.extend(cut);
     }
     let mut candidates = Vec::new();
     for mut seg in segments {
@@ -404,7 +435,11 @@ pub fn detect_wafers<T: Pixel>(
             contrast: contrast / count.max(1) as f64,
         });
     }
-    reject_reflections(&mut candidates, params.min_contrast_ratio);
+    reject_reflections(
+        &mut candidates,
+        params.min_contrast_ratio,
+        params.reflection_inside_rim,
+    );
     if params.band_refinement {
         for c in &mut candidates {
             refine_band_edges(image, &mut c.seg, params.assembly.residual_threshold);
@@ -475,20 +510,42 @@ fn drop_unconfirmed(edges: Vec<WaferEdge>, max_residual: f64) -> Vec<WaferEdge> 
     out
 }
 
-/// Drops candidates whose contrast is under `ratio` × the strongest contrast among candidates
-/// with a semi-major axis within 10 %.
-fn reject_reflections(candidates: &mut Vec<Candidate>, ratio: f64) {
+/// Fraction of `points` inside `e` (0 for no points).
+fn inside_fraction(e: &Ellipse, points: &[Vector2<f64>]) -> f64 {
+    if points.is_empty() {
+        return 0.0;
+    }
+    points.iter().filter(|p| e.contains(p)).count() as f64 / points.len() as f64
+}
+
+/// Drops candidates whose contrast is under `ratio` × the strongest contrast among the
+/// candidates with a semi-major axis within 10 % on whose face they are seen: a reflection of a
+/// neighbouring wafer's rim is mirrored in a wafer's face, so it lies inside that wafer's rim
+/// ellipse (most of its points: [`inside_fraction`] over one half). A dim rim beside a bright
+/// one is not a reflection of it (a flat target's lower rim, the far edge of a bright side band
+/// against a bright carrier floor, has under half the contrast of a disturbance rim higher up
+/// the image whose `a` is within 10 %). Without `inside_only`, every brighter candidate of
+/// about the same size counts.
+fn reject_reflections(candidates: &mut Vec<Candidate>, ratio: f64, inside_only: bool) {
     if ratio <= 0.0 {
         return;
     }
     let keep: Vec<bool> = candidates
         .iter()
-        .map(|c| {
+        .enumerate()
+        .map(|(i, c)| {
             let a = c.seg.fit.ellipse.a;
             let strongest = candidates
                 .iter()
-                .filter(|o| (o.seg.fit.ellipse.a - a).abs() <= 0.1 * a)
-                .map(|o| o.contrast)
+                .enumerate()
+                .filter(|&(j, o)| {
+                    j != i
+                        && (o.seg.fit.ellipse.a - a).abs() <= 0.1 * a
+                        && o.contrast * ratio > c.contrast
+                        && (!inside_only
+                            || inside_fraction(&o.seg.fit.ellipse, &c.seg.points) > 0.5)
+                })
+                .map(|(_, o)| o.contrast)
                 .fold(0.0, f64::max);
             c.contrast >= ratio * strongest
         })
@@ -1111,7 +1168,8 @@ mod tests {
         // whose fit's centre σ is ≈ 11 px: it lies within 3 px / 5 % of no true rim. The
         // centre-σ gate alone (the σ_b gate off) drops it; the rim found within 1 px / 1 % (the
         // target's upper rim) stays found. Measured without `ArcParams::restart_turn_at_cuts`
-        // (with it this scene's flat arc is split differently and no such rim is assembled).
+        // and `ArcParams::keep_flat_run_pieces` (with either, this scene's flat arc is split or
+        // joined differently and no such rim is assembled).
         let (data, w, h, rims) = benchmark_scene(
             3,
             (
@@ -1132,6 +1190,7 @@ mod tests {
             ..DetectParams::default()
         };
         centre_only.arcs.restart_turn_at_cuts = false;
+        centre_only.arcs.keep_flat_run_pieces = false;
         let without = DetectParams {
             max_centre_sigma: f64::INFINITY,
             ..centre_only
@@ -1171,9 +1230,12 @@ mod tests {
         // Image 141 of the wafer benchmark (seed 3): the disturbance wafer two slots above is
         // seen nearly edge-on (b ≈ 8.6 and 9.6 px), both rims along the front arc only. Their
         // fits come out 2.6 % and 3.3 % wide in `b` (near-misses); the fit's own standard
-        // deviation of `b` is over 0.5 % of `b` for at least one of them, and
-        // `max_relative_sigma_b` drops what the fit leaves that uncertain. The target wafer's
-        // upper rim (b ≈ 27 px, seen all round) stays a hit.
+        // deviation of `b` is over 0.5 % of `b`, or that of its centre over 1 px, for at least
+        // one of them, and `max_relative_sigma_b` / `max_centre_sigma` drop what the fit leaves
+        // that uncertain. The target wafer's upper rim (b ≈ 27 px, seen all round) stays a hit.
+        // (Since the joint band fit samples clipped bands pixel by pixel, the lower rim's refit
+        // comes out 4.7 % wide and is not taken; its own fit is then within 1 px / 1 % but still
+        // too uncertain to be reported, so the near-misses no longer drop here, they do not rise.)
         let (data, w, h, rims) = benchmark_scene(
             2,
             (
@@ -1207,18 +1269,20 @@ mod tests {
         };
         let all = DetectParams {
             max_relative_sigma_b: f64::INFINITY,
+            max_centre_sigma: f64::INFINITY,
             ..DetectParams::default()
         };
         let before = detect_wafers(&view, &all).unwrap();
         assert!(near_misses(&before) >= 1, "{before:#?}");
         assert!(
-            before.iter().any(|d| relative_sigma_b(d) > 0.005),
+            before.iter().any(|d| relative_sigma_b(d) > 0.005
+                || centre_and_minor_sigma(d).is_some_and(|(c, _)| c > 1.0)),
             "{before:#?}"
         );
         let after = detect_wafers(&view, &DetectParams::default()).unwrap();
         assert!(after.len() < before.len());
         assert!(after.iter().all(|d| !(relative_sigma_b(d) > 0.005)));
-        assert!(near_misses(&after) < near_misses(&before), "{after:#?}");
+        assert!(near_misses(&after) <= near_misses(&before), "{after:#?}");
         let (hit, wrong) = hit_and_wrong(&after, &rims, 0, Rim::Upper);
         assert!(hit, "{after:#?}");
         assert_eq!(wrong, 0);
@@ -1334,5 +1398,112 @@ mod tests {
             };
             assert!(detect_wafers(&view, &bad).is_err());
         }
+    }
+
+    /// A candidate rim on `e` (points every 2° over `t0..t1` radians) with edge `contrast`.
+    fn candidate_on(e: &Ellipse, t0: f64, t1: f64, contrast: f64) -> Candidate {
+        let n = ((t1 - t0).to_degrees() / 2.0) as usize + 1;
+        let points = e.sample(n, t0, t1).unwrap();
+        let fit =
+            crate::ellipse::fit_ellipse(&points, crate::ellipse::FitMethod::Geometric).unwrap();
+        Candidate {
+            seg: Segment {
+                arcs: vec![0],
+                points,
+                fit,
+                polarity: 1,
+            },
+            kind: RimKind::Upper,
+            contrast,
+        }
+    }
+
+    #[test]
+    fn reflections_are_dim_rims_seen_inside_a_brighter_rim() {
+        use std::f64::consts::PI;
+        // A bright rim, a dim one of about its size mirrored on its face (inside it, 10 px
+        // lower), and an equally dim one beside it (outside it, 300 px lower).
+        let bright = Ellipse::new(640.0, 300.0, 350.0, 40.0, 0.0).unwrap();
+        let mirrored = Ellipse::new(640.0, 310.0, 340.0, 18.0, 0.0).unwrap();
+        let beside = Ellipse::new(640.0, 600.0, 340.0, 40.0, 0.0).unwrap();
+        let mut candidates = vec![
+            candidate_on(&bright, 0.0, 2.0 * PI, 100.0),
+            candidate_on(&mirrored, 0.2 * PI, 0.8 * PI, 30.0),
+            candidate_on(&beside, 0.2 * PI, 0.8 * PI, 30.0),
+        ];
+        assert!((inside_fraction(&bright, &candidates[1].seg.points) - 1.0).abs() < 1e-12);
+        assert_eq!(inside_fraction(&bright, &candidates[2].seg.points), 0.0);
+        let mut any_brighter = candidates.clone();
+        reject_reflections(&mut candidates, 0.45, true);
+        let centres: Vec<f64> = candidates.iter().map(|c| c.seg.fit.ellipse.cy).collect();
+        assert_eq!(centres.len(), 2, "{centres:?}");
+        assert!((centres[0] - 300.0).abs() < 1e-6 && (centres[1] - 600.0).abs() < 1e-6);
+        // Without the inside test (the rule before), both dim rims go.
+        reject_reflections(&mut any_brighter, 0.45, false);
+        assert_eq!(any_brighter.len(), 1);
+        // Over the ratio, the mirrored rim stays; ratio 0 keeps all.
+        let mut bright_enough = vec![
+            candidate_on(&bright, 0.0, 2.0 * PI, 100.0),
+            candidate_on(&mirrored, 0.2 * PI, 0.8 * PI, 46.0),
+        ];
+        reject_reflections(&mut bright_enough, 0.45, true);
+        assert_eq!(bright_enough.len(), 2);
+        assert_eq!(inside_fraction(&bright, &[]), 0.0);
+    }
+
+    #[test]
+    fn dim_lower_rim_below_a_brighter_disturbance_rim_is_found() {
+        // Image 71 of the wafer benchmark (seed 3): the target's lower rim (the far edge of a
+        // bright side band against the bright carrier floor) has 0.44 × the edge contrast of
+        // the disturbance wafer's upper rim higher up the image, whose `a` is within 10 %; it
+        // lies outside that rim, so it is no reflection on its face.
+        let (data, w, h, rims) = benchmark_scene(
+            12,
+            (
+                -0.43925846117708955,
+                0.031129508642441198,
+                0.06248159183727277,
+            ),
+            -1.0084737908171222,
+            7.3349685001298965,
+            0.6602779745142456,
+            [0.05073686988053311, -0.2745788800464675],
+            1986257290,
+        );
+        let view = GrayView::new(&data, w, h).unwrap();
+        let dets = detect_wafers(&view, &DetectParams::default()).unwrap();
+        let (hit, wrong) = hit_and_wrong(&dets, &rims, 0, Rim::Lower);
+        assert!(hit && wrong == 0, "{dets:#?}");
+        assert!(hit_and_wrong(&dets, &rims, 0, Rim::Upper).0);
+    }
+
+    #[test]
+    fn flat_half_of_a_flat_front_arc_is_kept() {
+        // Image 99 of the wafer benchmark (seed 3): the target's lower rim (b/a = 0.05) runs
+        // from its right tip past its lowest point into a slot tooth's straight edge; the half
+        // between the lowest point (a quadrant change) and the junction (an inflection) sags
+        // under `straight_tolerance`. Dropped as straight, the rim had one arc and no segment.
+        let (data, w, h, rims) = benchmark_scene(
+            20,
+            (
+                -0.5473006008955796,
+                0.04877152519534442,
+                0.02750555238349963,
+            ),
+            -0.15462136217968414,
+            9.409342484615227,
+            0.9741349486246411,
+            [-0.15186369065681382, -0.12473474621322161],
+            886084855,
+        );
+        let view = GrayView::new(&data, w, h).unwrap();
+        let lower = |keep: bool| {
+            let mut params = DetectParams::default();
+            params.arcs.keep_flat_run_pieces = keep;
+            let dets = detect_wafers(&view, &params).unwrap();
+            hit_and_wrong(&dets, &rims, 0, Rim::Lower)
+        };
+        assert_eq!(lower(false), (false, 0));
+        assert_eq!(lower(true), (true, 0));
     }
 }
