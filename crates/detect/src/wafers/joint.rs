@@ -538,7 +538,7 @@ fn solve(
 
 /// Largest standardised step [`far_side_step`] in a profile's far side, in units of the grey-level
 /// noise, before the profile is dropped: a 3σ test.
-const MAX_FAR_SIDE_STEP: f64 = 3.0;
+pub(super) const MAX_FAR_SIDE_STEP: f64 = 3.0;
 
 /// The band model takes the image beyond the band's far edge as one level `L₂`. Where another
 /// edge runs just beyond the band — on the benchmark's images the front edge of the carrier's
@@ -607,39 +607,6 @@ fn angle_range(e: &Ellipse, points: &[Vector2<f64>]) -> Option<(f64, f64)> {
         .map(|&t| rel(t))
         .fold(f64::NEG_INFINITY, f64::max);
     (hi > lo).then_some((m + lo, m + hi))
-}
-
-/// Fits the partially seen rim `current` (supported by `points`) of a wafer whose other rim,
-/// `reference`, is well seen, with the joint band model of the module doc. `up` is the unit
-/// image direction of the wafer normal; `sigma0` a starting blur (pixels). `None` when fewer
-/// than [`MIN_PROFILES`] band profiles are usable or the fit fails; the caller decides whether
-/// to keep the result.
-///
-/// With `prior`, the offset `s` of the target's centre from the reference's along `up` gets the
-/// Gaussian prior [`OffsetPrior`] (from the wafer's thickness, [`super::rim_prior`]): near the
-/// ends of the front arc the band's far edge turns into the wafer's side contour, and there the
-/// offset and `b` trade off against each other (both move the far edge the same way); the prior
-/// pins the offset and leaves `b` to the data. Its weight is the grey-level noise (the median
-/// RMS of the per-profile band fits, corrected for their 6 unknowns) over the prior's σ.
-pub(super) fn fit_partner<T: Pixel>(
-    image: &GrayView<'_, T>,
-    reference: &Ellipse,
-    current: &Ellipse,
-    points: &[Vector2<f64>],
-    up: Vector2<f64>,
-    sigma0: f64,
-    prior: Option<OffsetPrior>,
-) -> Option<PartnerFit> {
-    fit_partner_screened(
-        image,
-        reference,
-        current,
-        points,
-        up,
-        sigma0,
-        prior,
-        MAX_FAR_SIDE_STEP,
-    )
 }
 
 /// The band profiles of [`fit_partner`] over the eccentric angles `[t_lo, t_hi]` of the
@@ -715,10 +682,22 @@ fn build_profiles<T: Pixel>(
     (profiles, levels, noise)
 }
 
-/// [`fit_partner`] with the far-side screen's limit `max_step` ([`MAX_FAR_SIDE_STEP`]; `+∞`
-/// turns the screen off).
+/// Fits the partially seen rim `current` (supported by `points`) of a wafer whose other rim,
+/// `reference`, is well seen, with the joint band model of the module doc. `up` is the unit
+/// image direction of the wafer normal; `sigma0` a starting blur (pixels). `None` when fewer
+/// than [`MIN_PROFILES`] band profiles are usable or the fit fails; the caller decides whether
+/// to keep the result.
+///
+/// With `prior`, the offset `s` of the target's centre from the reference's along `up` gets the
+/// Gaussian prior [`OffsetPrior`] (from the wafer's thickness, [`super::rim_prior`]): near the
+/// ends of the front arc the band's far edge turns into the wafer's side contour, and there the
+/// offset and `b` trade off against each other (both move the far edge the same way); the prior
+/// pins the offset and leaves `b` to the data. Its weight is the grey-level noise (the median
+/// RMS of the per-profile band fits, corrected for their 6 unknowns) over the prior's σ.
+///
+/// `max_step` is the far-side screen's limit ([`MAX_FAR_SIDE_STEP`]; `+∞` turns the screen off).
 #[allow(clippy::too_many_arguments)]
-fn fit_partner_screened<T: Pixel>(
+pub(super) fn fit_partner<T: Pixel>(
     image: &GrayView<'_, T>,
     reference: &Ellipse,
     current: &Ellipse,
@@ -761,7 +740,6 @@ fn fit_partner_screened<T: Pixel>(
     let sigma_n = if noise_level > 0.0 { noise_level } else { 0.0 };
     let prior = match prior {
         Some(OffsetPrior { mean, sigma }) => {
-            let sigma_n = noise_level;
             if !(sigma > 0.0 && sigma_n > 0.0 && mean.is_finite()) {
                 return None;
             }
@@ -1223,8 +1201,7 @@ mod tests {
         let (upper, lower, start) = target_rims_and_biased_start(&rims);
         let up = Vector2::new(0.0, -1.0);
         let points = lower.sample(200, 0.3, std::f64::consts::PI - 0.3).unwrap();
-        let fit =
-            fit_partner_screened(&view, &upper, &start, &points, up, 0.9, None, max_step).unwrap();
+        let fit = fit_partner(&view, &upper, &start, &points, up, 0.9, None, max_step).unwrap();
         (fit.ellipse.b - lower.b) / lower.b
     }
 
@@ -1337,7 +1314,17 @@ mod tests {
         let (upper, lower, start) = target_rims_and_biased_start(&rims);
         let up = Vector2::new(0.0, -1.0);
         let points = lower.sample(200, 0.5, std::f64::consts::PI - 0.5).unwrap();
-        let fit = fit_partner(&view, &upper, &start, &points, up, 0.9, None).unwrap();
+        let fit = fit_partner(
+            &view,
+            &upper,
+            &start,
+            &points,
+            up,
+            0.9,
+            None,
+            MAX_FAR_SIDE_STEP,
+        )
+        .unwrap();
         let e = fit.ellipse;
         let centre = (e.cx - lower.cx).hypot(e.cy - lower.cy);
         assert!(centre < 0.25, "centre error {centre}: {e:?} vs {lower:?}");

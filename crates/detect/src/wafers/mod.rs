@@ -530,24 +530,16 @@ fn reject_reflections(candidates: &mut Vec<Candidate>, ratio: f64, inside_only: 
     if ratio <= 0.0 {
         return;
     }
+    // (A candidate is never `ratio` ≤ 1 times brighter than itself.)
     let keep: Vec<bool> = candidates
         .iter()
-        .enumerate()
-        .map(|(i, c)| {
+        .map(|c| {
             let a = c.seg.fit.ellipse.a;
-            let strongest = candidates
-                .iter()
-                .enumerate()
-                .filter(|&(j, o)| {
-                    j != i
-                        && (o.seg.fit.ellipse.a - a).abs() <= 0.1 * a
-                        && o.contrast * ratio > c.contrast
-                        && (!inside_only
-                            || inside_fraction(&o.seg.fit.ellipse, &c.seg.points) > 0.5)
-                })
-                .map(|(_, o)| o.contrast)
-                .fold(0.0, f64::max);
-            c.contrast >= ratio * strongest
+            !candidates.iter().any(|o| {
+                o.contrast * ratio > c.contrast
+                    && (o.seg.fit.ellipse.a - a).abs() <= 0.1 * a
+                    && (!inside_only || inside_fraction(&o.seg.fit.ellipse, &c.seg.points) > 0.5)
+            })
         })
         .collect();
     let mut k = 0;

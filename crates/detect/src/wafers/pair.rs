@@ -458,8 +458,16 @@ fn joint_partner<T: Pixel>(
             mean: -p.offset(reference.a),
             sigma: p.sigma(reference.a),
         });
-    let Some(fit) = joint::fit_partner(image, &reference, &current, &c.seg.points, up, 0.9, prior)
-    else {
+    let Some(fit) = joint::fit_partner(
+        image,
+        &reference,
+        &current,
+        &c.seg.points,
+        up,
+        0.9,
+        prior,
+        joint::MAX_FAR_SIDE_STEP,
+    ) else {
         return;
     };
     let e = fit.ellipse;
@@ -486,7 +494,7 @@ fn joint_partner<T: Pixel>(
             cov[(r, k)] += rc[(r, k)];
         }
     }
-    take_refit_gated(
+    take_refit(
         c,
         e,
         cov,
@@ -544,13 +552,6 @@ fn near_own_fit(e: &Ellipse, own: &Ellipse) -> bool {
     (e.cx - own.cx).hypot(e.cy - own.cy) < 2.0 && (e.b - own.b).abs() < 0.05 * own.b
 }
 
-/// Gives rim `c` the refitted ellipse `e` (covariance `covariance`) when its own points still
-/// fit it (mean orthogonal distance under the assembly's residual threshold); the points are
-/// kept as they are and the residuals re-measured on them.
-fn take_refit(c: &mut Candidate, e: Ellipse, covariance: Matrix5<f64>, params: &DetectParams) {
-    take_refit_gated(c, e, covariance, params.assembly.residual_threshold);
-}
-
 /// How much farther than the assembly's residual threshold the rim's own points may lie, in the
 /// mean, from a joint band refit ([`joint_partner`]) that is kept. The own points are the Canny
 /// edge points of a narrow band, whose two edges pull each other's gradient maxima apart
@@ -561,8 +562,11 @@ fn take_refit(c: &mut Candidate, e: Ellipse, covariance: Matrix5<f64>, params: &
 /// 2 → recall 0.8741, 3 or 4 → 0.8755 (seed 3).
 const JOINT_REFIT_RESIDUAL_FACTOR: f64 = 3.0;
 
-/// [`take_refit`] with the mean-residual limit `gate` (pixels).
-fn take_refit_gated(c: &mut Candidate, e: Ellipse, covariance: Matrix5<f64>, gate: f64) {
+/// Gives rim `c` the refitted ellipse `e` (covariance `covariance`) when its own points still
+/// fit it (mean orthogonal distance under `gate` pixels: the assembly's residual threshold, or
+/// [`JOINT_REFIT_RESIDUAL_FACTOR`] times it for a joint band refit); the points are kept as they
+/// are and the residuals re-measured on them.
+fn take_refit(c: &mut Candidate, e: Ellipse, covariance: Matrix5<f64>, gate: f64) {
     let d = e.orthogonal_distances(&c.seg.points);
     let n = d.len().max(1) as f64;
     let residual_mean = d.iter().map(|x| x.abs()).sum::<f64>() / n;
@@ -635,7 +639,12 @@ fn refit_front_arc_pair(
         return;
     }
     if let Some(c) = slots.get_mut(l).and_then(|c| c.as_mut()) {
-        take_refit(c, fit.lower, fit.lower_covariance(), params);
+        take_refit(
+            c,
+            fit.lower,
+            fit.lower_covariance(),
+            params.assembly.residual_threshold,
+        );
     }
 }
 
