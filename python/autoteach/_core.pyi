@@ -565,6 +565,7 @@ def wafer_detect(
     keep_flat_run_pieces: bool | None = None,
     border_pairs_take_arcs: bool | None = None,
     reflection_inside_rim: bool | None = None,
+    seek_missing_partner: bool | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 

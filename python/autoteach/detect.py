@@ -240,6 +240,7 @@ def detect_wafers(
     keep_flat_run_pieces: bool = True,
     border_pairs_take_arcs: bool = True,
     reflection_inside_rim: bool = True,
+    seek_missing_partner: bool = True,
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -316,6 +317,11 @@ def detect_wafers(
         reflection_inside_rim: A dim rim counts as a reflection (``min_contrast_ratio``) only
             when it lies inside the brighter rim on whose face it would be mirrored; ``False``
             compares it with every brighter rim of about its size.
+        seek_missing_partner: The missing rim of a wafer of which only one rim was found is
+            sought as the far edge of the side band along the found rim's front arc (per-profile
+            band fits place a first guess, the joint band model of both rims fits it); it is
+            reported when the fit stays within 2 px and 5 % of the guess and its measured far
+            edges fit it, and passes the covariance screens like every rim.
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -364,6 +370,7 @@ def detect_wafers(
         keep_flat_run_pieces=bool(keep_flat_run_pieces),
         border_pairs_take_arcs=bool(border_pairs_take_arcs),
         reflection_inside_rim=bool(reflection_inside_rim),
+        seek_missing_partner=bool(seek_missing_partner),
     )
     return [
         WaferEdge(

@@ -424,9 +424,9 @@ def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, 
     Unless ``options`` say otherwise, the detector runs with the arc rules and rim screens of
     the session the Table 5.1 figures were measured with (``restart_turn_at_cuts=False``,
     ``max_relative_sigma_b=inf``, ``max_centre_sigma=inf``, ``keep_flat_run_pieces=False``,
-    ``min_coverage=0.15``, ``border_pairs_take_arcs=False``, ``reflection_inside_rim=False``; the
-    detector's defaults changed in sessions 10 and 11 for the wafer benchmark), so the hand-eye
-    pipeline is unchanged until it is re-measured with them.
+    ``min_coverage=0.15``, ``border_pairs_take_arcs=False``, ``reflection_inside_rim=False``,
+    ``seek_missing_partner=False``; the detector's defaults changed in sessions 10–12 for the
+    wafer benchmark), so the hand-eye pipeline is unchanged until it is re-measured with them.
     """
     from concurrent.futures import ThreadPoolExecutor
 
@@ -442,6 +442,7 @@ def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, 
         "min_coverage": 0.15,
         "border_pairs_take_arcs": False,
         "reflection_inside_rim": False,
+        "seek_missing_partner": False,
         **options,
     }
     images = np.asarray(images)

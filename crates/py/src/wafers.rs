@@ -126,6 +126,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("keep_flat_run_pieces", p.arcs.keep_flat_run_pieces)?;
     d.set_item("border_pairs_take_arcs", p.border_pairs_take_arcs)?;
     d.set_item("reflection_inside_rim", p.reflection_inside_rim)?;
+    d.set_item("seek_missing_partner", p.seek_missing_partner)?;
     d.set_item("residual_threshold", p.assembly.residual_threshold)?;
     d.set_item("max_gap", p.assembly.max_gap)?;
     d.set_item("up", (p.up[0], p.up[1]))?;
@@ -159,7 +160,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     share_rim_shape=None, share_rim_centre=None, joint_band_fit=None, inflection_sigmas=None,
     join_border_cut_arcs=None, thickness_ratio=None, focal_length=None, restart_turn_at_cuts=None,
     max_relative_sigma_b=None, max_centre_sigma=None, keep_flat_run_pieces=None,
-    border_pairs_take_arcs=None, reflection_inside_rim=None
+    border_pairs_take_arcs=None, reflection_inside_rim=None, seek_missing_partner=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -196,6 +197,7 @@ fn wafer_detect(
     keep_flat_run_pieces: Option<bool>,
     border_pairs_take_arcs: Option<bool>,
     reflection_inside_rim: Option<bool>,
+    seek_missing_partner: Option<bool>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let mut params = DetectParams::default();
     // `None` keeps the library default (`wafer_detect_defaults`).
@@ -222,6 +224,7 @@ fn wafer_detect(
         (&mut params.arcs.keep_flat_run_pieces, keep_flat_run_pieces),
         (&mut params.border_pairs_take_arcs, border_pairs_take_arcs),
         (&mut params.reflection_inside_rim, reflection_inside_rim),
+        (&mut params.seek_missing_partner, seek_missing_partner),
     ] {
         if let Some(v) = value {
             *slot = v;

@@ -299,9 +299,12 @@ mod tests {
             .find(|(wafer, rim, _, _)| *wafer == 1 && *rim == Rim::Upper)
             .unwrap();
         assert!(e.cy - e.b < 0.0, "{e:?}");
+        // Without the join, the partner search (`seek.rs`) would find the upper rim from the
+        // lower one: off here, so that only this rule is compared.
         let run = |join: bool| {
             let params = DetectParams {
                 join_border_cut_arcs: join,
+                seek_missing_partner: join,
                 ..DetectParams::default()
             };
             let dets = detect_wafers(&view, &params).unwrap();
@@ -337,9 +340,12 @@ mod tests {
         // its perimeter (the former coverage floor).
         let (data, w, h, rims) = seed4_image70();
         let view = GrayView::new(&data, w, h).unwrap();
+        // The partner search (`seek.rs`) finds the upper rim from the lower one too: off with the
+        // former floor, so that only this rule is compared.
         let run = |min_coverage: f64| {
             let params = DetectParams {
                 min_coverage,
+                seek_missing_partner: min_coverage < 0.15,
                 ..DetectParams::default()
             };
             let dets = detect_wafers(&view, &params).unwrap();

@@ -134,6 +134,9 @@ pub struct DetectParams {
     /// [`joint`]: the far edge of the side band on the profiles of the well-seen rim, with one
     /// blur and one smooth band level for all profiles), after [`share_shape`]. Default true.
     pub joint_band_fit: bool,
+    /// Seeks the missing rim of a wafer of which only one rim was found, as the far edge of the
+    /// side band along the found rim's front arc (see [`seek`]). Default true.
+    pub seek_missing_partner: bool,
     /// A rim left without a partner by the pairing is kept only when its mean residual (after
     /// the band refinement) is under this (pixels). A rim edge is a clean step or band edge
     /// (residual 0.03–0.12 px on the benchmark scenes); assemblies of slot-tooth clutter or of
@@ -206,6 +209,7 @@ impl Default for DetectParams {
             share_rim_centre: true,
             max_arc_residual_ratio: 1.5,
             joint_band_fit: true,
+            seek_missing_partner: true,
             max_unpaired_residual: 0.15,
             join_border_cut_arcs: true,
             border_pairs_take_arcs: true,
@@ -556,6 +560,7 @@ mod pair;
 mod refine;
 mod rim_prior;
 mod rim_shared;
+mod seek;
 mod validate;
 
 use pair::pair_rims;
@@ -1091,6 +1096,7 @@ mod tests {
             max_rim_axis_difference: 0.03,
             max_relative_sigma_b: f64::INFINITY,
             max_centre_sigma: f64::INFINITY,
+            seek_missing_partner: false,
             ..DetectParams::default()
         };
         gate.arcs.restart_turn_at_cuts = false;
@@ -1307,12 +1313,13 @@ mod tests {
         let view = GrayView::new(&data, w, h).unwrap();
         // The rules of the session this test was written in (no `restart_turn_at_cuts`, no
         // `max_relative_sigma_b` or `max_centre_sigma`, each of which drops the unpaired off
-        // fit by itself).
+        // fit by itself, and no partner search).
         let run = |gate: f64| {
             let mut params = DetectParams {
                 max_rim_axis_difference: gate,
                 max_relative_sigma_b: f64::INFINITY,
                 max_centre_sigma: f64::INFINITY,
+                seek_missing_partner: false,
                 ..DetectParams::default()
             };
             params.arcs.restart_turn_at_cuts = false;
@@ -1489,8 +1496,13 @@ mod tests {
             886084855,
         );
         let view = GrayView::new(&data, w, h).unwrap();
+        // Without the rule, the partner search (`seek.rs`) finds the lower rim from the upper
+        // one: off here, so that only this rule is compared.
         let lower = |keep: bool| {
-            let mut params = DetectParams::default();
+            let mut params = DetectParams {
+                seek_missing_partner: keep,
+                ..DetectParams::default()
+            };
             params.arcs.keep_flat_run_pieces = keep;
             let dets = detect_wafers(&view, &params).unwrap();
             hit_and_wrong(&dets, &rims, 0, Rim::Lower)

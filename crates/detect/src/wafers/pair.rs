@@ -96,15 +96,29 @@ pub(super) fn pair_rims<T: Pixel>(
     for (wafer_id, g) in groups.iter().enumerate() {
         for &i in g {
             if let Some(c) = slots[i].take() {
+                // A lone rim that stands on its own (`drop_unconfirmed` keeps it): its partner
+                // sought along the side band (`seek.rs`).
+                let partner = (g.len() == 1
+                    && params.seek_missing_partner
+                    && c.seg.fit.residual_mean < params.max_unpaired_residual)
+                    .then(|| super::seek::seek_partner(image, &c, up, params))
+                    .flatten()
+                    .map(|p| WaferEdge { wafer_id, ..p });
                 let fit = c.seg.fit;
-                out.push(WaferEdge {
+                let own = WaferEdge {
                     ellipse: fit.ellipse,
                     points: c.seg.points.iter().map(|p| Point2::new(p.x, p.y)).collect(),
                     residual: fit.residual_mean,
                     covariance: fit.covariance,
                     kind: c.kind,
                     wafer_id,
-                });
+                };
+                // Upper before lower.
+                match partner {
+                    Some(p) if p.kind == RimKind::Upper => out.extend([p, own]),
+                    Some(p) => out.extend([own, p]),
+                    None => out.push(own),
+                }
             }
         }
     }
@@ -474,7 +488,23 @@ fn joint_partner<T: Pixel>(
     if !near_own_fit(&e, &current) {
         return;
     }
-    // (cx, cy, b) = (rcx + s·up.x, rcy + s·up.y, b): J maps (s, b).
+    take_refit(
+        c,
+        e,
+        joint_covariance(&fit, up, reference_cov.as_ref()),
+        JOINT_REFIT_RESIDUAL_FACTOR * params.assembly.residual_threshold,
+    );
+}
+
+/// Covariance of `(cx, cy, a, b, θ)` of a rim fitted by [`joint::fit_partner`]: the joint
+/// fit's `(s, b)` covariance mapped to `(cx, cy, b)` (`(cx, cy) = reference centre + s·up`),
+/// plus the reference's covariance `reference_cov` of the shared parameters (its centre, `a`,
+/// `θ`).
+pub(super) fn joint_covariance(
+    fit: &joint::PartnerFit,
+    up: Vector2<f64>,
+    reference_cov: Option<&Matrix5<f64>>,
+) -> Matrix5<f64> {
     let mut jac = nalgebra::SMatrix::<f64, 5, 2>::zeros();
     jac[(0, 0)] = up.x;
     jac[(1, 0)] = up.y;
@@ -494,12 +524,7 @@ fn joint_partner<T: Pixel>(
             cov[(r, k)] += rc[(r, k)];
         }
     }
-    take_refit(
-        c,
-        e,
-        cov,
-        JOINT_REFIT_RESIDUAL_FACTOR * params.assembly.residual_threshold,
-    );
+    cov
 }
 
 /// Whether the wafer of the rim pair in slots `(i, j)` (one upper, one lower, either order) is
@@ -560,7 +585,7 @@ fn near_own_fit(e: &Ellipse, own: &Ellipse) -> bool {
 /// the truth), and the threshold of 0.25 px rejected these refits for the own fit (`b` 1.4–2.7 %
 /// off). Measured on the benchmark (210 images, with pixel profiles for clipped bands): factor
 /// 2 → recall 0.8741, 3 or 4 → 0.8755 (seed 3).
-const JOINT_REFIT_RESIDUAL_FACTOR: f64 = 3.0;
+pub(super) const JOINT_REFIT_RESIDUAL_FACTOR: f64 = 3.0;
 
 /// Gives rim `c` the refitted ellipse `e` (covariance `covariance`) when its own points still
 /// fit it (mean orthogonal distance under `gate` pixels: the assembly's residual threshold, or
@@ -587,7 +612,7 @@ fn take_refit(c: &mut Candidate, e: Ellipse, covariance: Matrix5<f64>, gate: f64
 /// Mean of `(p − c)·up / b` over `points` (`c`, `b` of `e`): the side of the centre on which a
 /// rim is seen. A front arc seen from above lies against `up` (≈ −0.8 for half an ellipse), seen
 /// from below along `up` (≈ +0.8); a rim seen all round gives ≈ 0.
-fn front_side(e: &Ellipse, points: &[Vector2<f64>], up: Vector2<f64>) -> f64 {
+pub(super) fn front_side(e: &Ellipse, points: &[Vector2<f64>], up: Vector2<f64>) -> f64 {
     let n = points.len().max(1) as f64;
     points
         .iter()
