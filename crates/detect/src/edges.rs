@@ -755,8 +755,9 @@ pub fn link_edges(map: &EdgeMap, params: &LinkParams) -> Result<Vec<Vec<u32>>> {
     let mut next = vec![NONE; n];
     let mut prev = vec![NONE; n];
     let mut prev_dist = vec![f64::INFINITY; n];
-    for (i, e) in map.edgels.iter().enumerate() {
-        let gn = e.grad.norm();
+    // Gradient magnitudes, once per edgel (each is read again by up to eight neighbours).
+    let norms: Vec<f64> = map.edgels.iter().map(|e| e.grad.norm()).collect();
+    for (i, (e, &gn)) in map.edgels.iter().zip(&norms).enumerate() {
         if !(gn > 0.0) {
             continue;
         }
@@ -781,7 +782,7 @@ pub fn link_edges(map: &EdgeMap, params: &LinkParams) -> Result<Vec<Vec<u32>>> {
                 if !(d.dot(&t) > 0.0) {
                     continue;
                 }
-                let fg = f.grad.norm();
+                let fg = norms[j as usize];
                 if !(f.grad.dot(&g) >= params.min_gradient_cos * fg) {
                     continue;
                 }

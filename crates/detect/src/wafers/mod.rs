@@ -361,6 +361,20 @@ pub fn detect_wafers<T: Pixel>(
     image: &GrayView<'_, T>,
     params: &DetectParams,
 ) -> Result<Vec<WaferEdge>> {
+    // The stages' parallel loops (Canny's row blocks, the assembly's pair fits, the band
+    // profiles of each rim: a dozen or more per image) each hand their work to rayon's pool
+    // when called from outside it, and the calling thread sleeps until the pool is done: two
+    // thread wake-ups per loop. `rayon::scope` moves the whole detection onto a worker of the
+    // pool once, so the loops run there directly (inline with one thread, work-stealing with
+    // more). The same work in the same order: the result does not change.
+    rayon::scope(|_| detect_wafers_on_pool(image, params))
+}
+
+/// [`detect_wafers`], run on a worker of rayon's pool.
+fn detect_wafers_on_pool<T: Pixel>(
+    image: &GrayView<'_, T>,
+    params: &DetectParams,
+) -> Result<Vec<WaferEdge>> {
     let up = params.validate()?;
     let arcs = detect_arcs(image, &params.canny, &params.link, &params.arcs)?;
     let (s0, v0) = merge_arcs(&arcs, &params.assembly)?;
