@@ -14,7 +14,7 @@
 //! when its top is clipped.
 
 use super::{GrayView, Pixel, Vector2};
-use nalgebra::{Matrix6, Vector6};
+use nalgebra::{Matrix6, SMatrix, SVector, Vector6};
 
 /// First profile offset (pixels, from the edge point toward the bright side).
 pub(super) const T_MIN: f64 = -3.0;
@@ -289,28 +289,20 @@ fn normal_equations(
 /// `m.cholesky()` followed by `solve(rhs)` (column-oriented factorisation with the updates
 /// `L[i][j] ← (−L[j][k])·L[i][k] + L[i][j]`, division of the column below the diagonal by the
 /// square root, forward substitution with column updates, back substitution with dot products
-/// summed from +0), so the result is bit-identical — written out for the fixed size, where
+/// summed from +0), so the result is bit-identical — written out for fixed sizes, where
 /// nalgebra's generic column views cost more than the arithmetic (a test compares both).
-#[inline]
-pub(super) fn cholesky_solve(m: &Matrix6<f64>, rhs: &Vector6<f64>) -> Option<Vector6<f64>> {
-    cholesky_solve_leading::<6>(m, rhs)
-}
-
-/// [`cholesky_solve`] of the leading `N × N` block of `m` and the first `N` entries of `rhs`;
-/// the entries from `N` on of the result are zero.
 ///
-/// When the rows and columns from `N` on are those of the identity (a parameter held fixed:
-/// [`fit`] with σ fixed), the first `N` entries are bit-identical to those of
-/// [`cholesky_solve`] of the whole matrix: there the trailing columns of the factor are the
-/// identity's and the trailing entries of the off-diagonal factor columns stay +0, so every
-/// operation they enter adds a zero product to a sum that starts from +0 or is not zero (a
-/// test compares both) — at a fraction of the arithmetic (5³ against 6³).
+/// Of a matrix whose rows and columns from `k` on are those of the identity (a parameter held
+/// fixed: [`fit`] with σ fixed), the solve of the leading `k × k` block gives the first `k`
+/// entries bit-identical to the solve of the whole: there the trailing columns of the factor
+/// are the identity's and the trailing entries of the off-diagonal factor columns stay +0, so
+/// every operation they enter adds a zero product to a sum that starts from +0 or is not zero
+/// (a test compares both) — at a fraction of the arithmetic (5³ against 6³).
 #[inline]
-fn cholesky_solve_leading<const N: usize>(
-    m: &Matrix6<f64>,
-    rhs: &Vector6<f64>,
-) -> Option<Vector6<f64>> {
-    const { assert!(N <= 6) };
+pub(super) fn cholesky_solve<const N: usize>(
+    m: &SMatrix<f64, N, N>,
+    rhs: &SVector<f64, N>,
+) -> Option<SVector<f64, N>> {
     // l[c][r]: column-major like nalgebra, only r ≥ c is used.
     let mut l = [[0.0f64; N]; N];
     for (c, col) in l.iter_mut().enumerate() {
@@ -340,7 +332,7 @@ fn cholesky_solve_leading<const N: usize>(
         }
     }
     let mut b = [0.0f64; N];
-    b.copy_from_slice(&rhs.as_slice()[..N]);
+    b.copy_from_slice(rhs.as_slice());
     // L·y = b.
     for i in 0..N {
         let coeff = b[i] / l[i][i];
@@ -357,8 +349,19 @@ fn cholesky_solve_leading<const N: usize>(
         }
         b[i] = (b[i] - dot) / l[i][i];
     }
-    let mut x = Vector6::<f64>::zeros();
-    x.as_mut_slice()[..N].copy_from_slice(&b);
+    Some(SVector::from(b))
+}
+
+/// The step of [`fit`] with σ fixed: [`cholesky_solve`] of the leading 5 × 5 block (see there),
+/// σ's entry zero.
+#[inline]
+fn cholesky_solve_sigma_fixed(m: &Matrix6<f64>, rhs: &Vector6<f64>) -> Option<Vector6<f64>> {
+    let head = cholesky_solve::<5>(
+        &m.fixed_view::<5, 5>(0, 0).into_owned(),
+        &rhs.fixed_rows::<5>(0).into_owned(),
+    )?;
+    let mut x = Vector6::zeros();
+    x.fixed_rows_mut::<5>(0).copy_from(&head);
     Some(x)
 }
 
@@ -392,7 +395,7 @@ pub(super) fn fit(
             let solved = if sigma_free {
                 cholesky_solve(&damped, &(-g))
             } else {
-                cholesky_solve_leading::<5>(&damped, &(-g))
+                cholesky_solve_sigma_fixed(&damped, &(-g))
             };
             let Some(step) = solved else {
                 lambda *= 10.0;
@@ -505,7 +508,7 @@ mod tests {
             let ours = cholesky_solve(&dirty, &rhs);
             if case % 3 == 1 {
                 // σ fixed: the 5 × 5 solve of the leading block gives the same first 5 entries.
-                let leading = cholesky_solve_leading::<5>(&dirty, &rhs);
+                let leading = cholesky_solve_sigma_fixed(&dirty, &rhs);
                 assert_eq!(leading.is_some(), reference.is_some(), "case {case}");
                 if let (Some(x), Some(y)) = (reference, leading) {
                     for i in 0..5 {

@@ -740,6 +740,62 @@ mod tests {
     }
 
     #[test]
+    fn lower_rims_whose_a_differs_from_the_reference_are_recovered() {
+        // Benchmark images whose target lower rim, with the reference's `a` copied, traded its
+        // offset against `b` (a near-miss, `b` 1.0–1.2 % off): seed 3 image 129, seed 4 images
+        // 54 and 178 (clipped band). The joint fit's `δa` (`joint::PARTNER_A_SIGMA`) takes the
+        // ends of the front arc.
+        for (what, k, s) in [
+            (
+                "seed 3 image 129",
+                10,
+                (
+                    -0.5425593708144107,
+                    -0.006148618808287411,
+                    0.030857929249103223,
+                    1.351070569232192,
+                    8.05799942486017,
+                    1.4362948917973783,
+                    [0.11351282875031143, -0.14958753277998607],
+                    1544779414,
+                ),
+            ),
+            (
+                "seed 4 image 54",
+                15,
+                (
+                    -0.5030461006486473,
+                    -0.04966215426675306,
+                    0.042951513712110596,
+                    1.0524040012485862,
+                    6.000336714710295,
+                    0.6827729717822332,
+                    [-0.08181234281486363, 0.23904915098535068],
+                    1786864036,
+                ),
+            ),
+            (
+                "seed 4 image 178",
+                19,
+                (
+                    -0.5454966571293337,
+                    0.01759327356602486,
+                    0.025172591018541485,
+                    -0.3195808803439739,
+                    7.609333271056408,
+                    1.2957522492957196,
+                    [-0.05091365021067318, -0.23712297737600935],
+                    708666406,
+                ),
+            ),
+        ] {
+            let (dets, truth) = benchmark_scene(k, s);
+            assert_found(&dets, &truth, 0, Rim::Lower, what);
+            assert_found(&dets, &truth, 0, Rim::Upper, what);
+        }
+    }
+
+    #[test]
     fn partner_roles_follow_coverage_then_view() {
         assert_eq!(partner_roles(0.9, false, 0.5, true), Some(true));
         assert_eq!(partner_roles(0.5, true, 0.9, false), Some(false));
