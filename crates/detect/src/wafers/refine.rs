@@ -27,15 +27,7 @@ const BAND_POINTS: usize = 240;
 /// unbiased).
 pub fn refine_band_edges<T: Pixel>(image: &GrayView<'_, T>, seg: &mut Segment, threshold: f64) {
     let e = seg.fit.ellipse;
-    let (ct, st) = (e.theta.cos(), e.theta.sin());
-    let normal = |p: &Vector2<f64>| {
-        let (dx, dy) = (p.x - e.cx, p.y - e.cy);
-        let (xl, yl) = (dx * ct + dy * st, -dx * st + dy * ct);
-        let (gx, gy) = (xl / (e.a * e.a), yl / (e.b * e.b));
-        let n = Vector2::new(gx * ct - gy * st, gx * st + gy * ct);
-        let len = n.norm();
-        (len > 0.0).then(|| n / len)
-    };
+    let normal = |p: &Vector2<f64>| level_set_normal(&e, p);
     let n = seg.points.len();
     if n < 10 {
         return;
@@ -107,6 +99,18 @@ pub fn refine_band_edges<T: Pixel>(image: &GrayView<'_, T>, seg: &mut Segment, t
         seg.points = moved;
         seg.fit = fit;
     }
+}
+
+/// The unit normal at `p` of the level set of `e`'s implicit function through `p` (the
+/// direction of its gradient, outward), `None` at the centre.
+pub(super) fn level_set_normal(e: &Ellipse, p: &Vector2<f64>) -> Option<Vector2<f64>> {
+    let (st, ct) = e.theta.sin_cos();
+    let (dx, dy) = (p.x - e.cx, p.y - e.cy);
+    let (xl, yl) = (dx * ct + dy * st, -dx * st + dy * ct);
+    let (gx, gy) = (xl / (e.a * e.a), yl / (e.b * e.b));
+    let n = Vector2::new(gx * ct - gy * st, gx * st + gy * ct);
+    let len = n.norm();
+    (len > 0.0).then(|| n / len)
 }
 
 /// Smallest fraction of a rim's profiles that must be bands for [`screen_band_points`] to drop

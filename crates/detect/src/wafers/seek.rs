@@ -15,7 +15,7 @@
 use super::band;
 use super::joint::{self, OffsetPrior};
 use super::pair::{front_side, joint_covariance};
-use super::refine::is_band;
+use super::refine::{is_band, level_set_normal};
 use super::{Candidate, DetectParams, GrayView, Pixel, RimKind, Vector2, WaferEdge, median};
 use autoteach_geometry::conic::Ellipse;
 use nalgebra::Point2;
@@ -55,15 +55,6 @@ pub(super) fn seek_partner<T: Pixel>(
     if on_front.len() < 2 * MIN_BANDS {
         return None;
     }
-    let (st, ct) = e.theta.sin_cos();
-    let normal = |p: &Vector2<f64>| {
-        let (dx, dy) = (p.x - e.cx, p.y - e.cy);
-        let (xl, yl) = (dx * ct + dy * st, -dx * st + dy * ct);
-        let (gx, gy) = (xl / (e.a * e.a), yl / (e.b * e.b));
-        let n = Vector2::new(gx * ct - gy * st, gx * st + gy * ct);
-        let len = n.norm();
-        (len > 0.0).then(|| n / len)
-    };
     // Per-profile band fits: the far edges (measured positions of the partner) and the band
     // widths near the middle of the front arc.
     let stride = (on_front.len() / PROFILES).max(1);
@@ -71,7 +62,9 @@ pub(super) fn seek_partner<T: Pixel>(
     let mut far = Vec::new();
     let mut widths = Vec::new();
     for p in on_front.iter().step_by(stride) {
-        let Some(n) = normal(p) else { continue };
+        let Some(n) = level_set_normal(&e, p) else {
+            continue;
+        };
         let Some(d) = band::profile(image, *p, n, &mut buf) else {
             continue;
         };
