@@ -194,7 +194,12 @@ class WaferEdge:
         residual: Mean orthogonal distance of the points to the ellipse (pixels).
         kind: ``"upper"`` or ``"lower"``: which surface's rim.
         wafer_id: Groups the two rims of one wafer in this image (0, 1, … topmost first).
-        covariance: Covariance of ``(cx, cy, a, b, theta)``, shape ``(5, 5)``, or ``None``.
+        covariance: Covariance of ``(cx, cy, a, b, theta)``, shape ``(5, 5)``, or ``None``. It is
+            the fit's statistical covariance (edge-point noise only); on the rendered benchmark
+            the actual errors are larger, because the band model's small per-scene biases
+            dominate: error / reported σ has a standard deviation of 3.2–4.4 for ``b`` and
+            2.2–3.5 for ``a`` (``docs/benchmarks.md``, wafer-rim detection). Scale it before
+            using it as a measurement covariance.
 
     """
 
