@@ -566,6 +566,7 @@ def wafer_detect(
     border_pairs_take_arcs: bool | None = None,
     reflection_inside_rim: bool | None = None,
     seek_missing_partner: bool | None = None,
+    thin_band_fit: bool | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 

@@ -246,6 +246,7 @@ def detect_wafers(
     border_pairs_take_arcs: bool = True,
     reflection_inside_rim: bool = True,
     seek_missing_partner: bool = True,
+    thin_band_fit: bool = True,
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -327,6 +328,12 @@ def detect_wafers(
             band fits place a first guess, the joint band model of both rims fits it); it is
             reported when the fit stays within 2 px and 5 % of the guess and its measured far
             edges fit it, and passes the covariance screens like every rim.
+        thin_band_fit: With the rim offset prior (``thickness_ratio``, ``focal_length``), the
+            two rims of a thin wafer (``b`` under 8 px, major axis near horizontal, ``up`` near
+            ``(0, -1)``) are refitted together by one intensity fit of the image columns across
+            the face's silhouette and the side band (four grey levels per column, one blur, the
+            rims tied by the prior); an accepted fit (residual at the image's noise level)
+            replaces the pair's edge-point fits. No effect without the prior.
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -376,6 +383,7 @@ def detect_wafers(
         border_pairs_take_arcs=bool(border_pairs_take_arcs),
         reflection_inside_rim=bool(reflection_inside_rim),
         seek_missing_partner=bool(seek_missing_partner),
+        thin_band_fit=bool(thin_band_fit),
     )
     return [
         WaferEdge(

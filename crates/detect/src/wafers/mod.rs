@@ -181,6 +181,12 @@ pub struct DetectParams {
     /// detection within 1 px / 1 % of a rim was 0.48 px; 22 of the 23 detections within 3 px /
     /// 5 % of no rim had σ over 1 px (σ 1.2–440 px). `f64::INFINITY` disables. Default 1.0.
     pub max_centre_sigma: f64,
+    /// With [`DetectParams::rim_offset`] given, refits both rims of a thin wafer (`b` under
+    /// 8 px, major axis near horizontal, `up` near −y) by one intensity fit of the image
+    /// columns across its face and side band, the two rims tied by the rim offset prior (see
+    /// [`thin`]). An accepted fit replaces the pair's edge-point fits. Default true (no effect
+    /// without `rim_offset`).
+    pub thin_band_fit: bool,
     /// Optional size prior.
     pub prior: Option<WaferPrior>,
     /// Optional prior on the offset between the images of a wafer's two rims, from the wafer's
@@ -216,6 +222,7 @@ impl Default for DetectParams {
             reflection_inside_rim: true,
             max_relative_sigma_b: 0.005,
             max_centre_sigma: 1.0,
+            thin_band_fit: true,
             prior: None,
             rim_offset: None,
         }
@@ -464,7 +471,12 @@ fn detect_wafers_on_pool<T: Pixel>(
         }
     }
     let edges = pair_rims(image, candidates, up, params)?;
-    let edges = drop_unconfirmed(edges, params.max_unpaired_residual);
+    let mut edges = drop_unconfirmed(edges, params.max_unpaired_residual);
+    if params.thin_band_fit
+        && let Some(prior) = &params.rim_offset
+    {
+        edges = thin::refit_thin_wafers(image, edges, up, prior);
+    }
     Ok(drop_uncertain(edges, params))
 }
 
@@ -575,6 +587,7 @@ mod refine;
 mod rim_prior;
 mod rim_shared;
 mod seek;
+mod thin;
 mod validate;
 
 use pair::pair_rims;
