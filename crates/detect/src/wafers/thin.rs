@@ -31,6 +31,7 @@
 //! only when the residual of the columns kept is at the image's noise level.
 
 use super::band::{cdf_and_density, cholesky_solve};
+use super::joint::ray_hit;
 use super::rim_prior::RimOffsetPrior;
 use super::{GrayView, Pixel, RimKind, WaferEdge};
 use autoteach_geometry::conic::Ellipse;
@@ -89,21 +90,25 @@ pub(super) fn noise_sigma<T: Pixel>(image: &GrayView<'_, T>) -> f64 {
 }
 
 /// The row where column `x` meets the arc of `e` on the side `side` (+1: larger `y`) of its
-/// major axis; `None` beyond the ellipse's extent.
+/// major axis ([`ray_hit`] of the vertical line, the root nearest to a point beyond the
+/// ellipse on that side); `None` beyond the ellipse's extent.
 fn arc_row(e: &[f64; 5], x: f64, side: f64) -> Option<f64> {
-    let [cx, cy, a, b, th] = *e;
-    let (s, c) = th.sin_cos();
-    let dx = x - cx;
-    // (c·dx + s·dy)²/a² + (−s·dx + c·dy)²/b² = 1, a quadratic in dy.
-    let (ia, ib) = (1.0 / (a * a), 1.0 / (b * b));
-    let qa = s * s * ia + c * c * ib;
-    let qb = 2.0 * c * s * dx * (ia - ib);
-    let qc = dx * dx * (c * c * ia + s * s * ib) - 1.0;
-    let disc = qb * qb - 4.0 * qa * qc;
-    if !(disc >= 0.0) {
-        return None;
-    }
-    Some(cy + (-qb + side * disc.sqrt()) / (2.0 * qa))
+    let [cx, cy, a, b, theta] = *e;
+    let ellipse = Ellipse {
+        cx,
+        cy,
+        a,
+        b,
+        theta,
+    };
+    let beyond = cy + side * 2.0 * (a.abs() + b.abs());
+    ray_hit(
+        &ellipse,
+        Vector2::new(x, 0.0),
+        Vector2::new(0.0, 1.0),
+        beyond,
+    )
+    .map(|(y, _)| y)
 }
 
 /// The geometry of the pair: the upper rim `(cx, cy, a, b, θ)` and the side of the front arcs.
@@ -243,6 +248,17 @@ fn evaluate(
     Some((res, grads, column_rms))
 }
 
+/// `JᵀJ` and `Jᵀr` of the residuals `r` with gradients `g`.
+fn normal_equations(r: &[f64], g: &[Vector6<f64>]) -> (Matrix6<f64>, Vector6<f64>) {
+    let mut jtj = Matrix6::zeros();
+    let mut jtr = Vector6::zeros();
+    for (ri, gi) in r.iter().zip(g) {
+        jtj += gi * gi.transpose();
+        jtr += gi * *ri;
+    }
+    (jtj, jtr)
+}
+
 /// Levenberg–Marquardt on the six parameters from `p`; the parameters, the residual sum of
 /// squares, the residual count and `JᵀJ` at the optimum.
 fn solve(
@@ -256,12 +272,7 @@ fn solve(
     let (mut r, mut g, _) = evaluate(pair, &p, columns, kept, true)?;
     let mut c0 = cost(&r);
     for _ in 0..MAX_ITER {
-        let mut jtj = Matrix6::zeros();
-        let mut jtr = Vector6::zeros();
-        for (ri, gi) in r.iter().zip(&g) {
-            jtj += gi * gi.transpose();
-            jtr += gi * *ri;
-        }
+        let (jtj, jtr) = normal_equations(&r, &g);
         let mut improved = false;
         for _ in 0..10 {
             let mut a = jtj;
@@ -289,10 +300,7 @@ fn solve(
             break;
         }
     }
-    let mut jtj = Matrix6::zeros();
-    for gi in &g {
-        jtj += gi * gi.transpose();
-    }
+    let (jtj, _) = normal_equations(&r, &g);
     Some((p, c0, r.len(), jtj))
 }
 
