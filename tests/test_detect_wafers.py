@@ -290,7 +290,7 @@ def test_non_contiguous_view_equals_its_copy(scene: tuple[np.ndarray, list[dict]
 
 
 def test_thin_band_fit_adds_thin_rims_and_no_wrong_detection() -> None:
-    """With the rim offset prior, the thin-band fit (both rims of a wafer with ``b`` under 8 px
+    """With the rim offset prior, the thin-band fit (both rims of a wafer with ``b`` under 9 px
     refitted from the image columns) turns thin disturbance rims into hits (1 px, 1 %: the
     benchmark's rule, renderer ground truth) over the first 45 benchmark scenes of seed 3, and
     no hit into a miss."""

@@ -329,7 +329,7 @@ def detect_wafers(
             reported when the fit stays within 2 px and 5 % of the guess and its measured far
             edges fit it, and passes the covariance screens like every rim.
         thin_band_fit: With the rim offset prior (``thickness_ratio``, ``focal_length``), the
-            two rims of a thin wafer (``b`` under 8 px, major axis near horizontal, ``up`` near
+            two rims of a thin wafer (``b`` under 9 px, major axis near horizontal, ``up`` near
             ``(0, -1)``) are refitted together by one intensity fit of the image columns across
             the face's silhouette and the side band (four grey levels per column, one blur, the
             rims tied by the prior); an accepted fit (residual at the image's noise level)

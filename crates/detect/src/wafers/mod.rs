@@ -182,7 +182,7 @@ pub struct DetectParams {
     /// 5 % of no rim had σ over 1 px (σ 1.2–440 px). `f64::INFINITY` disables. Default 1.0.
     pub max_centre_sigma: f64,
     /// With [`DetectParams::rim_offset`] given, refits both rims of a thin wafer (`b` under
-    /// 8 px, major axis near horizontal, `up` near −y) by one intensity fit of the image
+    /// 9 px, major axis near horizontal, `up` near −y) by one intensity fit of the image
     /// columns across its face and side band, the two rims tied by the rim offset prior (see
     /// [`thin`]). An accepted fit replaces the pair's edge-point fits. Default true (no effect
     /// without `rim_offset`).
