@@ -567,6 +567,7 @@ def wafer_detect(
     reflection_inside_rim: bool | None = None,
     seek_missing_partner: bool | None = None,
     thin_band_fit: bool | None = None,
+    front_band_fit: bool | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 

@@ -247,6 +247,7 @@ def detect_wafers(
     reflection_inside_rim: bool = True,
     seek_missing_partner: bool = True,
     thin_band_fit: bool = True,
+    front_band_fit: bool = True,
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -334,6 +335,11 @@ def detect_wafers(
             the face's silhouette and the side band (four grey levels per column, one blur, the
             rims tied by the prior); an accepted fit (residual at the image's noise level)
             replaces the pair's edge-point fits. No effect without the prior.
+        front_band_fit: With the rim offset prior, the two rims of a wider level wafer seen from
+            above (``b`` from 9 px) are refitted together by one intensity fit of the image
+            columns across the side band (three grey levels per column, clipped samples
+            censored, one blur, the rims tied by the prior); an accepted fit replaces the pair's
+            edge-point fits. No effect without the prior.
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -384,6 +390,7 @@ def detect_wafers(
         reflection_inside_rim=bool(reflection_inside_rim),
         seek_missing_partner=bool(seek_missing_partner),
         thin_band_fit=bool(thin_band_fit),
+        front_band_fit=bool(front_band_fit),
     )
     return [
         WaferEdge(

@@ -146,6 +146,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("joint_band_fit", p.joint_band_fit)?;
     d.set_item("join_border_cut_arcs", p.join_border_cut_arcs)?;
     d.set_item("thin_band_fit", p.thin_band_fit)?;
+    d.set_item("front_band_fit", p.front_band_fit)?;
     Ok(d)
 }
 
@@ -162,7 +163,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     join_border_cut_arcs=None, thickness_ratio=None, focal_length=None, restart_turn_at_cuts=None,
     max_relative_sigma_b=None, max_centre_sigma=None, keep_flat_run_pieces=None,
     border_pairs_take_arcs=None, reflection_inside_rim=None, seek_missing_partner=None,
-    thin_band_fit=None
+    thin_band_fit=None, front_band_fit=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -201,6 +202,7 @@ fn wafer_detect(
     reflection_inside_rim: Option<bool>,
     seek_missing_partner: Option<bool>,
     thin_band_fit: Option<bool>,
+    front_band_fit: Option<bool>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let mut params = DetectParams::default();
     // `None` keeps the library default (`wafer_detect_defaults`).
@@ -229,6 +231,7 @@ fn wafer_detect(
         (&mut params.reflection_inside_rim, reflection_inside_rim),
         (&mut params.seek_missing_partner, seek_missing_partner),
         (&mut params.thin_band_fit, thin_band_fit),
+        (&mut params.front_band_fit, front_band_fit),
     ] {
         if let Some(v) = value {
             *slot = v;

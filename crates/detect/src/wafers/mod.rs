@@ -187,6 +187,12 @@ pub struct DetectParams {
     /// [`thin`]). An accepted fit replaces the pair's edge-point fits. Default true (no effect
     /// without `rim_offset`).
     pub thin_band_fit: bool,
+    /// With [`DetectParams::rim_offset`] given, refits both rims of a wider level wafer seen
+    /// from above (`b` from 9 px, major axis near horizontal, `up` near −y) by one intensity
+    /// fit of the image columns across its side band, the two rims tied by the rim offset
+    /// prior (see [`thin`], `Model::Band`). An accepted fit replaces the pair's edge-point
+    /// fits. Default true (no effect without `rim_offset`).
+    pub front_band_fit: bool,
     /// Optional size prior.
     pub prior: Option<WaferPrior>,
     /// Optional prior on the offset between the images of a wafer's two rims, from the wafer's
@@ -223,6 +229,7 @@ impl Default for DetectParams {
             max_relative_sigma_b: 0.005,
             max_centre_sigma: 1.0,
             thin_band_fit: true,
+            front_band_fit: true,
             prior: None,
             rim_offset: None,
         }
@@ -472,10 +479,15 @@ fn detect_wafers_on_pool<T: Pixel>(
     }
     let edges = pair_rims(image, candidates, up, params)?;
     let mut edges = drop_unconfirmed(edges, params.max_unpaired_residual);
-    if params.thin_band_fit
-        && let Some(prior) = &params.rim_offset
-    {
-        edges = thin::refit_thin_wafers(image, edges, up, prior);
+    if let Some(prior) = &params.rim_offset {
+        edges = thin::refit_level_wafers(
+            image,
+            edges,
+            up,
+            prior,
+            params.thin_band_fit,
+            params.front_band_fit,
+        );
     }
     Ok(drop_uncertain(edges, params))
 }

@@ -1,7 +1,8 @@
-//! Thin wafers: one intensity fit of both rims of a wafer whose side band is only a few pixels
-//! high (seed 000_3b1454b2b2194811.txt §3.2, Fig. 3.2: the two rims are the images of two
-//! parallel circles one wafer thickness apart; §3.5: disturbance wafers a few slots from the
-//! camera's height).
+//! Level wafers: one intensity fit of both rims of a wafer, column by column (seed
+//! 000_3b1454b2b2194811.txt §3.2, Fig. 3.2: the two rims are the images of two parallel circles
+//! one wafer thickness apart; §3.5: disturbance wafers a few slots from the camera's height) —
+//! thin wafers, whose side band lies a few pixels from the face's silhouette
+//! ([`Model::Thin`]), and wider ones seen from above ([`Model::Band`], last section).
 //!
 //! A wafer near the camera's height images as two flat ellipses (`b` 1–9 px for `a` ≈ 300 px)
 //! whose front arcs bound a bright band 2–4 px high, and, for a wafer seen from above, the dark
@@ -29,13 +30,35 @@
 //! Columns that the model does not describe (clutter behind the band, a neighbouring edge in
 //! the window) are found by their residual and left out (two rounds), and the fit is accepted
 //! only when the residual of the columns kept is at the image's noise level.
+//!
+//! **Wider wafers seen from above** ([`Model::Band`], `b` from [`MAX_B`]). The edge-point fits
+//! of these rims are off in `b` by ≈ 0.1 px (sd over the benchmark's matched rims, flat in `b`
+//! from 9 to 400 px), also on noise-free renders with 16×16 anti-aliasing: the per-profile
+//! band fits along the normals (`band.rs`, `refine.rs`) leave a bias of the narrow band's near
+//! edge that the reference rim's fit, and through the prior its partner's, inherits (seed 3
+//! image 123, noise-free: the upper rim's front-arc bottom 0.20 px high, `b` −1.15 %). For
+//! `b` of 9–25 px 1 % is 0.09–0.25 px, so these rims failed the benchmark's 1 % criterion and
+//! were also its false positives. The same column model with the two front arcs only (two
+//! edges, three levels per column: face, band, background; the face's silhouette is far
+//! from the band) measures them to a few hundredths of a pixel (same image: `b` −0.09 % and
+//! −0.02 %). Only wafers seen from above: for those seen from below (a few slots above the
+//! camera) the prior's offset (∗) is 0–10 % off (`rim_prior.rs`), and the fit moved as many
+//! such rims out of the criterion as into it.
+//!
+//! Both models: an edge crossing a column at slope `s` is blurred along the column by
+//! `σ·√(1 + s²)`; clipped samples (a saturated band) are censored — they stay out of the
+//! levels' solve and only require the model to reach the clip level; the Jacobian is
+//! Kaufman's (the derivative at fixed levels projected onto the complement of the levels'
+//! basis), with the edges' derivatives analytic ([`arc_row`]). The solves before the last run
+//! on an even subset of at most [`MAX_FIT_COLUMNS`] columns (speed); the screening and the
+//! last solve use all columns.
 
 use super::band::{cdf_and_density, cholesky_solve};
 use super::joint::ray_hit;
 use super::rim_prior::RimOffsetPrior;
 use super::{GrayView, Pixel, RimKind, WaferEdge};
 use autoteach_geometry::conic::Ellipse;
-use nalgebra::{Matrix4, Matrix5, Matrix6, Vector2, Vector4, Vector6};
+use nalgebra::{Matrix5, Matrix6, SMatrix, SVector, Vector2, Vector6};
 
 /// Largest semi-minor axis (pixels, of either rim's edge-point fit) of a rim pair refitted
 /// here: the band is then a few pixels from the face's silhouette, and the front arcs' slopes
@@ -67,11 +90,28 @@ const MAX_CENTRE_MOVE: f64 = 3.0;
 const MAX_B_CHANGE: f64 = 0.25;
 /// Levenberg–Marquardt iterations per round.
 const MAX_ITER: usize = 40;
+/// Relative decrease of the residual sum of squares below which Levenberg–Marquardt stops:
+/// with `n` residuals at noise σ the sum is `≈ nσ²`, so the parameters are then within
+/// `√(CONVERGED·n)` (≈ 0.03 for the ≈ 10⁴ samples of a fit) of their standard deviations from
+/// the optimum.
+const CONVERGED: f64 = 1e-7;
+/// Most columns of the first solve of a fit (an even subset; the screening rounds use all).
+const MAX_FIT_COLUMNS: usize = 150;
+/// Rows of the image summed by [`noise_sigma`]: every this many.
+const NOISE_ROW_STRIDE: usize = 4;
+/// Floor (grey levels) of the noise estimate used as a scale.
+const MIN_NOISE: f64 = 0.5;
+/// A sample at or above this grey level counts as clipped (censored), as in `band.rs`.
+const CLIP: f64 = 254.5;
+/// The clip level that a censored sample's model has to reach.
+const CLIP_LEVEL: f64 = 255.0;
 
 /// Noise standard deviation (grey levels) of an image by Immerkær's estimator (1996, "Fast
-/// noise variance estimation"): `σ = √(π/2)/(6(W−2)(H−2))·Σ|I ∗ N|` with the Laplacian
-/// difference mask `N = [1 −2 1; −2 4 −2; 1 −2 1]`, which cancels locally linear image
-/// content. Edges raise it slightly; the result is used as a scale, not a test statistic.
+/// noise variance estimation"): `σ = √(π/2)/(6·N)·Σ|I ∗ N|` over `N` pixels, with the
+/// Laplacian difference mask `N = [1 −2 1; −2 4 −2; 1 −2 1]`, which cancels locally linear image
+/// content. The sum runs over every [`NOISE_ROW_STRIDE`]-th row (a 1280×720 image still gives
+/// 2.3·10⁵ terms, a relative standard error under 0.3 %). Edges raise it slightly; the result is
+/// used as a scale, not a test statistic.
 pub(super) fn noise_sigma<T: Pixel>(image: &GrayView<'_, T>) -> f64 {
     let (w, h) = (image.width(), image.height());
     if w < 3 || h < 3 {
@@ -80,7 +120,8 @@ pub(super) fn noise_sigma<T: Pixel>(image: &GrayView<'_, T>) -> f64 {
     let d = image.data();
     let g = |x: usize, y: usize| f64::from(d[y * w + x].grey());
     let mut sum = 0.0;
-    for y in 1..h - 1 {
+    let mut count = 0usize;
+    for y in (1..h - 1).step_by(NOISE_ROW_STRIDE) {
         for x in 1..w - 1 {
             let v = g(x - 1, y - 1) - 2.0 * g(x, y - 1) + g(x + 1, y - 1)
                 - 2.0 * (g(x - 1, y) - 2.0 * g(x, y) + g(x + 1, y))
@@ -89,14 +130,19 @@ pub(super) fn noise_sigma<T: Pixel>(image: &GrayView<'_, T>) -> f64 {
                 + g(x + 1, y + 1);
             sum += v.abs();
         }
+        count += w - 2;
     }
-    (std::f64::consts::FRAC_PI_2).sqrt() * sum / (6.0 * ((w - 2) * (h - 2)) as f64)
+    (std::f64::consts::FRAC_PI_2).sqrt() * sum / (6.0 * count as f64)
 }
 
 /// The row where column `x` meets the arc of `e` on the side `side` (+1: larger `y`) of its
 /// major axis ([`ray_hit`] of the vertical line, the root nearest to a point beyond the
-/// ellipse on that side); `None` beyond the ellipse's extent.
-fn arc_row(e: &[f64; 5], x: f64, side: f64) -> Option<f64> {
+/// ellipse on that side), and its derivatives with respect to `e`'s `(cx, cy, a, b, θ)`;
+/// `None` beyond the ellipse's extent. [`ray_hit`] gives those of `(cx, cy, b, a)`; the one of
+/// `θ` follows the same way: in the ellipse frame the row's point `(x', y')` turns with `θ` as
+/// `∂x'/∂θ = y'`, `∂y'/∂θ = −x'`, so `∂F/∂θ = 2x'y'(1/a² − 1/b²)`. The slope of the arc in
+/// the column direction is `−∂y/∂cx`.
+fn arc_row(e: &[f64; 5], x: f64, side: f64) -> Option<(f64, [f64; 5])> {
     let [cx, cy, a, b, theta] = *e;
     let ellipse = Ellipse {
         cx,
@@ -106,13 +152,19 @@ fn arc_row(e: &[f64; 5], x: f64, side: f64) -> Option<f64> {
         theta,
     };
     let beyond = cy + side * 2.0 * (a.abs() + b.abs());
-    ray_hit(
+    let (y, d) = ray_hit(
         &ellipse,
         Vector2::new(x, 0.0),
         Vector2::new(0.0, 1.0),
         beyond,
-    )
-    .map(|(y, _)| y)
+    )?;
+    let (s, c) = theta.sin_cos();
+    let (dx, dy) = (x - cx, y - cy);
+    let (xl, yl) = (c * dx + s * dy, -s * dx + c * dy);
+    let (a2, b2) = (a * a, b * b);
+    let f_t = 2.0 * (xl * s / a2 + yl * c / b2);
+    let f_theta = 2.0 * xl * yl * (1.0 / a2 - 1.0 / b2);
+    Some((y, [d[0], d[1], d[3], d[2], -f_theta / f_t]))
 }
 
 /// The geometry of the pair: the upper rim `(cx, cy, a, b, θ)` and the side of the front arcs.
@@ -121,6 +173,18 @@ struct Pair {
     /// +1 when the band lies below the centre in the image (the wafer seen from above, `up`
     /// pointing to −y), −1 when above (seen from below).
     front: f64,
+}
+
+/// The edges a column crosses: [`Model::Thin`] the face's silhouette and both front arcs
+/// (three edges, four levels), [`Model::Band`] the two front arcs only (two edges, three
+/// levels).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Model {
+    /// A thin wafer (`b` < [`MAX_B`]): the face's silhouette lies within a few pixels of the
+    /// band and is one more edge of the column.
+    Thin,
+    /// A wider level wafer seen from above: the column crosses the side band alone.
+    Band,
 }
 
 impl Pair {
@@ -144,17 +208,36 @@ impl Pair {
         g
     }
 
-    /// The three edges of column `x` in image order: the face's silhouette (the back arc of
-    /// the upper rim seen from above, of the lower rim from below) and the two front arcs.
-    fn edges(&self, u: &[f64; 5], x: f64) -> Option<[f64; 3]> {
+    /// The `E` edges of column `x` in image order and their derivatives with respect to the
+    /// upper rim's `(cx, cy, a, b, θ)`: with `E = 3` the face's silhouette (the back arc of
+    /// the upper rim seen from above, of the lower rim from below) and the two front arcs,
+    /// with `E = 2` the two front arcs.
+    fn edges<const E: usize>(&self, u: &[f64; 5], x: f64) -> Option<[(f64, [f64; 5]); E]> {
         let l = self.lower(u);
-        let face = if self.front > 0.0 { u } else { &l };
-        let mut e = [
-            arc_row(face, x, -self.front)?,
+        let g = self.lower_jacobian(u);
+        // Derivatives of a lower-rim row chained through the prior.
+        let chain = |(y, d): (f64, [f64; 5])| {
+            let row = nalgebra::RowVector5::from_row_slice(&d) * g;
+            (y, [row[0], row[1], row[2], row[3], row[4]])
+        };
+        let mut e = [(0.0, [0.0; 5]); E];
+        let fronts = [
             arc_row(u, x, self.front)?,
-            arc_row(&l, x, self.front)?,
+            chain(arc_row(&l, x, self.front)?),
         ];
-        e.sort_by(f64::total_cmp);
+        match E {
+            2 => e.copy_from_slice(&fronts),
+            3 => {
+                e[0] = if self.front > 0.0 {
+                    arc_row(u, x, -self.front)?
+                } else {
+                    chain(arc_row(&l, x, -self.front)?)
+                };
+                e[1..].copy_from_slice(&fronts);
+            }
+            _ => return None,
+        }
+        e.sort_by(|p, q| p.0.total_cmp(&q.0));
         Some(e)
     }
 }
@@ -170,84 +253,117 @@ struct Column {
 type Evaluation = (Vec<f64>, Vec<Vector6<f64>>, Vec<f64>);
 
 /// Residuals and Jacobian (with respect to `(cx, cy, a, b, θ, σ)`, the levels projected out:
-/// Kaufman's variable projection) of every kept column; `None` where a column's edges do not
-/// exist (a parameter set beyond the rims' extent) or its levels are singular.
-fn evaluate(
+/// Kaufman's variable projection) of every kept column, for the model of `E` edges and
+/// `L = E + 1` levels; `None` where a column's edges do not exist (a parameter set beyond the
+/// rims' extent) or its levels are singular.
+///
+/// An edge crossing the column at slope `s` (`dEⱼ/dx`) is a straight edge blurred by σ along
+/// its normal, i.e. by `σ·√(1 + s²)` along the column. A clipped sample (at or above
+/// [`CLIP`]) is censored: it does not enter the levels' solve, and its residual is
+/// `min(model − 255, 0)` (the model has to reach the clip level there, nothing more).
+fn evaluate<const E: usize, const L: usize>(
     pair: &Pair,
     p: &Vector6<f64>,
     columns: &[Column],
     kept: &[bool],
     jac: bool,
 ) -> Option<Evaluation> {
+    debug_assert_eq!(L, E + 1);
     let u = [p[0], p[1], p[2], p[3], p[4]];
     let sigma = p[5];
     if !(sigma > 0.05 && u[2] > 0.0 && u[3] > 0.0) {
         return None;
     }
-    let inv = 1.0 / sigma;
-    let steps = [1e-4, 1e-4, 1e-3, 1e-5, 1e-7];
     let mut res = Vec::new();
     let mut grads = Vec::new();
     let mut column_rms = Vec::with_capacity(columns.len());
+    let mut basis = Vec::new();
     for (c, &keep) in columns.iter().zip(kept) {
         if !keep {
             column_rms.push(f64::NAN);
             continue;
         }
-        let e = pair.edges(&u, c.x)?;
-        // ∂Eⱼ/∂(cx, cy, a, b, θ) by central differences of the arc rows (cheap: per column).
-        let mut de = [[0.0; 5]; 3];
-        if jac {
-            for k in 0..5 {
-                let (mut lo, mut hi) = (u, u);
-                lo[k] -= steps[k];
-                hi[k] += steps[k];
-                let (el, eh) = (pair.edges(&lo, c.x)?, pair.edges(&hi, c.x)?);
-                for j in 0..3 {
-                    de[j][k] = (eh[j] - el[j]) / (2.0 * steps[k]);
-                }
-            }
-        }
-        // Basis of the four levels and the normal equations.
-        let n = c.grey.len();
-        let mut basis = Vec::with_capacity(n);
-        let mut m = Matrix4::<f64>::identity() * 1e-6;
-        let mut rhs = Vector4::<f64>::zeros();
+        let rows = pair.edges::<E>(&u, c.x)?;
+        let e: [f64; E] = std::array::from_fn(|j| rows[j].0);
+        let de: [[f64; 5]; E] = std::array::from_fn(|j| rows[j].1);
+        // Blur along the column of each edge, from its slope `dEⱼ/dx = −∂Eⱼ/∂cx`.
+        let inv: [f64; E] =
+            std::array::from_fn(|j| 1.0 / (sigma * (1.0 + de[j][0] * de[j][0]).sqrt()));
+        // Basis of the levels and the normal equations of the unclipped samples.
+        basis.clear();
+        let mut m = SMatrix::<f64, L, L>::identity() * 1e-6;
+        let mut rhs = SVector::<f64, L>::zeros();
         for (i, &g) in c.grey.iter().enumerate() {
             let y = c.y0 + i as f64;
-            let mut phi = [0.0; 3];
-            let mut dens = [0.0; 3];
-            for j in 0..3 {
-                let (cdf, d) = cdf_and_density((y - e[j]) * inv);
+            let mut phi = [0.0; E];
+            let mut dens = [0.0; E];
+            for j in 0..E {
+                let (cdf, d) = cdf_and_density((y - e[j]) * inv[j]);
                 phi[j] = cdf;
                 dens[j] = d;
             }
-            let b = Vector4::new(1.0 - phi[0], phi[0] - phi[1], phi[1] - phi[2], phi[2]);
-            m += b * b.transpose();
-            rhs += b * g;
+            let mut b = SVector::<f64, L>::zeros();
+            b[0] = 1.0 - phi[0];
+            for j in 1..E {
+                b[j] = phi[j - 1] - phi[j];
+            }
+            b[E] = phi[E - 1];
+            if g < CLIP {
+                m += b * b.transpose();
+                rhs += b * g;
+            }
             basis.push((b, phi, dens, y));
         }
-        let levels = cholesky_solve::<4>(&m, &rhs)?;
+        let levels = cholesky_solve::<L>(&m, &rhs)?;
         let mut ss = 0.0;
         for ((b, _, dens, y), &g) in basis.iter().zip(&c.grey) {
-            let r = levels.dot(b) - g;
+            let model = levels.dot(b);
+            let r = if g < CLIP {
+                model - g
+            } else {
+                (model - CLIP_LEVEL).min(0.0)
+            };
             ss += r * r;
             res.push(r);
             if jac {
                 let mut grad = Vector6::zeros();
-                for j in 0..3 {
-                    let step = levels[j + 1] - levels[j];
-                    // ∂/∂Eⱼ of step·Φ((y − Eⱼ)/σ), and ∂/∂σ.
-                    let d_edge = -step * dens[j] * inv;
-                    for k in 0..5 {
-                        grad[k] += d_edge * de[j][k];
+                if g < CLIP || r < 0.0 {
+                    for j in 0..E {
+                        let step = levels[j + 1] - levels[j];
+                        // ∂/∂Eⱼ of step·Φ((y − Eⱼ)/σⱼ), and ∂/∂σ (σⱼ ∝ σ).
+                        let d_edge = -step * dens[j] * inv[j];
+                        for k in 0..5 {
+                            grad[k] += d_edge * de[j][k];
+                        }
+                        grad[5] += d_edge * (y - e[j]) / sigma;
                     }
-                    grad[5] += -step * dens[j] * (y - e[j]) * inv * inv;
                 }
                 grads.push(grad);
             }
         }
-        column_rms.push((ss / n as f64).sqrt());
+        if jac {
+            // Kaufman's Jacobian is the model's derivative at fixed levels projected onto the
+            // complement of the levels' basis (what the levels cannot absorb): subtract, per
+            // parameter, the basis' least-squares fit of the derivative (unclipped samples).
+            let first = grads.len() - c.grey.len();
+            let column = &mut grads[first..];
+            let mut bt_g = SMatrix::<f64, L, 6>::zeros();
+            for ((b, ..), (grad, &g)) in basis.iter().zip(column.iter().zip(&c.grey)) {
+                if g < CLIP {
+                    bt_g += b * grad.transpose();
+                }
+            }
+            let mut w = SMatrix::<f64, L, 6>::zeros();
+            for k in 0..6 {
+                w.set_column(k, &cholesky_solve::<L>(&m, &bt_g.column(k).into_owned())?);
+            }
+            for ((b, ..), (grad, &g)) in basis.iter().zip(column.iter_mut().zip(&c.grey)) {
+                if g < CLIP {
+                    *grad -= w.transpose() * b;
+                }
+            }
+        }
+        column_rms.push((ss / c.grey.len() as f64).sqrt());
     }
     Some((res, grads, column_rms))
 }
@@ -265,7 +381,7 @@ fn normal_equations(r: &[f64], g: &[Vector6<f64>]) -> (Matrix6<f64>, Vector6<f64
 
 /// Levenberg–Marquardt on the six parameters from `p`; the parameters, the residual sum of
 /// squares, the residual count and `JᵀJ` at the optimum.
-fn solve(
+fn solve<const E: usize, const L: usize>(
     pair: &Pair,
     mut p: Vector6<f64>,
     columns: &[Column],
@@ -273,7 +389,7 @@ fn solve(
 ) -> Option<(Vector6<f64>, f64, usize, Matrix6<f64>)> {
     let mut lambda = 1e-3;
     let cost = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
-    let (mut r, mut g, _) = evaluate(pair, &p, columns, kept, true)?;
+    let (mut r, mut g, _) = evaluate::<E, L>(pair, &p, columns, kept, true)?;
     let mut c0 = cost(&r);
     for _ in 0..MAX_ITER {
         let (jtj, jtr) = normal_equations(&r, &g);
@@ -284,11 +400,18 @@ fn solve(
                 a[(k, k)] += lambda * jtj[(k, k)].max(1e-12);
             }
             let step = cholesky_solve::<6>(&a, &(-jtr))?;
+            // The decrease the linearised model predicts for the step: when it is below the
+            // convergence threshold, no trial is worth its evaluation (at the optimum every
+            // trial fails, and ten of them would only raise λ).
+            let predicted = -(step.dot(&jtr) * 2.0 + step.dot(&(jtj * step)));
+            if predicted <= CONVERGED * c0 {
+                break;
+            }
             let trial = p + step;
-            if let Some((rt, gt, _)) = evaluate(pair, &trial, columns, kept, true) {
+            if let Some((rt, gt, _)) = evaluate::<E, L>(pair, &trial, columns, kept, true) {
                 let c1 = cost(&rt);
                 if c1 < c0 {
-                    let small = c0 - c1 <= 1e-10 * c0;
+                    let small = c0 - c1 <= CONVERGED * c0;
                     p = trial;
                     r = rt;
                     g = gt;
@@ -308,11 +431,60 @@ fn solve(
     Some((p, c0, r.len(), jtj))
 }
 
-/// Refits the two rims `upper` and `lower` of one thin wafer (module doc) on `image`, whose
-/// noise is `noise` grey levels; `None` when the pair is not thin, not level enough for the
-/// column model, or the fit is not accepted. The rims keep their edge points; their residuals
-/// are recomputed against the new ellipses and their covariances are the fit's (scaled by its
-/// residual variance), propagated to the lower rim through the prior.
+/// The parameters, the residual sum of squares, the residual count, `JᵀJ` and the number of
+/// columns kept of a column fit.
+type ColumnFit = (Vector6<f64>, f64, usize, Matrix6<f64>, usize);
+
+/// The fit of [`refit_pair`] with `E` edges per column: Levenberg–Marquardt from the rims'
+/// edge-point fit `u0`, then [`ROUNDS`] rounds of column screening; the parameters, the
+/// residual sum of squares, the residual count, `JᵀJ` and the number of columns kept.
+fn fit_columns<const E: usize, const L: usize>(
+    pair: &Pair,
+    u0: [f64; 5],
+    columns: &[Column],
+    noise: f64,
+) -> Option<ColumnFit> {
+    let noise = noise.max(MIN_NOISE);
+    // The solves before the last (from the edge-point fit, then after the first screening)
+    // run on an even subset of at most MAX_FIT_COLUMNS columns; the screening and the last
+    // solve use all columns.
+    let stride = columns.len().div_ceil(MAX_FIT_COLUMNS).max(1);
+    let subset = |i: usize| i.is_multiple_of(stride);
+    let mut kept: Vec<bool> = (0..columns.len()).map(subset).collect();
+    let mut p = Vector6::new(u0[0], u0[1], u0[2], u0[3], u0[4], 0.85);
+    let all = vec![true; columns.len()];
+    for round in 0..=ROUNDS {
+        let (q, ss, n, jtj) = solve::<E, L>(pair, p, columns, &kept)?;
+        p = q;
+        if round == ROUNDS {
+            let count = kept.iter().filter(|&&k| k).count();
+            return Some((p, ss, n, jtj, count));
+        }
+        let (_, _, column_rms) = evaluate::<E, L>(pair, &p, columns, &all, false)?;
+        let mut finite: Vec<f64> = column_rms
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .collect();
+        finite.sort_by(f64::total_cmp);
+        let median = *finite.get(finite.len() / 2)?;
+        let limit = COLUMN_OUTLIER * median.max(noise);
+        let last = round + 1 == ROUNDS;
+        kept = column_rms
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| v <= limit && (last || subset(i)))
+            .collect();
+    }
+    None
+}
+
+/// Refits the two rims `upper` and `lower` of one level wafer with `model` (module doc) on
+/// `image`, whose noise is `noise` grey levels; `None` when the pair does not suit the model
+/// (`Thin`: both rims' `b` under [`MAX_B`]; `Band`: seen from above), is not level enough for
+/// the column model, or the fit is not accepted. The rims keep their edge points; their
+/// residuals are recomputed against the new ellipses and their covariances are the fit's
+/// (scaled by its residual variance), propagated to the lower rim through the prior.
 pub(super) fn refit_pair<T: Pixel>(
     image: &GrayView<'_, T>,
     upper: &WaferEdge,
@@ -320,15 +492,16 @@ pub(super) fn refit_pair<T: Pixel>(
     up: Vector2<f64>,
     prior: &RimOffsetPrior,
     noise: f64,
+    model: Model,
 ) -> Option<(WaferEdge, WaferEdge)> {
     let eu = &upper.ellipse;
-    // Thin (NaN fails), an upright camera and level rims: the column model's premises.
-    let thin = eu.b.max(lower.ellipse.b) < MAX_B;
+    // An upright camera and level rims: the column model's premises (NaN fails).
     let level = up.x.abs() < MAX_TILT
         && up.y < 0.0
         && eu.theta.sin().abs() < MAX_TILT
         && lower.ellipse.theta.sin().abs() < MAX_TILT;
-    if !(thin && level) {
+    let thin = eu.b.max(lower.ellipse.b) < MAX_B;
+    if !(level && thin == (model == Model::Thin)) {
         return None;
     }
     let points: Vec<_> = upper.points.iter().chain(&lower.points).collect();
@@ -338,6 +511,9 @@ pub(super) fn refit_pair<T: Pixel>(
     let mut ys: Vec<f64> = points.iter().map(|p| p.y).collect();
     ys.sort_by(f64::total_cmp);
     let front = if ys[ys.len() / 2] > eu.cy { 1.0 } else { -1.0 };
+    if model == Model::Band && front < 0.0 {
+        return None;
+    }
     let pair = Pair {
         prior: *prior,
         front,
@@ -353,12 +529,16 @@ pub(super) fn refit_pair<T: Pixel>(
     let mut columns = Vec::new();
     let mut x = (x0 + END_COLUMNS).ceil();
     while x <= x1 - END_COLUMNS {
+        let rows = match model {
+            Model::Thin => pair.edges::<3>(&u0, x).map(|e| (e[0].0, e[2].0)),
+            Model::Band => pair.edges::<2>(&u0, x).map(|e| (e[0].0, e[1].0)),
+        };
         if x >= 0.0
             && x < w as f64
-            && let Some(e) = pair.edges(&u0, x)
+            && let Some((first, last)) = rows
         {
-            let top = (e[0] - WINDOW_MARGIN).floor();
-            let bottom = (e[2] + WINDOW_MARGIN).ceil();
+            let top = (first - WINDOW_MARGIN).floor();
+            let bottom = (last + WINDOW_MARGIN).ceil();
             if top >= 0.0 && bottom < h as f64 {
                 let xi = x as usize;
                 let grey = (top as usize..=bottom as usize)
@@ -372,33 +552,13 @@ pub(super) fn refit_pair<T: Pixel>(
     if columns.len() < MIN_COLUMNS {
         return None;
     }
-    let noise = noise.max(0.5);
-    let mut kept = vec![true; columns.len()];
-    let mut p = Vector6::new(u0[0], u0[1], u0[2], u0[3], u0[4], 0.85);
-    let mut fit = None;
-    for round in 0..=ROUNDS {
-        let (q, ss, n, jtj) = solve(&pair, p, &columns, &kept)?;
-        p = q;
-        fit = Some((ss, n, jtj));
-        if round == ROUNDS {
-            break;
-        }
-        let (_, _, column_rms) = evaluate(&pair, &p, &columns, &vec![true; columns.len()], false)?;
-        let mut finite: Vec<f64> = column_rms
-            .iter()
-            .copied()
-            .filter(|v| v.is_finite())
-            .collect();
-        finite.sort_by(f64::total_cmp);
-        let median = *finite.get(finite.len() / 2)?;
-        let limit = COLUMN_OUTLIER * median.max(noise);
-        kept = column_rms.iter().map(|&v| v <= limit).collect();
-    }
-    let (ss, n, jtj) = fit?;
-    let kept_count = kept.iter().filter(|&&k| k).count();
+    let (p, ss, n, jtj, kept_count) = match model {
+        Model::Thin => fit_columns::<3, 4>(&pair, u0, &columns, noise)?,
+        Model::Band => fit_columns::<2, 3>(&pair, u0, &columns, noise)?,
+    };
     let rms = (ss / n.max(1) as f64).sqrt();
     let u = [p[0], p[1], p[2], p[3], p[4]];
-    if !(rms <= MAX_RMS_OVER_NOISE * noise)
+    if !(rms <= MAX_RMS_OVER_NOISE * noise.max(MIN_NOISE))
         || (kept_count as f64) < MIN_KEPT * columns.len() as f64
         || !((u[0] - u0[0]).hypot(u[1] - u0[1]) <= MAX_CENTRE_MOVE)
         || !((u[3] - u0[3]).abs() <= MAX_B_CHANGE * u0[3])
@@ -406,7 +566,11 @@ pub(super) fn refit_pair<T: Pixel>(
     {
         return None;
     }
-    let s2 = ss / (n.saturating_sub(6 + 4 * kept_count)).max(1) as f64;
+    let levels = match model {
+        Model::Thin => 4,
+        Model::Band => 3,
+    };
+    let s2 = ss / (n.saturating_sub(6 + levels * kept_count)).max(1) as f64;
     let cov6 = jtj.try_inverse()? * s2;
     let cov_u: Matrix5<f64> = cov6.fixed_view::<5, 5>(0, 0).into_owned();
     let g = pair.lower_jacobian(&u);
@@ -433,12 +597,15 @@ pub(super) fn refit_pair<T: Pixel>(
 }
 
 /// [`refit_pair`] for every wafer of `edges` with both rims (the image's noise estimated once,
-/// when there is a pair to refit); the rims of an accepted fit replace the pair's.
-pub(super) fn refit_thin_wafers<T: Pixel>(
+/// when there is a pair to refit): thin pairs with [`Model::Thin`] when `thin`, wider ones with
+/// [`Model::Band`] when `band`; the rims of an accepted fit replace the pair's.
+pub(super) fn refit_level_wafers<T: Pixel>(
     image: &GrayView<'_, T>,
     mut edges: Vec<WaferEdge>,
     up: Vector2<f64>,
     prior: &RimOffsetPrior,
+    thin: bool,
+    band: bool,
 ) -> Vec<WaferEdge> {
     let mut noise = None;
     for i in 0..edges.len() {
@@ -450,11 +617,19 @@ pub(super) fn refit_thin_wafers<T: Pixel>(
         else {
             continue;
         };
-        if !(edges[i].ellipse.b.max(edges[j].ellipse.b) < MAX_B) {
+        let model = if edges[i].ellipse.b.max(edges[j].ellipse.b) < MAX_B {
+            Model::Thin
+        } else {
+            Model::Band
+        };
+        if !(match model {
+            Model::Thin => thin,
+            Model::Band => band,
+        }) {
             continue;
         }
         let sigma = *noise.get_or_insert_with(|| noise_sigma(image));
-        if let Some((u, l)) = refit_pair(image, &edges[i], &edges[j], up, prior, sigma) {
+        if let Some((u, l)) = refit_pair(image, &edges[i], &edges[j], up, prior, sigma, model) {
             edges[i] = u;
             edges[j] = l;
         }
@@ -498,13 +673,66 @@ mod tests {
         let el = Ellipse::new(e[0], e[1], e[2], e[3], e[4]).unwrap();
         for x in [300.0, 450.0, 600.0, 800.0, 915.0] {
             for side in [-1.0, 1.0] {
-                let y = arc_row(&e, x, side).unwrap();
+                let (y, _) = arc_row(&e, x, side).unwrap();
                 let d = el.orthogonal_distance(&Vector2::new(x, y));
                 assert!(d.abs() < 1e-9, "{x} {side}: {d}");
                 assert_eq!(y > el.cy + (x - el.cx) * e[4].tan(), side > 0.0);
             }
         }
         assert!(arc_row(&e, 1000.0, 1.0).is_none());
+    }
+
+    /// The edges' analytic derivatives (ray–ellipse implicit derivatives, the `θ` term and the
+    /// chain through the prior to the lower rim) against central differences, for both models,
+    /// a wafer seen from above and one from below, on a tilted ellipse.
+    #[test]
+    fn edge_derivatives_match_finite_differences() {
+        let prior = RimOffsetPrior {
+            thickness_ratio: 1.0 / 150.0,
+            focal_length: 1000.0,
+        };
+        let u = [640.0, 300.0, 310.0, 12.0, 0.02];
+        let steps = [1e-4, 1e-4, 1e-4, 1e-5, 1e-7];
+        for front in [1.0, -1.0] {
+            let pair = Pair { prior, front };
+            for x in [400.0, 600.0, 700.0, 900.0] {
+                let check = |rows: &[(f64, [f64; 5])], shifted: &dyn Fn(usize, f64) -> Vec<f64>| {
+                    for (k, &h) in steps.iter().enumerate() {
+                        let (hi, lo) = (shifted(k, h), shifted(k, -h));
+                        for (j, row) in rows.iter().enumerate() {
+                            let fd = (hi[j] - lo[j]) / (2.0 * h);
+                            let tol = 1e-5 * (1.0 + fd.abs());
+                            assert!(
+                                (row.1[k] - fd).abs() < tol,
+                                "{front} {x} {j} {k}: {} vs {fd}",
+                                row.1[k]
+                            );
+                        }
+                    }
+                };
+                let moved = |k: usize, h: f64| {
+                    let mut v = u;
+                    v[k] += h;
+                    v
+                };
+                let rows3 = pair.edges::<3>(&u, x).unwrap();
+                check(&rows3, &|k, h| {
+                    pair.edges::<3>(&moved(k, h), x)
+                        .unwrap()
+                        .iter()
+                        .map(|r| r.0)
+                        .collect()
+                });
+                let rows2 = pair.edges::<2>(&u, x).unwrap();
+                check(&rows2, &|k, h| {
+                    pair.edges::<2>(&moved(k, h), x)
+                        .unwrap()
+                        .iter()
+                        .map(|r| r.0)
+                        .collect()
+                });
+            }
+        }
     }
 
     /// Images 161 (disturbance 2 slots above, seen from above, `b` 4.8 and 5.3 px) and 124
@@ -563,6 +791,85 @@ mod tests {
             let both_off = [Rim::Upper, Rim::Lower]
                 .iter()
                 .all(|&rim| hit_and_wrong(&off, &rims, 1, rim).0);
+            assert!(
+                !both_off,
+                "k={k}: the edge-point fits already hit both rims"
+            );
+        }
+    }
+    /// Images 123, 105 (target wafers, `b` 13.4 and 22.8 px) and 142 (a disturbance 3 slots
+    /// above, `b` 12.9 px) of the wafer benchmark (seed 3), all seen from above: the
+    /// edge-point fits of the rims miss the 1 % axis criterion (`b` 1.0–2.2 % off, also on a
+    /// noise-free render: the bias of the narrow band's profile fits); the band model's column
+    /// fit with the rim offset prior hits both rims (renderer ground truth) and adds no wrong
+    /// detection.
+    #[test]
+    fn front_band_fit_measures_rims_the_edge_point_fits_miss() {
+        let scenes = [
+            (
+                4,
+                0,
+                (
+                    -0.508_763_338_889_398_4,
+                    0.022_706_212_272_166_723,
+                    0.021_567_005_920_759_07,
+                ),
+                -0.699_898_648_609_708_3,
+                7.979_593_710_128_432,
+                1.346_561_912_964_309,
+                [0.037_930_682_362_884_77, -0.152_682_793_893_145_26],
+                292_593_318,
+            ),
+            (
+                6,
+                0,
+                (
+                    -0.510_882_258_580_018_3,
+                    -0.004_044_970_343_040_209,
+                    0.036_953_388_669_552_015,
+                ),
+                2.323_965_822_997_648,
+                5.935_913_376_380_524,
+                1.497_092_943_783_395_7,
+                [-0.064_473_834_133_685_71, 0.289_667_204_912_280_76],
+                1_455_981_231,
+            ),
+            (
+                3,
+                1,
+                (
+                    -0.450_342_202_690_282_2,
+                    -0.029_621_274_287_514_876,
+                    0.046_028_617_038_397_79,
+                ),
+                0.438_426_540_621_046_36,
+                5.280_563_183_961_084_5,
+                1.445_070_349_199_156_3,
+                [-0.220_286_155_972_942_43, -0.210_342_800_954_374_52],
+                3_832_682_570,
+            ),
+        ];
+        let prior = RimOffsetPrior {
+            thickness_ratio: 1.0 / 150.0,
+            focal_length: 1000.0,
+        };
+        for (k, wafer, camera, yaw, down, gain, gradient, seed) in scenes {
+            let (data, w, h, rims) = benchmark_scene(k, camera, yaw, down, gain, gradient, seed);
+            let view = GrayView::new(&data, w, h).unwrap();
+            let with = |front_band_fit| DetectParams {
+                rim_offset: Some(prior),
+                front_band_fit,
+                ..DetectParams::default()
+            };
+            let on = detect_wafers(&view, &with(true)).unwrap();
+            let off = detect_wafers(&view, &with(false)).unwrap();
+            for rim in [Rim::Upper, Rim::Lower] {
+                let (hit, wrong) = hit_and_wrong(&on, &rims, wafer, rim);
+                assert!(hit && wrong == 0, "k={k} {rim:?}: hit {hit}, wrong {wrong}");
+            }
+            let both_off = [Rim::Upper, Rim::Lower]
+                .iter()
+                .all(|&rim| hit_and_wrong(&off, &rims, wafer, rim).0);
             assert!(
                 !both_off,
                 "k={k}: the edge-point fits already hit both rims"
