@@ -479,17 +479,22 @@ fn detect_wafers_on_pool<T: Pixel>(
     }
     let edges = pair_rims(image, candidates, up, params)?;
     let mut edges = drop_unconfirmed(edges, params.max_unpaired_residual);
+    // The column fits run before the uncertainty screens: the edge-point fits of thin pairs,
+    // and of some wider ones, are too uncertain to pass them, and the column fit is what
+    // measures them.
     if let Some(prior) = &params.rim_offset {
-        edges = thin::refit_level_wafers(
-            image,
-            edges,
-            up,
-            prior,
-            params.thin_band_fit,
-            params.front_band_fit,
-        );
+        let mut noise = None;
+        for (on, model) in [
+            (params.thin_band_fit, thin::Model::Thin),
+            (params.front_band_fit, thin::Model::Band),
+        ] {
+            if on {
+                edges = thin::refit_level_wafers(image, edges, up, prior, model, &mut noise);
+            }
+        }
     }
-    Ok(drop_uncertain(edges, params))
+    let edges = drop_uncertain(edges, params);
+    Ok(edges)
 }
 
 /// Standard deviations of the centre `√(σ²_cx + σ²_cy)` and of the minor axis `σ_b` (pixels)

@@ -88,6 +88,13 @@ const MIN_KEPT: f64 = 0.6;
 /// Largest move of the centre (pixels) and relative change of `b` from the edge-point fit.
 const MAX_CENTRE_MOVE: f64 = 3.0;
 const MAX_B_CHANGE: f64 = 0.25;
+/// Largest relative change of `a` from the edge-point fit for [`Model::Band`]: the band fit
+/// sharpens the band's rows, while `a` of a wider rim is fixed by its edge points to ≈ 0.1 %
+/// (benchmark, seeds 3 and 4, 456 accepted band fits: |Δa| median 0.04 %, 99th percentile
+/// 0.6 %). The two accepted fits beyond 1 % (seed 3 images 80 and 143, Δa 1.5 % and 1.4 %)
+/// had moved to a different ellipse: a second pairing of a target's rims 1 px off, and a thin
+/// disturbance wafer's rims with `b` 7 % off, both at a residual 1.4–1.5× the noise.
+const MAX_A_CHANGE_BAND: f64 = 0.01;
 /// Levenberg–Marquardt iterations per round.
 const MAX_ITER: usize = 40;
 /// Relative decrease of the residual sum of squares below which Levenberg–Marquardt stops:
@@ -562,6 +569,7 @@ pub(super) fn refit_pair<T: Pixel>(
         || (kept_count as f64) < MIN_KEPT * columns.len() as f64
         || !((u[0] - u0[0]).hypot(u[1] - u0[1]) <= MAX_CENTRE_MOVE)
         || !((u[3] - u0[3]).abs() <= MAX_B_CHANGE * u0[3])
+        || (model == Model::Band && !((u[2] - u0[2]).abs() <= MAX_A_CHANGE_BAND * u0[2]))
         || !p.iter().all(|v| v.is_finite())
     {
         return None;
@@ -596,18 +604,18 @@ pub(super) fn refit_pair<T: Pixel>(
     ))
 }
 
-/// [`refit_pair`] for every wafer of `edges` with both rims (the image's noise estimated once,
-/// when there is a pair to refit): thin pairs with [`Model::Thin`] when `thin`, wider ones with
-/// [`Model::Band`] when `band`; the rims of an accepted fit replace the pair's.
+/// [`refit_pair`] with `model` for every wafer of `edges` with both rims that suits it (thin
+/// pairs for [`Model::Thin`], wider ones for [`Model::Band`]); the image's noise is estimated
+/// once into `noise`, when there is a pair to refit. The rims of an accepted fit replace the
+/// pair's.
 pub(super) fn refit_level_wafers<T: Pixel>(
     image: &GrayView<'_, T>,
     mut edges: Vec<WaferEdge>,
     up: Vector2<f64>,
     prior: &RimOffsetPrior,
-    thin: bool,
-    band: bool,
+    model: Model,
+    noise: &mut Option<f64>,
 ) -> Vec<WaferEdge> {
-    let mut noise = None;
     for i in 0..edges.len() {
         if edges[i].kind != RimKind::Upper {
             continue;
@@ -617,15 +625,8 @@ pub(super) fn refit_level_wafers<T: Pixel>(
         else {
             continue;
         };
-        let model = if edges[i].ellipse.b.max(edges[j].ellipse.b) < MAX_B {
-            Model::Thin
-        } else {
-            Model::Band
-        };
-        if !(match model {
-            Model::Thin => thin,
-            Model::Band => band,
-        }) {
+        let thin = edges[i].ellipse.b.max(edges[j].ellipse.b) < MAX_B;
+        if thin != (model == Model::Thin) {
             continue;
         }
         let sigma = *noise.get_or_insert_with(|| noise_sigma(image));
