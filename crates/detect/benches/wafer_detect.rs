@@ -22,7 +22,7 @@ use autoteach_detect::edges::{
     ArcParams, CannyParams, EdgeWorkspace, GrayView, LinkParams, canny, detect_arcs, link_edges,
     split_arcs,
 };
-use autoteach_detect::wafers::{DetectParams, detect_wafers};
+use autoteach_detect::wafers::{DetectParams, RimOffsetPrior, detect_wafers};
 use autoteach_geometry::camera::Camera;
 use autoteach_geometry::render::{self, Carrier, RenderOptions, Scene};
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -206,6 +206,28 @@ fn bench(c: &mut Criterion) {
     c.bench_function("detect_wafers 1280x720", |b| {
         b.iter(|| detect_wafers(black_box(&view), &params))
     });
+    // With the rim offset prior (the rendered wafer's thickness/radius, the focal length): the
+    // joint fits use it, and the thin and front-band column fits (`thin.rs`) run; without the
+    // column fits for the comparison.
+    let prior = DetectParams {
+        rim_offset: Some(RimOffsetPrior {
+            thickness_ratio: 1.0 / 150.0,
+            focal_length: 1000.0,
+        }),
+        ..params
+    };
+    let no_columns = DetectParams {
+        thin_band_fit: false,
+        front_band_fit: false,
+        ..prior
+    };
+    c.bench_function("detect_wafers 1280x720, rim offset prior", |b| {
+        b.iter(|| detect_wafers(black_box(&view), &prior))
+    });
+    c.bench_function(
+        "detect_wafers 1280x720, rim offset prior, no column fits",
+        |b| b.iter(|| detect_wafers(black_box(&view), &no_columns)),
+    );
     c.bench_function("canny 1280x720", |b| {
         b.iter(|| canny(black_box(&view), &CannyParams::default()))
     });
