@@ -736,6 +736,47 @@ mod tests {
         }
     }
 
+    /// A benchmark scene's parameters: `k` (disturbance slots above the target), the camera
+    /// `(x, y, dz)`, yaw and pitch (degrees), gain, gradient, noise seed.
+    type SceneParams = (usize, (f64, f64, f64), f64, f64, f64, [f64; 2], u64);
+
+    /// With the rim offset prior and `model`'s column fit on (`switch(true)`), both rims of
+    /// `wafer` in the scene are hits (benchmark rule, renderer ground truth) and no detection is
+    /// wrong; with it off, not both are hits.
+    fn assert_column_fit_hits(
+        scene: SceneParams,
+        wafer: usize,
+        switch: impl Fn(&mut DetectParams, bool),
+    ) {
+        let (k, camera, yaw, down, gain, gradient, seed) = scene;
+        let (data, w, h, rims) = benchmark_scene(k, camera, yaw, down, gain, gradient, seed);
+        let view = GrayView::new(&data, w, h).unwrap();
+        let with = |on| {
+            let mut p = DetectParams {
+                rim_offset: Some(RimOffsetPrior {
+                    thickness_ratio: 1.0 / 150.0,
+                    focal_length: 1000.0,
+                }),
+                ..DetectParams::default()
+            };
+            switch(&mut p, on);
+            p
+        };
+        let on = detect_wafers(&view, &with(true)).unwrap();
+        let off = detect_wafers(&view, &with(false)).unwrap();
+        for rim in [Rim::Upper, Rim::Lower] {
+            let (hit, wrong) = hit_and_wrong(&on, &rims, wafer, rim);
+            assert!(hit && wrong == 0, "k={k} {rim:?}: hit {hit}, wrong {wrong}");
+        }
+        let both_off = [Rim::Upper, Rim::Lower]
+            .iter()
+            .all(|&rim| hit_and_wrong(&off, &rims, wafer, rim).0);
+        assert!(
+            !both_off,
+            "k={k}: the edge-point fits already hit both rims"
+        );
+    }
+
     /// Images 161 (disturbance 2 slots above, seen from above, `b` 4.8 and 5.3 px) and 124
     /// (5 slots above, `b` 5.6 and 6.2 px) of the wafer benchmark (seed 3): the edge-point fits
     /// of both rims miss the 1 % axis criterion (161: the upper rim's `b` +9 %); the thin-band
@@ -771,33 +812,11 @@ mod tests {
                 3_481_075_875,
             ),
         ];
-        let prior = RimOffsetPrior {
-            thickness_ratio: 1.0 / 150.0,
-            focal_length: 1000.0,
-        };
-        for (k, camera, yaw, down, gain, gradient, seed) in scenes {
-            let (data, w, h, rims) = benchmark_scene(k, camera, yaw, down, gain, gradient, seed);
-            let view = GrayView::new(&data, w, h).unwrap();
-            let with = |thin_band_fit| DetectParams {
-                rim_offset: Some(prior),
-                thin_band_fit,
-                ..DetectParams::default()
-            };
-            let on = detect_wafers(&view, &with(true)).unwrap();
-            let off = detect_wafers(&view, &with(false)).unwrap();
-            for rim in [Rim::Upper, Rim::Lower] {
-                let (hit, wrong) = hit_and_wrong(&on, &rims, 1, rim);
-                assert!(hit && wrong == 0, "k={k} {rim:?}: hit {hit}, wrong {wrong}");
-            }
-            let both_off = [Rim::Upper, Rim::Lower]
-                .iter()
-                .all(|&rim| hit_and_wrong(&off, &rims, 1, rim).0);
-            assert!(
-                !both_off,
-                "k={k}: the edge-point fits already hit both rims"
-            );
+        for scene in scenes {
+            assert_column_fit_hits(scene, 1, |p, on| p.thin_band_fit = on);
         }
     }
+
     /// Images 123, 105 (target wafers, `b` 13.4 and 22.8 px) and 142 (a disturbance 3 slots
     /// above, `b` 12.9 px) of the wafer benchmark (seed 3), all seen from above: the
     /// edge-point fits of the rims miss the 1 % axis criterion (`b` 1.0–2.2 % off, also on a
@@ -850,31 +869,9 @@ mod tests {
                 3_832_682_570,
             ),
         ];
-        let prior = RimOffsetPrior {
-            thickness_ratio: 1.0 / 150.0,
-            focal_length: 1000.0,
-        };
         for (k, wafer, camera, yaw, down, gain, gradient, seed) in scenes {
-            let (data, w, h, rims) = benchmark_scene(k, camera, yaw, down, gain, gradient, seed);
-            let view = GrayView::new(&data, w, h).unwrap();
-            let with = |front_band_fit| DetectParams {
-                rim_offset: Some(prior),
-                front_band_fit,
-                ..DetectParams::default()
-            };
-            let on = detect_wafers(&view, &with(true)).unwrap();
-            let off = detect_wafers(&view, &with(false)).unwrap();
-            for rim in [Rim::Upper, Rim::Lower] {
-                let (hit, wrong) = hit_and_wrong(&on, &rims, wafer, rim);
-                assert!(hit && wrong == 0, "k={k} {rim:?}: hit {hit}, wrong {wrong}");
-            }
-            let both_off = [Rim::Upper, Rim::Lower]
-                .iter()
-                .all(|&rim| hit_and_wrong(&off, &rims, wafer, rim).0);
-            assert!(
-                !both_off,
-                "k={k}: the edge-point fits already hit both rims"
-            );
+            let scene = (k, camera, yaw, down, gain, gradient, seed);
+            assert_column_fit_hits(scene, wafer, |p, on| p.front_band_fit = on);
         }
     }
 }
