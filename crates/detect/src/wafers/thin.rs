@@ -215,22 +215,31 @@ impl Pair {
         g
     }
 
+    /// The upper rim `u`, its lower rim and `∂(lower)/∂(upper)`: what [`Pair::edges`] needs
+    /// in every column, computed once per parameter set.
+    fn rims(&self, u: &[f64; 5]) -> Rims {
+        Rims {
+            upper: *u,
+            lower: self.lower(u),
+            chain: self.lower_jacobian(u),
+        }
+    }
+
     /// The `E` edges of column `x` in image order and their derivatives with respect to the
     /// upper rim's `(cx, cy, a, b, θ)`: with `E = 3` the face's silhouette (the back arc of
     /// the upper rim seen from above, of the lower rim from below) and the two front arcs,
     /// with `E = 2` the two front arcs.
-    fn edges<const E: usize>(&self, u: &[f64; 5], x: f64) -> Option<[(f64, [f64; 5]); E]> {
-        let l = self.lower(u);
-        let g = self.lower_jacobian(u);
+    fn edges<const E: usize>(&self, r: &Rims, x: f64) -> Option<[(f64, [f64; 5]); E]> {
+        let (u, l) = (&r.upper, &r.lower);
         // Derivatives of a lower-rim row chained through the prior.
         let chain = |(y, d): (f64, [f64; 5])| {
-            let row = nalgebra::RowVector5::from_row_slice(&d) * g;
+            let row = nalgebra::RowVector5::from_row_slice(&d) * r.chain;
             (y, [row[0], row[1], row[2], row[3], row[4]])
         };
         let mut e = [(0.0, [0.0; 5]); E];
         let fronts = [
             arc_row(u, x, self.front)?,
-            chain(arc_row(&l, x, self.front)?),
+            chain(arc_row(l, x, self.front)?),
         ];
         match E {
             2 => e.copy_from_slice(&fronts),
@@ -238,7 +247,7 @@ impl Pair {
                 e[0] = if self.front > 0.0 {
                     arc_row(u, x, -self.front)?
                 } else {
-                    chain(arc_row(&l, x, -self.front)?)
+                    chain(arc_row(l, x, -self.front)?)
                 };
                 e[1..].copy_from_slice(&fronts);
             }
@@ -247,6 +256,13 @@ impl Pair {
         e.sort_by(|p, q| p.0.total_cmp(&q.0));
         Some(e)
     }
+}
+
+/// Both rims of a parameter set (see [`Pair::rims`]).
+struct Rims {
+    upper: [f64; 5],
+    lower: [f64; 5],
+    chain: Matrix5<f64>,
 }
 
 /// One column: its `x` and the grey levels of its window rows `y0, y0 + 1, …`.
@@ -285,12 +301,13 @@ fn evaluate<const E: usize, const L: usize>(
     let mut grads = Vec::new();
     let mut column_rms = Vec::with_capacity(columns.len());
     let mut basis = Vec::new();
+    let rims = pair.rims(&u);
     for (c, &keep) in columns.iter().zip(kept) {
         if !keep {
             column_rms.push(f64::NAN);
             continue;
         }
-        let rows = pair.edges::<E>(&u, c.x)?;
+        let rows = pair.edges::<E>(&rims, c.x)?;
         let e: [f64; E] = std::array::from_fn(|j| rows[j].0);
         let de: [[f64; 5]; E] = std::array::from_fn(|j| rows[j].1);
         // Blur along the column of each edge, from its slope `dEⱼ/dx = −∂Eⱼ/∂cx`.
@@ -534,11 +551,12 @@ pub(super) fn refit_pair<T: Pixel>(
     let (w, h) = (image.width(), image.height());
     let data = image.data();
     let mut columns = Vec::new();
+    let rims0 = pair.rims(&u0);
     let mut x = (x0 + END_COLUMNS).ceil();
     while x <= x1 - END_COLUMNS {
         let rows = match model {
-            Model::Thin => pair.edges::<3>(&u0, x).map(|e| (e[0].0, e[2].0)),
-            Model::Band => pair.edges::<2>(&u0, x).map(|e| (e[0].0, e[1].0)),
+            Model::Thin => pair.edges::<3>(&rims0, x).map(|e| (e[0].0, e[2].0)),
+            Model::Band => pair.edges::<2>(&rims0, x).map(|e| (e[0].0, e[1].0)),
         };
         if x >= 0.0
             && x < w as f64
@@ -688,50 +706,39 @@ mod tests {
     /// a wafer seen from above and one from below, on a tilted ellipse.
     #[test]
     fn edge_derivatives_match_finite_differences() {
+        /// `pair.edges::<E>` at `x`: analytic derivatives against central differences.
+        fn check<const E: usize>(pair: &Pair, u: [f64; 5], x: f64) {
+            let steps = [1e-4, 1e-4, 1e-4, 1e-5, 1e-7];
+            let rows = pair.edges::<E>(&pair.rims(&u), x).unwrap();
+            let at = |k: usize, h: f64| {
+                let mut v = u;
+                v[k] += h;
+                pair.edges::<E>(&pair.rims(&v), x).unwrap()
+            };
+            for (k, &h) in steps.iter().enumerate() {
+                let (hi, lo) = (at(k, h), at(k, -h));
+                for (j, row) in rows.iter().enumerate() {
+                    let fd = (hi[j].0 - lo[j].0) / (2.0 * h);
+                    let tol = 1e-5 * (1.0 + fd.abs());
+                    let front = pair.front;
+                    assert!(
+                        (row.1[k] - fd).abs() < tol,
+                        "E={E} front {front} x {x} edge {j} parameter {k}: {} vs {fd}",
+                        row.1[k]
+                    );
+                }
+            }
+        }
         let prior = RimOffsetPrior {
             thickness_ratio: 1.0 / 150.0,
             focal_length: 1000.0,
         };
         let u = [640.0, 300.0, 310.0, 12.0, 0.02];
-        let steps = [1e-4, 1e-4, 1e-4, 1e-5, 1e-7];
         for front in [1.0, -1.0] {
             let pair = Pair { prior, front };
             for x in [400.0, 600.0, 700.0, 900.0] {
-                let check = |rows: &[(f64, [f64; 5])], shifted: &dyn Fn(usize, f64) -> Vec<f64>| {
-                    for (k, &h) in steps.iter().enumerate() {
-                        let (hi, lo) = (shifted(k, h), shifted(k, -h));
-                        for (j, row) in rows.iter().enumerate() {
-                            let fd = (hi[j] - lo[j]) / (2.0 * h);
-                            let tol = 1e-5 * (1.0 + fd.abs());
-                            assert!(
-                                (row.1[k] - fd).abs() < tol,
-                                "{front} {x} {j} {k}: {} vs {fd}",
-                                row.1[k]
-                            );
-                        }
-                    }
-                };
-                let moved = |k: usize, h: f64| {
-                    let mut v = u;
-                    v[k] += h;
-                    v
-                };
-                let rows3 = pair.edges::<3>(&u, x).unwrap();
-                check(&rows3, &|k, h| {
-                    pair.edges::<3>(&moved(k, h), x)
-                        .unwrap()
-                        .iter()
-                        .map(|r| r.0)
-                        .collect()
-                });
-                let rows2 = pair.edges::<2>(&u, x).unwrap();
-                check(&rows2, &|k, h| {
-                    pair.edges::<2>(&moved(k, h), x)
-                        .unwrap()
-                        .iter()
-                        .map(|r| r.0)
-                        .collect()
-                });
+                check::<3>(&pair, u, x);
+                check::<2>(&pair, u, x);
             }
         }
     }
