@@ -568,6 +568,7 @@ def wafer_detect(
     seek_missing_partner: bool | None = None,
     thin_band_fit: bool | None = None,
     front_band_fit: bool | None = None,
+    principal_point: tuple[float, float] | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 

@@ -248,6 +248,7 @@ def detect_wafers(
     seek_missing_partner: bool = True,
     thin_band_fit: bool = True,
     front_band_fit: bool = True,
+    principal_point: tuple[float, float] | None = None,
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -340,6 +341,12 @@ def detect_wafers(
             columns across the side band (three grey levels per column, clipped samples
             censored, one blur, the rims tied by the prior); an accepted fit replaces the pair's
             edge-point fits. No effect without the prior.
+        principal_point: Camera principal point ``(cx, cy)`` (pixels) for the rim offset prior;
+            ``None``: the image centre ``((width - 1) / 2, (height - 1) / 2)``. With it, the
+            column fits (``thin_band_fit``, ``front_band_fit``) tie the lower rim to the upper
+            one exactly: the upper rim's ellipse gives the circle's pose (radius 1) under the
+            pinhole camera, and the lower rim is its image moved by ``thickness_ratio`` against
+            the normal. Only with ``thickness_ratio`` and ``focal_length``.
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -391,6 +398,7 @@ def detect_wafers(
         seek_missing_partner=bool(seek_missing_partner),
         thin_band_fit=bool(thin_band_fit),
         front_band_fit=bool(front_band_fit),
+        principal_point=None if principal_point is None else (float(principal_point[0]), float(principal_point[1])),
     )
     return [
         WaferEdge(

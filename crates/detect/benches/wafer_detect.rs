@@ -213,6 +213,7 @@ fn bench(c: &mut Criterion) {
         rim_offset: Some(RimOffsetPrior {
             thickness_ratio: 1.0 / 150.0,
             focal_length: 1000.0,
+            principal_point: None,
         }),
         ..params
     };

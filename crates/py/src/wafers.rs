@@ -163,7 +163,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     join_border_cut_arcs=None, thickness_ratio=None, focal_length=None, restart_turn_at_cuts=None,
     max_relative_sigma_b=None, max_centre_sigma=None, keep_flat_run_pieces=None,
     border_pairs_take_arcs=None, reflection_inside_rim=None, seek_missing_partner=None,
-    thin_band_fit=None, front_band_fit=None
+    thin_band_fit=None, front_band_fit=None, principal_point=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -203,6 +203,7 @@ fn wafer_detect(
     seek_missing_partner: Option<bool>,
     thin_band_fit: Option<bool>,
     front_band_fit: Option<bool>,
+    principal_point: Option<(f64, f64)>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let mut params = DetectParams::default();
     // `None` keeps the library default (`wafer_detect_defaults`).
@@ -255,10 +256,16 @@ fn wafer_detect(
         }),
     };
     params.rim_offset = match (thickness_ratio, focal_length) {
+        (None, None) if principal_point.is_some() => {
+            return Err(errors::invalid_input(
+                "principal_point belongs to the rim offset prior: give thickness_ratio and focal_length too",
+            ));
+        }
         (None, None) => None,
         (Some(thickness_ratio), Some(focal_length)) => Some(RimOffsetPrior {
             thickness_ratio,
             focal_length,
+            principal_point: principal_point.map(|(x, y)| [x, y]),
         }),
         _ => {
             return Err(errors::invalid_input(

@@ -881,6 +881,7 @@ mod tests {
             rim_offset: Some(RimOffsetPrior {
                 thickness_ratio: 0.001 / 0.150,
                 focal_length: 1000.0,
+                principal_point: None,
             }),
             ..DetectParams::default()
         };

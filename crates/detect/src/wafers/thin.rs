@@ -55,7 +55,7 @@
 
 use super::band::{cdf_and_density, cholesky_solve};
 use super::joint::ray_hit;
-use super::rim_prior::RimOffsetPrior;
+use super::rim_prior::{RimMap, RimOffsetPrior};
 use super::{GrayView, Pixel, RimKind, WaferEdge};
 use autoteach_geometry::conic::Ellipse;
 use nalgebra::{Matrix5, Matrix6, SMatrix, SVector, Vector2, Vector6};
@@ -174,9 +174,10 @@ fn arc_row(e: &[f64; 5], x: f64, side: f64) -> Option<(f64, [f64; 5])> {
     Some((y, [d[0], d[1], d[3], d[2], -f_theta / f_t]))
 }
 
-/// The geometry of the pair: the upper rim `(cx, cy, a, b, θ)` and the side of the front arcs.
+/// The geometry of the pair: the map from the upper rim `(cx, cy, a, b, θ)` to the lower one
+/// and the side of the front arcs.
 struct Pair {
-    prior: RimOffsetPrior,
+    map: RimMap,
     /// +1 when the band lies below the centre in the image (the wafer seen from above, `up`
     /// pointing to −y), −1 when above (seen from below).
     front: f64,
@@ -195,34 +196,16 @@ pub(super) enum Model {
 }
 
 impl Pair {
-    /// The lower rim of the upper rim `u` (module doc).
-    fn lower(&self, u: &[f64; 5]) -> [f64; 5] {
-        let a = u[2];
-        let off = self.prior.offset(a);
-        let db = self.front * self.prior.thickness_ratio * a * a / self.prior.focal_length;
-        [u[0], u[1] + off, a, u[3] + db, u[4]]
-    }
-
-    /// `∂(lower)/∂(upper)`: the identity except the dependence of the offset and of the minor
-    /// axis change on `a`.
-    fn lower_jacobian(&self, u: &[f64; 5]) -> Matrix5<f64> {
-        let a = u[2];
-        let (k, f) = (self.prior.thickness_ratio, self.prior.focal_length);
-        let r = (1.0 + (a / f).powi(2)).sqrt();
-        let mut g = Matrix5::identity();
-        g[(1, 2)] = k * (r + a * a / (f * f * r));
-        g[(3, 2)] = self.front * 2.0 * k * a / f;
-        g
-    }
-
-    /// The upper rim `u`, its lower rim and `∂(lower)/∂(upper)`: what [`Pair::edges`] needs
-    /// in every column, computed once per parameter set.
-    fn rims(&self, u: &[f64; 5]) -> Rims {
-        Rims {
+    /// The upper rim `u`, its lower rim and `∂(lower)/∂(upper)` ([`RimMap::lower_rim`]): what
+    /// [`Pair::edges`] needs in every column, computed once per parameter set; `None` where
+    /// the map does not recover the wafer's pose.
+    fn rims(&self, u: &[f64; 5]) -> Option<Rims> {
+        let (lower, chain) = self.map.lower_rim(u)?;
+        Some(Rims {
             upper: *u,
-            lower: self.lower(u),
-            chain: self.lower_jacobian(u),
-        }
+            lower,
+            chain,
+        })
     }
 
     /// The `E` edges of column `x` in image order and their derivatives with respect to the
@@ -301,7 +284,7 @@ fn evaluate<const E: usize, const L: usize>(
     let mut grads = Vec::new();
     let mut column_rms = Vec::with_capacity(columns.len());
     let mut basis = Vec::new();
-    let rims = pair.rims(&u);
+    let rims = pair.rims(&u)?;
     for (c, &keep) in columns.iter().zip(kept) {
         if !keep {
             column_rms.push(f64::NAN);
@@ -539,7 +522,7 @@ pub(super) fn refit_pair<T: Pixel>(
         return None;
     }
     let pair = Pair {
-        prior: *prior,
+        map: RimMap::new(prior, image.width(), image.height(), front, up),
         front,
     };
     let (mut x0, mut x1) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -551,7 +534,7 @@ pub(super) fn refit_pair<T: Pixel>(
     let (w, h) = (image.width(), image.height());
     let data = image.data();
     let mut columns = Vec::new();
-    let rims0 = pair.rims(&u0);
+    let rims0 = pair.rims(&u0)?;
     let mut x = (x0 + END_COLUMNS).ceil();
     while x <= x1 - END_COLUMNS {
         let rows = match model {
@@ -599,9 +582,9 @@ pub(super) fn refit_pair<T: Pixel>(
     let s2 = ss / (n.saturating_sub(6 + levels * kept_count)).max(1) as f64;
     let cov6 = jtj.try_inverse()? * s2;
     let cov_u: Matrix5<f64> = cov6.fixed_view::<5, 5>(0, 0).into_owned();
-    let g = pair.lower_jacobian(&u);
-    let cov_l = g * cov_u * g.transpose();
-    let l = pair.lower(&u);
+    let rims = pair.rims(&u)?;
+    let cov_l = rims.chain * cov_u * rims.chain.transpose();
+    let l = rims.lower;
     let make = |e: [f64; 5], cov: Matrix5<f64>, old: &WaferEdge, kind: RimKind| {
         let ellipse = Ellipse::new(e[0], e[1], e[2], e[3], e[4]).ok()?;
         let pts: Vec<Vector2<f64>> = old.points.iter().map(|p| p.coords).collect();
@@ -709,11 +692,11 @@ mod tests {
         /// `pair.edges::<E>` at `x`: analytic derivatives against central differences.
         fn check<const E: usize>(pair: &Pair, u: [f64; 5], x: f64) {
             let steps = [1e-4, 1e-4, 1e-4, 1e-5, 1e-7];
-            let rows = pair.edges::<E>(&pair.rims(&u), x).unwrap();
+            let rows = pair.edges::<E>(&pair.rims(&u).unwrap(), x).unwrap();
             let at = |k: usize, h: f64| {
                 let mut v = u;
                 v[k] += h;
-                pair.edges::<E>(&pair.rims(&v), x).unwrap()
+                pair.edges::<E>(&pair.rims(&v).unwrap(), x).unwrap()
             };
             for (k, &h) in steps.iter().enumerate() {
                 let (hi, lo) = (at(k, h), at(k, -h));
@@ -732,10 +715,14 @@ mod tests {
         let prior = RimOffsetPrior {
             thickness_ratio: 1.0 / 150.0,
             focal_length: 1000.0,
+            principal_point: None,
         };
         let u = [640.0, 300.0, 310.0, 12.0, 0.02];
         for front in [1.0, -1.0] {
-            let pair = Pair { prior, front };
+            let pair = Pair {
+                map: RimMap::new(&prior, 1280, 720, front, Vector2::new(0.0, -1.0)),
+                front,
+            };
             for x in [400.0, 600.0, 700.0, 900.0] {
                 check::<3>(&pair, u, x);
                 check::<2>(&pair, u, x);
@@ -763,6 +750,7 @@ mod tests {
                 rim_offset: Some(RimOffsetPrior {
                     thickness_ratio: 1.0 / 150.0,
                     focal_length: 1000.0,
+                    principal_point: None,
                 }),
                 ..DetectParams::default()
             };
