@@ -131,8 +131,13 @@ def evaluate(
     n_images: int, seed: int = SEED, silhouettes: bool = False, rim_offset_prior: bool = False
 ) -> dict[str, float]:
     """Runs the robustness test on ``n_images`` scenes; returns the figures. ``rim_offset_prior``
-    gives the detector the wafer's thickness ratio and the camera's focal length."""
-    prior = {"thickness_ratio": WAFER_THICKNESS / WAFER_RADIUS, "focal_length": float(PARAMS[0])}
+    gives the detector the wafer's thickness ratio and the camera's focal length and principal
+    point."""
+    prior = {
+        "thickness_ratio": WAFER_THICKNESS / WAFER_RADIUS,
+        "focal_length": float(PARAMS[0]),
+        "principal_point": (float(PARAMS[2]), float(PARAMS[3])),
+    }
     kwargs = prior if rim_offset_prior else {}
     rng = np.random.default_rng(seed)
     n_visible = n_matched_visible = n_det = n_det_ignored = n_det_matched = 0
@@ -193,12 +198,15 @@ def main() -> None:
     parser.add_argument(
         "--rim-offset-prior",
         action="store_true",
-        help="give the detector the wafer's thickness/radius and the camera's focal length",
+        help="give the detector the wafer's thickness/radius and the camera's focal length and principal point",
     )
     args = parser.parse_args()
     r = evaluate(args.n_images, silhouettes=args.all_silhouettes, rim_offset_prior=args.rim_offset_prior)
     print(f"visible-rim definition: {'any unoccluded point' if args.all_silhouettes else 'side-facing band edge'}")
-    print(f"rim offset prior: {'thickness/radius and focal length given' if args.rim_offset_prior else 'none'}")
+    print(
+        "rim offset prior: "
+        + ("thickness/radius, focal length and principal point given" if args.rim_offset_prior else "none")
+    )
     print(f"images {r['images']}, visible rims {r['visible_rims']}, detections {r['detections']}")
     print(f"recall {r['recall']:.4f}  precision {r['precision']:.4f}  target-wafer recall {r['target_recall']:.4f}")
     print(

@@ -223,6 +223,8 @@ def test_python_defaults_are_the_library_defaults() -> None:
         ({"min_rim_separation": 1.0}, "min_rim_separation"),
         ({"max_arc_residual_ratio": -1.0}, "max_arc_residual_ratio"),
         ({"inflection_sigmas": math.inf}, "inflection_sigmas"),
+        ({"principal_point": (640.0, 360.0)}, "principal_point"),
+        ({"thickness_ratio": 0.005, "focal_length": 900.0, "principal_point": (math.nan, 360.0)}, "principal_point"),
         ({"thickness_ratio": 1 / 150}, "focal_length"),
         ({"focal_length": 1000.0}, "thickness_ratio"),
         ({"thickness_ratio": -1.0, "focal_length": 1000.0}, "thickness_ratio"),
@@ -292,24 +294,26 @@ def test_non_contiguous_view_equals_its_copy(scene: tuple[np.ndarray, list[dict]
 def _column_fit_gains(switch: str, n_scenes: int = 45) -> tuple[int, int, bool]:
     """Visible-rim hits (the benchmark's rule: 1 px, 1 %, renderer ground truth) gained and lost
     by turning the detector keyword ``switch`` on, with the rim offset prior, over the first
-    ``n_scenes`` benchmark scenes of seed 3; and whether the number of detections stayed the same
-    in every scene."""
+    ``n_scenes`` benchmark scenes of seed 3; and whether no scene gained a detection that matches
+    no rim (a refit can add a detection: a rim whose edge-point fit was too uncertain to be
+    reported)."""
     prior = {"thickness_ratio": bench.WAFER_THICKNESS / bench.WAFER_RADIUS, "focal_length": float(bench.PARAMS[0])}
     rng = np.random.default_rng(bench.SEED)
     gained = lost = 0
-    same_count = True
+    no_wrong_added = True
     for i in range(n_scenes):
         image, truth = bench.make_scene(rng, 1 + i % 20)
         visible = [bench.visible_fraction(t) >= bench.MIN_VISIBLE for t in truth]
-        hits, counts = {}, {}
+        hits, unmatched = {}, {}
         for on in (False, True):
             dets = detect_wafers(image, **{switch: on}, **prior)
-            hits[on] = {j for _, j in bench.match(dets, truth) if visible[j]}
-            counts[on] = len(dets)
-        same_count &= counts[True] == counts[False]
+            matches = bench.match(dets, truth)
+            hits[on] = {j for _, j in matches if visible[j]}
+            unmatched[on] = len(dets) - len(matches)
+        no_wrong_added &= unmatched[True] <= unmatched[False]
         gained += len(hits[True] - hits[False])
         lost += len(hits[False] - hits[True])
-    return gained, lost, same_count
+    return gained, lost, no_wrong_added
 
 
 def test_thin_band_fit_adds_thin_rims_and_no_wrong_detection() -> None:
@@ -321,9 +325,11 @@ def test_thin_band_fit_adds_thin_rims_and_no_wrong_detection() -> None:
 
 
 def test_front_band_fit_adds_rims_and_loses_none() -> None:
-    """With the rim offset prior, the front-band fit (both rims of a level wafer seen from above
-    with ``b`` from 9 px refitted from the image columns across the side band) turns rims whose
-    edge-point fits are 1-3 % off in ``b`` into hits over the first 45 benchmark scenes of seed 3,
-    no hit into a miss, and adds no detection."""
-    gained, lost, same_count = _column_fit_gains("front_band_fit")
-    assert gained >= 4 and lost == 0 and same_count, (gained, lost, same_count)
+    """With the rim offset prior, the front-band fit (both rims of a level wafer with ``b`` from
+    9 px, seen from above or below, refitted from the image columns across the side band) turns
+    rims whose edge-point fits are 1-3 % off in ``b`` into hits over the first 45 benchmark scenes
+    of seed 3 (9 since the exact lower-rim map, among them the partner rims of two wafers seen
+    from below that were too uncertain to report), no hit into a miss, and adds no wrong
+    detection."""
+    gained, lost, no_wrong_added = _column_fit_gains("front_band_fit")
+    assert gained >= 7 and lost == 0 and no_wrong_added, (gained, lost, no_wrong_added)

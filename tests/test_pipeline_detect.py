@@ -111,9 +111,10 @@ def test_detector_options_carry_the_wafer_and_camera(session, monkeypatch):
     cfg = session.config
     k = _k(session)
     opts = pipeline.detector_options(k, cfg.wafer_radius, cfg.wafer_thickness)
-    assert opts == pytest.approx(
-        {"thickness_ratio": cfg.wafer_thickness / cfg.wafer_radius, "focal_length": 0.5 * (k[0, 0] + k[1, 1])}
-    )
+    assert set(opts) == {"thickness_ratio", "focal_length", "principal_point"}
+    assert opts["thickness_ratio"] == pytest.approx(cfg.wafer_thickness / cfg.wafer_radius)
+    assert opts["focal_length"] == pytest.approx(0.5 * (k[0, 0] + k[1, 1]))
+    assert opts["principal_point"] == pytest.approx((k[0, 2], k[1, 2]))
     for radius, thickness, f in ((0.0, 0.001, 1000.0), (0.15, np.nan, 1000.0), (0.15, 0.001, -1.0)):
         with pytest.raises(InvalidInputError, match="finite and positive"):
             pipeline.detector_options(np.diag([f, f, 1.0]), radius, thickness)

@@ -399,13 +399,14 @@ def _overlap(a: np.ndarray, b: np.ndarray, margin: float) -> bool:
     return bool(a[0] - margin <= b[2] and b[0] - margin <= a[2] and a[1] - margin <= b[3] and b[1] - margin <= a[3])
 
 
-def detector_options(k: np.ndarray, radius: float, thickness: float) -> dict[str, float]:
+def detector_options(k: np.ndarray, radius: float, thickness: float) -> dict[str, object]:
     """Keyword options of :func:`autoteach.detect.detect_wafers` that the pipeline knows.
 
-    The wafer's thickness-to-radius ratio and the camera's focal length (pixels, the mean of
-    ``fx`` and ``fy`` of ``k``) give the detector's prior on the image offset between a wafer's
-    two rims (``thickness_ratio``, ``focal_length``; 000_3b1454b2b2194811.txt §3.2, the rims
-    are the images of two parallel circles a thickness apart, eqs. (3.1)–(3.2)).
+    The wafer's thickness-to-radius ratio, the camera's focal length (pixels, the mean of
+    ``fx`` and ``fy`` of ``k``) and its principal point (``k[0, 2]``, ``k[1, 2]``) give the
+    detector's prior on the image offset between a wafer's two rims (``thickness_ratio``,
+    ``focal_length``, ``principal_point``; 000_3b1454b2b2194811.txt §3.2, the rims are the
+    images of two parallel circles a thickness apart, eqs. (3.1)–(3.2)).
 
     Raises:
         InvalidInputError: a radius, thickness or focal length that is not finite and positive.
@@ -415,7 +416,10 @@ def detector_options(k: np.ndarray, radius: float, thickness: float) -> dict[str
     for name, v in (("wafer radius", radius), ("wafer thickness", thickness), ("focal length", f)):
         if not (math.isfinite(v) and v > 0.0):
             raise InvalidInputError(f"the {name} must be finite and positive, got {v!r}")
-    return {"thickness_ratio": thickness / radius, "focal_length": f}
+    principal_point = (float(k[0, 2]), float(k[1, 2]))
+    if not all(math.isfinite(v) for v in principal_point):
+        raise InvalidInputError(f"the principal point must be finite, got {principal_point!r}")
+    return {"thickness_ratio": thickness / radius, "focal_length": f, "principal_point": principal_point}
 
 
 def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, **options: Any) -> list[list[Any]]:

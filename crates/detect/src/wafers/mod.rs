@@ -187,8 +187,8 @@ pub struct DetectParams {
     /// [`thin`]). An accepted fit replaces the pair's edge-point fits. Default true (no effect
     /// without `rim_offset`).
     pub thin_band_fit: bool,
-    /// With [`DetectParams::rim_offset`] given, refits both rims of a wider level wafer seen
-    /// from above (`b` from 9 px, major axis near horizontal, `up` near −y) by one intensity
+    /// With [`DetectParams::rim_offset`] given, refits both rims of a wider level wafer, seen
+    /// from above or below (`b` from 9 px, major axis near horizontal, `up` near −y), by one intensity
     /// fit of the image columns across its side band, the two rims tied by the rim offset
     /// prior (see [`thin`], `Model::Band`). An accepted fit replaces the pair's edge-point
     /// fits. Default true (no effect without `rim_offset`).
@@ -609,7 +609,7 @@ mod validate;
 
 use pair::pair_rims;
 pub use refine::refine_band_edges;
-pub use rim_prior::{RIM_OFFSET_RELATIVE_SIGMA, RimOffsetPrior};
+pub use rim_prior::{RIM_OFFSET_RELATIVE_SIGMA, RimMap, RimOffsetPrior};
 use validate::{drop_inconsistent_arcs, drop_outlier_arcs, median};
 
 #[cfg(test)]

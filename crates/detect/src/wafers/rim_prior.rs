@@ -237,12 +237,13 @@ impl RimMap {
     }
 
     /// The lower rim `(cx, cy, a, b, θ)` of the wafer whose upper rim images as `upper`, and
-    /// its 5×5 Jacobian with respect to `upper`: `J_l·Ad(S)·J_u⁺`, with `J_u`, `J_l` the
+    /// its 5×5 Jacobian with respect to `upper`: `J_l·Ad(S⁻¹)·J_u⁺`, with `J_u`, `J_l` the
     /// Jacobians of the two rims' ellipses with respect to the right perturbation of the
     /// circle's pose ([`project_circle_jacobian`]), `J_u⁺ = J_uᵀ(J_uJ_uᵀ)⁻¹` (any right inverse
     /// serves: `J_u`'s null space, the rotation about the normal, moves neither rim) and `S`
     /// the shift from the upper circle to the lower one (`T·Exp(δ)·S = T·S·Exp(Ad(S⁻¹)δ)`).
-    /// `None` where the pose is not recovered ([`Self::pose`]).
+    /// `None` where the pose is not recovered (Gauss–Newton from the weak-perspective pose does
+    /// not converge, or converges to the other side).
     pub fn lower_rim(&self, upper: &[f64; 5]) -> Option<([f64; 5], Matrix5<f64>)> {
         let pose = self.pose(upper)?;
         let shift = Isometry3::translation(0.0, 0.0, -self.thickness_ratio);
