@@ -85,7 +85,7 @@ pub struct Ellipse {
 }
 
 /// Wraps an angle into `(−π/2, π/2]` (an axis direction is defined modulo π).
-fn wrap_half_pi(theta: f64) -> f64 {
+pub fn wrap_half_pi(theta: f64) -> f64 {
     let mut t = theta.rem_euclid(PI); // [0, π], π possible by rounding
     if t > FRAC_PI_2 {
         t -= PI;

@@ -45,7 +45,7 @@
 //! with the same `a`, `θ` and centre column is off by up to 0.29 px in `cy`, 0.22 px in `a`
 //! and 0.31 px in `b` (for wafers seen from below; 0.08 px in `cy` and `b` from above).
 
-use autoteach_geometry::conic::project_circle_jacobian;
+use autoteach_geometry::conic::{project_circle_jacobian, wrap_half_pi};
 use autoteach_geometry::lie::{se3_adjoint, se3_plus};
 use nalgebra::{
     Isometry3, Matrix3, Matrix5, Rotation3, SMatrix, Translation3, UnitQuaternion, Vector2,
@@ -135,12 +135,6 @@ pub struct RimMap {
     up: Vector2<f64>,
 }
 
-/// `d` wrapped to `(−π/2, π/2]` (an ellipse's `θ` is defined modulo π).
-fn wrap_half_turn(d: f64) -> f64 {
-    let pi = std::f64::consts::PI;
-    d - pi * (d / pi).round()
-}
-
 impl RimMap {
     /// The map for `prior`, an image of `width × height` pixels (for the default principal
     /// point), wafers seen from above (`front` > 0) or below, and the image direction `up` of
@@ -197,7 +191,7 @@ impl RimMap {
                 e.cy - cy,
                 e.a - a,
                 e.b - b,
-                wrap_half_turn(e.theta - upper[4]),
+                wrap_half_pi(e.theta - upper[4]),
             )
             .component_mul(&weights);
             let mut wj = j;
@@ -252,7 +246,7 @@ impl RimMap {
         let right_inverse: SMatrix<f64, 6, 5> =
             ju.transpose() * (ju * ju.transpose()).try_inverse()?;
         let chain = jl * se3_adjoint(&shift.inverse()) * right_inverse;
-        let theta = upper[4] + wrap_half_turn(lower.theta - upper[4]);
+        let theta = upper[4] + wrap_half_pi(lower.theta - upper[4]);
         Some(([lower.cx, lower.cy, lower.a, lower.b, theta], chain))
     }
 }
