@@ -74,6 +74,9 @@ use nalgebra::{Matrix5, Matrix6, SMatrix, SVector, Vector2, Vector6};
 /// with the rim offset prior (210 images; seed 3 / seed 4 recall, precision): 8 px 0.9305 /
 /// 0.9206, 0.9626 / 0.9557 (true rims of `b` 7.3–7.9 px whose edge-point fit is 2 % high were
 /// left out); 9 px 0.9363 / 0.9250, 0.9686 / 0.9588; 10 px 0.9334 / 0.9265, 0.9627 / 0.9604.
+/// Re-measured with the exact lower-rim map and the band model on both sides (session 16;
+/// seed 3 recall / precision, seed 4): 8 px 0.9682 / 0.9882, 0.9574 / 0.9834; 9 px 0.9740 /
+/// 0.9941, 0.9632 / 0.9894; 10 px 0.9653 / 0.9823, 0.9632 / 0.9894.
 pub(super) const MAX_B: f64 = 9.0;
 /// Largest `|sin θ|` of the rims' major axis and `|up_x|` for the column model.
 const MAX_TILT: f64 = 0.05;
