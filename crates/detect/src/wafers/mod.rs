@@ -623,7 +623,7 @@ mod tests {
 
     /// Camera at `(x, y, z)` (world, metres) looking along +x, yawed by `yaw` and pitched down
     /// by `down` (radians).
-    fn camera_pose(x: f64, y: f64, z: f64, yaw: f64, down: f64) -> Isometry3<f64> {
+    pub(super) fn camera_pose(x: f64, y: f64, z: f64, yaw: f64, down: f64) -> Isometry3<f64> {
         let axes = Matrix3::from_columns(&[-Vector3::y(), -Vector3::z(), Vector3::x()]);
         let r = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw)
             * Rotation3::from_matrix_unchecked(axes)

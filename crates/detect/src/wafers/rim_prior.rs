@@ -194,11 +194,7 @@ impl RimMap {
                 wrap_half_pi(e.theta - upper[4]),
             )
             .component_mul(&weights);
-            let mut wj = j;
-            for (row, w) in weights.iter().enumerate() {
-                wj.row_mut(row).scale_mut(*w);
-            }
-            Some((r, wj))
+            Some((r, Matrix5::from_diagonal(&weights) * j))
         };
         let (mut r, mut wj) = residual(&pose)?;
         for _ in 0..POSE_ITERATIONS {
@@ -254,6 +250,7 @@ impl RimMap {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::wafers::tests::camera_pose;
     use autoteach_geometry::camera::Camera;
     use autoteach_geometry::render::{self, Rim, Scene, WaferShape};
 
@@ -307,19 +304,6 @@ mod tests {
         }
     }
 
-    /// Camera at `(x, y, z)` looking along +x (image x = −y, image y = −z), yawed and pitched
-    /// down (radians), as in the wafer benchmark.
-    fn benchmark_camera(x: f64, y: f64, z: f64, yaw: f64, down: f64) -> Isometry3<f64> {
-        let r0 = Matrix3::from_columns(&[-Vector3::y(), -Vector3::z(), Vector3::x()]);
-        let pitch = Rotation3::from_axis_angle(&Vector3::x_axis(), -down);
-        let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw);
-        let rot = turn.into_inner() * r0 * pitch.into_inner();
-        Isometry3::from_parts(
-            Translation3::new(x, y, z),
-            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rot)),
-        )
-    }
-
     /// The true rims (renderer ground truth) of a level 1 mm wafer at height `z` seen by
     /// `t_wc`, and the side it is seen from.
     fn true_rims(t_wc: &Isometry3<f64>, z: f64) -> ([f64; 5], [f64; 5], f64) {
@@ -363,7 +347,7 @@ mod tests {
         ];
         let mut worst_closed_form: f64 = 0.0;
         for (x, y, z, yaw, down, wafer_z) in views {
-            let t_wc = benchmark_camera(x, y, z, yaw, down);
+            let t_wc = camera_pose(x, y, z, yaw, down);
             let (u, l, front) = true_rims(&t_wc, wafer_z);
             for prior in [
                 PRIOR,
@@ -382,7 +366,7 @@ mod tests {
                         l[k]
                     );
                 }
-                // The wrong side has no pose.
+                // The other side gives no pose, or one whose lower rim is far off.
                 let other = RimMap::new(&prior, 1280, 720, -front, Vector2::new(0.0, -1.0));
                 if let Some((wrong, _)) = other.lower_rim(&u) {
                     assert!((wrong[3] - l[3]).abs() > 0.1, "{wrong:?} vs {l:?}");

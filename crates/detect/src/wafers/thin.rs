@@ -45,8 +45,8 @@
 //! image 123, noise-free: the upper rim's front-arc bottom 0.20 px high, `b` −1.15 %). For
 //! `b` of 9–25 px 1 % is 0.09–0.25 px, so these rims failed the benchmark's 1 % criterion and
 //! were also its false positives. The same column model with the two front arcs only (two
-//! edges, three levels per column: face, band, background, in image order from above; the face's silhouette is far
-//! from the band) measures them to a few hundredths of a pixel (same image: `b` −0.09 % and
+//! edges, three levels per column: face, band, background, in image order from above; the
+//! face's silhouette is far from the band) measures them to a few hundredths of a pixel (same image: `b` −0.09 % and
 //! −0.02 %). Wafers seen from below too since the exact map: with the closed form (∗), whose
 //! offset is 0–10 % off for them, the fit moved as many such rims out of the criterion as into
 //! it; with the exact map it gains 24 rims and loses 2 on seed 3 (22 and 3 on seed 4; the
