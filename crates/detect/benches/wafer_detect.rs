@@ -15,7 +15,8 @@
 //! `AUTOTEACH_DETECT_IMAGES=<file>` profiles the frames of a raw file instead (consecutive
 //! 1280×720 8-bit grey frames, e.g. the 210 images of `benchmarks/wafer_detection.py` written
 //! with numpy's `tofile`), once each; `AUTOTEACH_DETECT_PROFILE=detect` then only times
-//! `detect_wafers` over them (`AUTOTEACH_DETECT_REPEATS` passes, default 3; for `perf record`).
+//! `detect_wafers` over them (`AUTOTEACH_DETECT_REPEATS` passes, default 3; for `perf record`;
+//! `AUTOTEACH_DETECT_PRIOR=1` adds the rim offset prior of the benchmark's wafers).
 
 use autoteach_detect::assembly::{AssemblyParams, assemble, merge_arcs, merge_segments};
 use autoteach_detect::edges::{
@@ -112,7 +113,17 @@ fn frames_from_file() -> Option<Vec<Vec<u8>>> {
 
 /// `detect_wafers` alone over the frames of `AUTOTEACH_DETECT_IMAGES` (for `perf record`).
 fn detect_only(images: &[Vec<u8>]) {
-    let p = DetectParams::default();
+    let p = match std::env::var("AUTOTEACH_DETECT_PRIOR") {
+        Ok(v) if v == "1" => DetectParams {
+            rim_offset: Some(RimOffsetPrior {
+                thickness_ratio: 1.0 / 150.0,
+                focal_length: 1000.0,
+                principal_point: None,
+            }),
+            ..DetectParams::default()
+        },
+        _ => DetectParams::default(),
+    };
     let repeats: usize = std::env::var("AUTOTEACH_DETECT_REPEATS")
         .ok()
         .and_then(|v| v.parse().ok())
