@@ -147,7 +147,7 @@ def edge_bias(seeds: list[int], frames: int, rim_offset_prior: bool = True) -> N
     for seed in seeds:
         s = simulate_session(seed=seed, frames=frames, render=True)
         k, r, h = _pinhole_k(s.camera), s.config.wafer_radius, s.config.wafer_thickness
-        det = detect_all(s.images, **(detector_options(k, r, h) if rim_offset_prior else {}))
+        det = detect_all(s.images, **(detector_options(k, r, h, edge_profile="pixel") if rim_offset_prior else {}))
         rims = []
         for t in np.asarray(s.wafer_poses, dtype=np.float64):
             for sign in (0.5, -0.5):

@@ -25,7 +25,8 @@ def session():
 def detections(session):
     cfg = session.config
     return pipeline.detect_all(
-        session.images, **pipeline.detector_options(_k(session), cfg.wafer_radius, cfg.wafer_thickness)
+        session.images,
+        **pipeline.detector_options(_k(session), cfg.wafer_radius, cfg.wafer_thickness, edge_profile="pixel"),
     )
 
 
@@ -111,7 +112,14 @@ def test_detector_options_carry_the_wafer_and_camera(session, monkeypatch):
     cfg = session.config
     k = _k(session)
     opts = pipeline.detector_options(k, cfg.wafer_radius, cfg.wafer_thickness)
-    assert set(opts) == {"thickness_ratio", "focal_length", "principal_point"}
+    assert set(opts) == {"thickness_ratio", "focal_length", "principal_point", "edge_profile"}
+    assert opts["edge_profile"] == "optical"
+    assert (
+        pipeline.detector_options(k, cfg.wafer_radius, cfg.wafer_thickness, edge_profile="pixel")["edge_profile"]
+        == "pixel"
+    )
+    with pytest.raises(InvalidInputError, match="edge_profile"):
+        pipeline.detector_options(k, cfg.wafer_radius, cfg.wafer_thickness, edge_profile="box")
     assert opts["thickness_ratio"] == pytest.approx(cfg.wafer_thickness / cfg.wafer_radius)
     assert opts["focal_length"] == pytest.approx(0.5 * (k[0, 0] + k[1, 1]))
     assert opts["principal_point"] == pytest.approx((k[0, 2], k[1, 2]))
@@ -129,7 +137,8 @@ def test_detector_options_carry_the_wafer_and_camera(session, monkeypatch):
     for prior in (True, False):
         with pytest.raises(InvalidInputError, match="stop here"):
             autoteach(session, frontend="detect", seed=3, rim_offset_prior=prior)
-    assert seen == [opts, {}]
+    # a simulated session: the renderer's pixel-grid blur
+    assert seen == [{**opts, "edge_profile": "pixel"}, {}]
 
 
 def test_no_detection_in_any_frame_is_a_clear_error(session, monkeypatch):

@@ -569,13 +569,14 @@ def wafer_detect(
     thin_band_fit: bool | None = None,
     front_band_fit: bool | None = None,
     principal_point: tuple[float, float] | None = None,
+    edge_profile: str | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 
     ``None`` keeps the library default (:func:`wafer_detect_defaults`).
     """
 
-def wafer_detect_defaults() -> dict[str, float | int | bool | tuple[float, float]]:
+def wafer_detect_defaults() -> dict[str, float | int | bool | str | tuple[float, float]]:
     """The detector's default parameters by keyword name of :func:`wafer_detect`."""
 
 # --- end wafers ---

@@ -249,6 +249,7 @@ def detect_wafers(
     thin_band_fit: bool = True,
     front_band_fit: bool = True,
     principal_point: tuple[float, float] | None = None,
+    edge_profile: Literal["optical", "pixel"] = "optical",
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -348,6 +349,13 @@ def detect_wafers(
             one exactly: the upper rim's ellipse gives the circle's pose (radius 1) under the
             pinhole camera, and the lower rim is its image moved by ``thickness_ratio`` against
             the normal. Only with ``thickness_ratio`` and ``focal_length``.
+        edge_profile: How the image forms an edge's profile, for the column fits:
+            ``"optical"`` (a camera: the optics blur before the pixels integrate, a Gaussian
+            profile ``Φ((y − E)/σ)`` whatever the edge's sub-pixel position) or ``"pixel"`` (the
+            pixels integrate first and a Gaussian sampled on the pixel grid blurs the image after,
+            as the simulator's renderer does: the profile ``Σₖ wₖ·clamp(y − E − k + ½, 0, 1)`` is
+            piecewise linear in the edge's position, and a Gaussian profile fitted to it is off by
+            up to ≈ 0.05 px by the edge's sub-pixel phase). σ is fitted either way.
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -400,6 +408,7 @@ def detect_wafers(
         thin_band_fit=bool(thin_band_fit),
         front_band_fit=bool(front_band_fit),
         principal_point=None if principal_point is None else (float(principal_point[0]), float(principal_point[1])),
+        edge_profile=str(edge_profile),
     )
     return [
         WaferEdge(

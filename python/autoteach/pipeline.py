@@ -399,17 +399,23 @@ def _overlap(a: np.ndarray, b: np.ndarray, margin: float) -> bool:
     return bool(a[0] - margin <= b[2] and b[0] - margin <= a[2] and a[1] - margin <= b[3] and b[1] - margin <= a[3])
 
 
-def detector_options(k: np.ndarray, radius: float, thickness: float) -> dict[str, object]:
+def detector_options(
+    k: np.ndarray, radius: float, thickness: float, *, edge_profile: str = "optical"
+) -> dict[str, object]:
     """Keyword options of :func:`autoteach.detect.detect_wafers` that the pipeline knows.
 
     The wafer's thickness-to-radius ratio, the camera's focal length (pixels, the mean of
     ``fx`` and ``fy`` of ``k``) and its principal point (``k[0, 2]``, ``k[1, 2]``) give the
     detector's prior on the image offset between a wafer's two rims (``thickness_ratio``,
     ``focal_length``, ``principal_point``; 000_3b1454b2b2194811.txt §3.2, the rims are the
-    images of two parallel circles a thickness apart, eqs. (3.1)–(3.2)).
+    images of two parallel circles a thickness apart, eqs. (3.1)–(3.2)). ``edge_profile`` is how
+    the camera forms an edge's profile (``"optical"``, a camera; ``"pixel"``, the simulator's
+    renderer, which blurs on the pixel grid after the pixels integrate), for the detector's
+    column fits.
 
     Raises:
-        InvalidInputError: a radius, thickness or focal length that is not finite and positive.
+        InvalidInputError: a radius, thickness or focal length that is not finite and positive,
+            or an unknown edge profile.
 
     """
     f = 0.5 * (float(k[0, 0]) + float(k[1, 1]))
@@ -419,7 +425,14 @@ def detector_options(k: np.ndarray, radius: float, thickness: float) -> dict[str
     principal_point = (float(k[0, 2]), float(k[1, 2]))
     if not all(math.isfinite(v) for v in principal_point):
         raise InvalidInputError(f"the principal point must be finite, got {principal_point!r}")
-    return {"thickness_ratio": thickness / radius, "focal_length": f, "principal_point": principal_point}
+    if edge_profile not in ("optical", "pixel"):
+        raise InvalidInputError(f"edge_profile must be 'optical' or 'pixel', got {edge_profile!r}")
+    return {
+        "thickness_ratio": thickness / radius,
+        "focal_length": f,
+        "principal_point": principal_point,
+        "edge_profile": edge_profile,
+    }
 
 
 def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, **options: Any) -> list[list[Any]]:
@@ -1008,7 +1021,9 @@ def autoteach(
         estimate_links: link lengths to calibrate, among ``"l1"``, ``"l2"``, ``"l4"``.
         rim_offset_prior: detect front end: give the detector the wafer's thickness ratio and
             the focal length (:func:`detector_options`), its prior on the offset between a
-            wafer's two rims.
+            wafer's two rims, and the edge profile of the camera (``"pixel"`` for a simulated
+            session, whose renderer blurs on the pixel grid; ``"optical"`` for a log without
+            the simulator's configuration).
         seed: seed of the simulated front end's noise and odometry.
         progress: progress bars on stderr.
 
@@ -1070,7 +1085,9 @@ def autoteach(
             WaferRobot(params=params, base=base_world).camera_pose(session.joints_encoder), dtype=np.float64
         )
         t1 = time.perf_counter()
-        options = detector_options(k, radius, thickness) if rim_offset_prior else {}
+        # A simulated session's images come from the renderer, which blurs on the pixel grid.
+        profile = "pixel" if cfg is not None else "optical"
+        options = detector_options(k, radius, thickness, edge_profile=profile) if rim_offset_prior else {}
         detections = detect_all(session.images, progress=progress, **options)
         timings["detect_s"] = time.perf_counter() - t1
         obs = detect_frontend(

@@ -6,7 +6,7 @@
 
 use autoteach_detect::edges::{GrayView, Pixel};
 use autoteach_detect::wafers::{
-    DetectParams, RimOffsetPrior, WaferEdge, WaferPrior, detect_wafers,
+    DetectParams, EdgeProfile, RimOffsetPrior, WaferEdge, WaferPrior, detect_wafers,
 };
 use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -147,6 +147,13 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("join_border_cut_arcs", p.join_border_cut_arcs)?;
     d.set_item("thin_band_fit", p.thin_band_fit)?;
     d.set_item("front_band_fit", p.front_band_fit)?;
+    d.set_item(
+        "edge_profile",
+        match p.edge_profile {
+            EdgeProfile::Optical => "optical",
+            EdgeProfile::PixelGrid => "pixel",
+        },
+    )?;
     Ok(d)
 }
 
@@ -163,7 +170,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     join_border_cut_arcs=None, thickness_ratio=None, focal_length=None, restart_turn_at_cuts=None,
     max_relative_sigma_b=None, max_centre_sigma=None, keep_flat_run_pieces=None,
     border_pairs_take_arcs=None, reflection_inside_rim=None, seek_missing_partner=None,
-    thin_band_fit=None, front_band_fit=None, principal_point=None
+    thin_band_fit=None, front_band_fit=None, principal_point=None, edge_profile=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -204,8 +211,21 @@ fn wafer_detect(
     thin_band_fit: Option<bool>,
     front_band_fit: Option<bool>,
     principal_point: Option<(f64, f64)>,
+    edge_profile: Option<&str>,
 ) -> PyResult<Vec<PyWaferEdge>> {
-    let mut params = DetectParams::default();
+    let edge_profile = match edge_profile {
+        None | Some("optical") => EdgeProfile::Optical,
+        Some("pixel") => EdgeProfile::PixelGrid,
+        Some(other) => {
+            return Err(errors::invalid_input(format!(
+                "edge_profile must be \"optical\" or \"pixel\", got {other:?}"
+            )));
+        }
+    };
+    let mut params = DetectParams {
+        edge_profile,
+        ..DetectParams::default()
+    };
     // `None` keeps the library default (`wafer_detect_defaults`).
     let set = |slot: &mut f64, value: Option<f64>| {
         if let Some(v) = value {

@@ -193,6 +193,13 @@ pub struct DetectParams {
     /// prior (see [`thin`], `Model::Band`). An accepted fit replaces the pair's edge-point
     /// fits. Default true (no effect without `rim_offset`).
     pub front_band_fit: bool,
+    /// How the image forms an edge's profile, for the column fits of
+    /// [`DetectParams::thin_band_fit`] and [`DetectParams::front_band_fit`]:
+    /// [`EdgeProfile::Optical`] (a camera: the optics blur before the pixels integrate; the
+    /// default) or [`EdgeProfile::PixelGrid`] (the pixels integrate first and a Gaussian
+    /// sampled on the pixel grid blurs after: a digital blur, as the renderer of
+    /// `autoteach_geometry::render` forms the simulator's images).
+    pub edge_profile: EdgeProfile,
     /// Optional size prior.
     pub prior: Option<WaferPrior>,
     /// Optional prior on the offset between the images of a wafer's two rims, from the wafer's
@@ -230,6 +237,7 @@ impl Default for DetectParams {
             max_centre_sigma: 1.0,
             thin_band_fit: true,
             front_band_fit: true,
+            edge_profile: EdgeProfile::Optical,
             prior: None,
             rim_offset: None,
         }
@@ -489,7 +497,15 @@ fn detect_wafers_on_pool<T: Pixel>(
             (params.front_band_fit, thin::Model::Band),
         ] {
             if on {
-                edges = thin::refit_level_wafers(image, edges, up, prior, model, &mut noise);
+                edges = thin::refit_level_wafers(
+                    image,
+                    edges,
+                    up,
+                    prior,
+                    model,
+                    params.edge_profile,
+                    &mut noise,
+                );
             }
         }
     }
@@ -610,6 +626,7 @@ mod validate;
 use pair::pair_rims;
 pub use refine::refine_band_edges;
 pub use rim_prior::{RIM_OFFSET_RELATIVE_SIGMA, RimMap, RimOffsetPrior};
+pub use thin::EdgeProfile;
 use validate::{drop_inconsistent_arcs, drop_outlier_arcs, median};
 
 #[cfg(test)]
