@@ -228,6 +228,7 @@ def test_python_defaults_are_the_library_defaults() -> None:
         ({"inflection_sigmas": math.inf}, "inflection_sigmas"),
         ({"principal_point": (640.0, 360.0)}, "principal_point"),
         ({"thickness_ratio": 0.005, "focal_length": 900.0, "principal_point": (math.nan, 360.0)}, "principal_point"),
+        ({"thickness_ratio": 0.005, "focal_length": 900.0, "edge_profile": "box"}, "edge_profile"),
         ({"thickness_ratio": 1 / 150}, "focal_length"),
         ({"focal_length": 1000.0}, "thickness_ratio"),
         ({"thickness_ratio": -1.0, "focal_length": 1000.0}, "thickness_ratio"),
