@@ -16,14 +16,15 @@
 //! 1280×720 8-bit grey frames, e.g. the 210 images of `benchmarks/wafer_detection.py` written
 //! with numpy's `tofile`), once each; `AUTOTEACH_DETECT_PROFILE=detect` then only times
 //! `detect_wafers` over them (`AUTOTEACH_DETECT_REPEATS` passes, default 3; for `perf record`;
-//! `AUTOTEACH_DETECT_PRIOR=1` adds the rim offset prior of the benchmark's wafers).
+//! `AUTOTEACH_DETECT_PRIOR=1` adds the rim offset prior of the benchmark's wafers and the
+//! renderer's pixel-grid edge profile).
 
 use autoteach_detect::assembly::{AssemblyParams, assemble, merge_arcs, merge_segments};
 use autoteach_detect::edges::{
     ArcParams, CannyParams, EdgeWorkspace, GrayView, LinkParams, canny, detect_arcs, link_edges,
     split_arcs,
 };
-use autoteach_detect::wafers::{DetectParams, RimOffsetPrior, detect_wafers};
+use autoteach_detect::wafers::{DetectParams, EdgeProfile, RimOffsetPrior, detect_wafers};
 use autoteach_geometry::camera::Camera;
 use autoteach_geometry::render::{self, Carrier, RenderOptions, Scene};
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -120,6 +121,7 @@ fn detect_only(images: &[Vec<u8>]) {
                 focal_length: 1000.0,
                 principal_point: None,
             }),
+            edge_profile: EdgeProfile::PixelGrid,
             ..DetectParams::default()
         },
         _ => DetectParams::default(),
@@ -218,14 +220,15 @@ fn bench(c: &mut Criterion) {
         b.iter(|| detect_wafers(black_box(&view), &params))
     });
     // With the rim offset prior (the rendered wafer's thickness/radius, the focal length): the
-    // joint fits use it, and the thin and front-band column fits (`thin.rs`) run; without the
-    // column fits for the comparison.
+    // joint fits use it, and the thin and front-band column fits (`thin.rs`) run, with the
+    // renderer's pixel-grid edge profile; without the column fits for the comparison.
     let prior = DetectParams {
         rim_offset: Some(RimOffsetPrior {
             thickness_ratio: 1.0 / 150.0,
             focal_length: 1000.0,
             principal_point: None,
         }),
+        edge_profile: EdgeProfile::PixelGrid,
         ..params
     };
     let no_columns = DetectParams {
