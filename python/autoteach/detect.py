@@ -332,14 +332,14 @@ def detect_wafers(
             reported when the fit stays within 2 px and 5 % of the guess and its measured far
             edges fit it, and passes the covariance screens like every rim.
         thin_band_fit: With the rim offset prior (``thickness_ratio``, ``focal_length``), the
-            two rims of a thin wafer (``b`` under 9 px, major axis near horizontal, ``up`` near
+            two rims of a thin wafer (``b`` under 9 px, 10 px seen from above; major axis near horizontal, ``up`` near
             ``(0, -1)``) are refitted together by one intensity fit of the image columns across
             the face's silhouette and the side band (four grey levels per column, one blur, the
             lower rim the exact image of the upper rim's circle moved by the thickness); an
             accepted fit (residual at the image's noise level) replaces the pair's edge-point
             fits. No effect without the prior.
         front_band_fit: With the rim offset prior, the two rims of a wider level wafer (``b`` from
-            9 px, seen from above or below) are refitted together by one intensity fit of the image
+            10 px seen from above, 9 px from below) are refitted together by one intensity fit of the image
             columns across the side band (three grey levels per column, clipped samples
             censored, one blur, the rims tied by the prior); an accepted fit replaces the pair's
             edge-point fits. No effect without the prior.

@@ -182,16 +182,17 @@ pub struct DetectParams {
     /// 5 % of no rim had σ over 1 px (σ 1.2–440 px). `f64::INFINITY` disables. Default 1.0.
     pub max_centre_sigma: f64,
     /// With [`DetectParams::rim_offset`] given, refits both rims of a thin wafer (`b` under
-    /// 9 px, major axis near horizontal, `up` near −y) by one intensity fit of the image
-    /// columns across its face and side band, the two rims tied by the rim offset prior (see
-    /// [`thin`]). An accepted fit replaces the pair's edge-point fits. Default true (no effect
-    /// without `rim_offset`).
+    /// 9 px, 10 px seen from above; major axis near horizontal, `up` near −y) by one intensity
+    /// fit of the image columns across its face and side band, the two rims tied by the rim
+    /// offset prior (see [`thin`]). An accepted fit replaces the pair's edge-point fits.
+    /// Default true (no effect without `rim_offset`).
     pub thin_band_fit: bool,
     /// With [`DetectParams::rim_offset`] given, refits both rims of a wider level wafer, seen
-    /// from above or below (`b` from 9 px, major axis near horizontal, `up` near −y), by one intensity
-    /// fit of the image columns across its side band, the two rims tied by the rim offset
-    /// prior (see [`thin`], `Model::Band`). An accepted fit replaces the pair's edge-point
-    /// fits. Default true (no effect without `rim_offset`).
+    /// from above or below (`b` from 10 px seen from above, from 9 px below; major axis near
+    /// horizontal, `up` near −y), by one intensity fit of the image columns across its side
+    /// band, the two rims tied by the rim offset prior (see [`thin`], `Model::Band`). An
+    /// accepted fit replaces the pair's edge-point fits. Default true (no effect without
+    /// `rim_offset`).
     pub front_band_fit: bool,
     /// How the image forms an edge's profile, for the column fits of
     /// [`DetectParams::thin_band_fit`] and [`DetectParams::front_band_fit`]:
