@@ -112,18 +112,24 @@ fn frames_from_file() -> Option<Vec<Vec<u8>>> {
     Some(raw.chunks_exact(n).map(<[u8]>::to_vec).collect())
 }
 
+/// `params` with the rim offset prior of the rendered wafers (thickness/radius, focal length)
+/// and the renderer's pixel-grid edge profile.
+fn with_prior(params: DetectParams) -> DetectParams {
+    DetectParams {
+        rim_offset: Some(RimOffsetPrior {
+            thickness_ratio: 1.0 / 150.0,
+            focal_length: 1000.0,
+            principal_point: None,
+        }),
+        edge_profile: EdgeProfile::PixelGrid,
+        ..params
+    }
+}
+
 /// `detect_wafers` alone over the frames of `AUTOTEACH_DETECT_IMAGES` (for `perf record`).
 fn detect_only(images: &[Vec<u8>]) {
     let p = match std::env::var("AUTOTEACH_DETECT_PRIOR") {
-        Ok(v) if v == "1" => DetectParams {
-            rim_offset: Some(RimOffsetPrior {
-                thickness_ratio: 1.0 / 150.0,
-                focal_length: 1000.0,
-                principal_point: None,
-            }),
-            edge_profile: EdgeProfile::PixelGrid,
-            ..DetectParams::default()
-        },
+        Ok(v) if v == "1" => with_prior(DetectParams::default()),
         _ => DetectParams::default(),
     };
     let repeats: usize = std::env::var("AUTOTEACH_DETECT_REPEATS")
@@ -222,15 +228,7 @@ fn bench(c: &mut Criterion) {
     // With the rim offset prior (the rendered wafer's thickness/radius, the focal length): the
     // joint fits use it, and the thin and front-band column fits (`thin.rs`) run, with the
     // renderer's pixel-grid edge profile; without the column fits for the comparison.
-    let prior = DetectParams {
-        rim_offset: Some(RimOffsetPrior {
-            thickness_ratio: 1.0 / 150.0,
-            focal_length: 1000.0,
-            principal_point: None,
-        }),
-        edge_profile: EdgeProfile::PixelGrid,
-        ..params
-    };
+    let prior = with_prior(params);
     let no_columns = DetectParams {
         thin_band_fit: false,
         front_band_fit: false,

@@ -147,15 +147,16 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("join_border_cut_arcs", p.join_border_cut_arcs)?;
     d.set_item("thin_band_fit", p.thin_band_fit)?;
     d.set_item("front_band_fit", p.front_band_fit)?;
-    d.set_item(
-        "edge_profile",
-        match p.edge_profile {
-            EdgeProfile::Optical => "optical",
-            EdgeProfile::PixelGrid => "pixel",
-        },
-    )?;
+    let profile = EDGE_PROFILES.iter().find(|(_, e)| *e == p.edge_profile);
+    d.set_item("edge_profile", profile.map(|(name, _)| *name))?;
     Ok(d)
 }
+
+/// The Python names of the column fits' edge profiles (`edge_profile=`).
+const EDGE_PROFILES: [(&str, EdgeProfile); 2] = [
+    ("optical", EdgeProfile::Optical),
+    ("pixel", EdgeProfile::PixelGrid),
+];
 
 /// Detects wafer rims in a grayscale image `(height, width)` of dtype uint8 (0–255) or
 /// float32/float64 (0–1). Returns a list of `WaferEdge`.
@@ -214,13 +215,16 @@ fn wafer_detect(
     edge_profile: Option<&str>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let edge_profile = match edge_profile {
-        None | Some("optical") => EdgeProfile::Optical,
-        Some("pixel") => EdgeProfile::PixelGrid,
-        Some(other) => {
-            return Err(errors::invalid_input(format!(
-                "edge_profile must be \"optical\" or \"pixel\", got {other:?}"
-            )));
-        }
+        None => EdgeProfile::default(),
+        Some(name) => EDGE_PROFILES
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|&(_, p)| p)
+            .ok_or_else(|| {
+                errors::invalid_input(format!(
+                    "edge_profile must be \"optical\" or \"pixel\", got {name:?}"
+                ))
+            })?,
     };
     let mut params = DetectParams {
         edge_profile,

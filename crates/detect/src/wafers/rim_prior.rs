@@ -158,6 +158,11 @@ impl RimMap {
         }
     }
 
+    /// +1 for wafers seen from above, −1 from below (the sign the map was built with).
+    pub(crate) fn front(&self) -> f64 {
+        self.front
+    }
+
     /// The pose (camera from circle) of the unit circle whose image is `upper` = `(cx, cy, a,
     /// b, θ)`, seen from the side `front`: Gauss–Newton on [`project_circle_jacobian`] from the
     /// weak-perspective pose (centre on the ray through the ellipse's centre at distance

@@ -248,10 +248,9 @@ fn arc_row(e: &[f64; 5], x: f64, side: f64) -> Option<(f64, [f64; 5])> {
 /// The geometry of the pair: the map from the upper rim `(cx, cy, a, b, θ)` to the lower one
 /// and the side of the front arcs.
 struct Pair {
+    /// The map; its side ([`RimMap::front`]) is +1 when the band lies below the centre in the
+    /// image (the wafer seen from above, `up` pointing to −y), −1 when above (seen from below).
     map: RimMap,
-    /// +1 when the band lies below the centre in the image (the wafer seen from above, `up`
-    /// pointing to −y), −1 when above (seen from below).
-    front: f64,
     /// The edges' profile along a column.
     profile: EdgeProfile,
 }
@@ -398,16 +397,16 @@ impl Pair {
         };
         let mut e = [(0.0, [0.0; 5]); E];
         let fronts = [
-            arc_row(u, x, self.front)?,
-            chain(arc_row(l, x, self.front)?),
+            arc_row(u, x, self.map.front())?,
+            chain(arc_row(l, x, self.map.front())?),
         ];
         match E {
             2 => e.copy_from_slice(&fronts),
             3 => {
-                e[0] = if self.front > 0.0 {
-                    arc_row(u, x, -self.front)?
+                e[0] = if self.map.front() > 0.0 {
+                    arc_row(u, x, -self.map.front())?
                 } else {
-                    chain(arc_row(l, x, -self.front)?)
+                    chain(arc_row(l, x, -self.map.front())?)
                 };
                 e[1..].copy_from_slice(&fronts);
             }
@@ -430,6 +429,18 @@ struct Column {
     x: f64,
     y0: f64,
     grey: Vec<f64>,
+}
+
+/// The basis of the `L = E + 1` levels of a sample whose profiles across the `E` edges (in
+/// image order) are `phi`: level `j` weighs `Φⱼ₋₁ − Φⱼ` (`Φ₋₁ = 1`, `Φ_E = 0`).
+fn level_basis<const E: usize, const L: usize>(phi: &[f64; E]) -> SVector<f64, L> {
+    let mut b = SVector::<f64, L>::zeros();
+    b[0] = 1.0 - phi[0];
+    for j in 1..E {
+        b[j] = phi[j - 1] - phi[j];
+    }
+    b[E] = phi[E - 1];
+    b
 }
 
 /// The sums of one column at a parameter set: `JᵀJ` and `Jᵀr` of its samples (zero when the
@@ -524,12 +535,7 @@ fn evaluate<const E: usize, const L: usize>(
                 dens[j] = d;
                 dsig[j] = ds * widen[j];
             }
-            let mut b = SVector::<f64, L>::zeros();
-            b[0] = 1.0 - phi[0];
-            for j in 1..E {
-                b[j] = phi[j - 1] - phi[j];
-            }
-            b[E] = phi[E - 1];
+            let b = level_basis::<E, L>(&phi);
             if g < CLIP {
                 btb.ger(1.0, &b, &b, 1.0);
                 rhs += b * g;
@@ -748,7 +754,6 @@ pub(super) fn refit_pair<T: Pixel>(
     let front = if ys[ys.len() / 2] > eu.cy { 1.0 } else { -1.0 };
     let pair = Pair {
         map: RimMap::new(prior, image.width(), image.height(), front, up),
-        front,
         profile,
     };
     let (mut x0, mut x1) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -890,6 +895,21 @@ mod tests {
     /// changes `Jᵀr` by ≈ 1 %, and with `θ` = 0.01 by 0.1 % here).
     #[test]
     fn column_sums_match_finite_differences_of_the_projected_cost() {
+        /// The level basis of row `y` of column `x` for the upper rim `u` and blur `sigma`.
+        fn basis_at<const E: usize, const L: usize>(
+            pair: &Pair,
+            u: &[f64; 5],
+            sigma: f64,
+            x: f64,
+            y: f64,
+        ) -> SVector<f64, L> {
+            let e = pair.edges::<E>(&pair.rims(u).unwrap(), x).unwrap();
+            let phi: [f64; E] = std::array::from_fn(|j| {
+                let s = sigma * (1.0 + e[j].1[0].powi(2)).sqrt();
+                Profile::new(pair.profile, s).at(y - e[j].0).0
+            });
+            level_basis::<E, L>(&phi)
+        }
         fn check<const E: usize, const L: usize>(pair: &Pair, u: [f64; 5], seed: u64) {
             let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
             let noise = Normal::new(0.0, 2.0).unwrap();
@@ -902,7 +922,7 @@ mod tests {
                 u[4] + 0.001,
             ];
             let rims = pair.rims(&truth).unwrap();
-            let levels: [f64; L] = std::array::from_fn(|j| 60.0 + 50.0 * ((j * 7) % 4) as f64);
+            let levels = SVector::<f64, L>::from_fn(|j, _| 60.0 + 50.0 * ((j * 7) % 4) as f64);
             let mut columns = Vec::new();
             for x in (600..=680).step_by(2) {
                 let x = x as f64;
@@ -910,14 +930,8 @@ mod tests {
                 let y0 = (edges[0].0 - 4.0).floor();
                 let grey = (0..(edges[E - 1].0 - y0 + 5.0) as usize)
                     .map(|i| {
-                        let y = y0 + i as f64;
-                        let mut v = levels[0];
-                        for j in 0..E {
-                            let s = 0.9 * (1.0 + edges[j].1[0].powi(2)).sqrt();
-                            let phi = Profile::new(pair.profile, s).at(y - edges[j].0).0;
-                            v += (levels[j + 1] - levels[j]) * phi;
-                        }
-                        v + noise.sample(&mut rng)
+                        let b = basis_at::<E, L>(pair, &truth, 0.9, x, y0 + i as f64);
+                        levels.dot(&b) + noise.sample(&mut rng)
                     })
                     .collect();
                 columns.push(Column { x, y0, grey });
@@ -940,47 +954,22 @@ mod tests {
                     (jtr[k] - fd).abs() < 1e-4 * (1.0 + fd.abs()),
                     "{:?} E={E} front {} parameter {k}: Jᵀr {} vs {fd}",
                     pair.profile,
-                    pair.front,
+                    pair.map.front(),
                     jtr[k]
                 );
             }
             // JᵀJ: explicit rows per column, the model at the column's fixed levels.
-            let rims0 = pair.rims(&u).unwrap();
             let mut explicit = Matrix6::<f64>::zeros();
             for c in &columns {
                 let model_at = |q: &Vector6<f64>, lv: &SVector<f64, L>| -> Vec<f64> {
-                    let r = pair.rims(&[q[0], q[1], q[2], q[3], q[4]]).unwrap();
-                    let e = pair.edges::<E>(&r, c.x).unwrap();
+                    let uq = [q[0], q[1], q[2], q[3], q[4]];
                     (0..c.grey.len())
-                        .map(|i| {
-                            let y = c.y0 + i as f64;
-                            let mut v = lv[0];
-                            for j in 0..E {
-                                let s = q[5] * (1.0 + e[j].1[0].powi(2)).sqrt();
-                                let phi = Profile::new(pair.profile, s).at(y - e[j].0).0;
-                                v += (lv[j + 1] - lv[j]) * phi;
-                            }
-                            v
-                        })
+                        .map(|i| lv.dot(&basis_at::<E, L>(pair, &uq, q[5], c.x, c.y0 + i as f64)))
                         .collect()
                 };
                 // Basis and levels at p.
-                let e0 = pair.edges::<E>(&rims0, c.x).unwrap();
                 let basis: Vec<SVector<f64, L>> = (0..c.grey.len())
-                    .map(|i| {
-                        let y = c.y0 + i as f64;
-                        let phi: [f64; E] = std::array::from_fn(|j| {
-                            let s = p[5] * (1.0 + e0[j].1[0].powi(2)).sqrt();
-                            Profile::new(pair.profile, s).at(y - e0[j].0).0
-                        });
-                        let mut b = SVector::<f64, L>::zeros();
-                        b[0] = 1.0 - phi[0];
-                        for j in 1..E {
-                            b[j] = phi[j - 1] - phi[j];
-                        }
-                        b[E] = phi[E - 1];
-                        b
-                    })
+                    .map(|i| basis_at::<E, L>(pair, &u, p[5], c.x, c.y0 + i as f64))
                     .collect();
                 let btb: SMatrix<f64, L, L> = basis.iter().map(|b| b * b.transpose()).sum();
                 let bty: SVector<f64, L> = basis.iter().zip(&c.grey).map(|(b, g)| b * *g).sum();
@@ -1014,7 +1003,7 @@ mod tests {
                         (jtj[(i, k)] - explicit[(i, k)]).abs() < 1e-4 * scale,
                         "{:?} E={E} front {} JᵀJ[{i},{k}]: {} vs {}",
                         pair.profile,
-                        pair.front,
+                        pair.map.front(),
                         jtj[(i, k)],
                         explicit[(i, k)]
                     );
@@ -1033,7 +1022,6 @@ mod tests {
             ] {
                 let pair = Pair {
                     map: RimMap::new(&prior, 1280, 720, front, Vector2::new(0.0, -1.0)),
-                    front,
                     profile,
                 };
                 check::<2, 3>(&pair, u, 1);
@@ -1095,7 +1083,7 @@ mod tests {
                 for (j, row) in rows.iter().enumerate() {
                     let fd = (hi[j].0 - lo[j].0) / (2.0 * h);
                     let tol = 1e-5 * (1.0 + fd.abs());
-                    let front = pair.front;
+                    let front = pair.map.front();
                     assert!(
                         (row.1[k] - fd).abs() < tol,
                         "E={E} front {front} x {x} edge {j} parameter {k}: {} vs {fd}",
@@ -1113,7 +1101,6 @@ mod tests {
         for front in [1.0, -1.0] {
             let pair = Pair {
                 map: RimMap::new(&prior, 1280, 720, front, Vector2::new(0.0, -1.0)),
-                front,
                 profile: EdgeProfile::Optical,
             };
             for x in [400.0, 600.0, 700.0, 900.0] {
