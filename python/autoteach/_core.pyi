@@ -570,6 +570,7 @@ def wafer_detect(
     front_band_fit: bool | None = None,
     principal_point: tuple[float, float] | None = None,
     edge_profile: str | None = None,
+    level_band_search: bool | None = None,
 ) -> list[WaferEdge]:
     """Detect wafer rims in a grayscale image; see :func:`autoteach.detect.detect_wafers`.
 

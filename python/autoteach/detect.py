@@ -250,6 +250,7 @@ def detect_wafers(
     front_band_fit: bool = True,
     principal_point: tuple[float, float] | None = None,
     edge_profile: Literal["optical", "pixel"] = "optical",
+    level_band_search: bool = True,
 ) -> list[WaferEdge]:
     """Detect the elliptic rims of wafers in a grayscale image (seed 000_3b1454b2b2194811.txt ch. 3.2).
 
@@ -356,6 +357,12 @@ def detect_wafers(
             as the simulator's renderer does: the profile ``Σₖ wₖ·clamp(y − E − k + ½, 0, 1)`` is
             piecewise linear in the edge's position, and a Gaussian profile fitted to it is off by
             up to ≈ 0.05 px by the edge's sub-pixel phase). σ is fitted either way.
+        level_band_search: With the rim offset prior and ``thin_band_fit``, also finds the wafers
+            seen almost edge-on (``b`` of 1–4 px), whose nearly straight rims no edge-point fit
+            finds: long bright bars across the image, whose ends (the rims' tips, located to a
+            tenth of a pixel) fix the centre column and ``a``, and whose sag seeds the thin column
+            fit, which measures ``b`` and the rows (the tips' columns screened for clutter in runs
+            of neighbouring columns). No effect without the prior.
 
     Returns:
         The rims, grouped by ``wafer_id`` (upper before lower); empty if none is found.
@@ -409,6 +416,7 @@ def detect_wafers(
         front_band_fit=bool(front_band_fit),
         principal_point=None if principal_point is None else (float(principal_point[0]), float(principal_point[1])),
         edge_profile=str(edge_profile),
+        level_band_search=bool(level_band_search),
     )
     return [
         WaferEdge(

@@ -147,6 +147,7 @@ fn wafer_detect_defaults<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("join_border_cut_arcs", p.join_border_cut_arcs)?;
     d.set_item("thin_band_fit", p.thin_band_fit)?;
     d.set_item("front_band_fit", p.front_band_fit)?;
+    d.set_item("level_band_search", p.level_band_search)?;
     let profile = EDGE_PROFILES.iter().find(|(_, e)| *e == p.edge_profile);
     d.set_item("edge_profile", profile.map(|(name, _)| *name))?;
     Ok(d)
@@ -171,7 +172,8 @@ const EDGE_PROFILES: [(&str, EdgeProfile); 2] = [
     join_border_cut_arcs=None, thickness_ratio=None, focal_length=None, restart_turn_at_cuts=None,
     max_relative_sigma_b=None, max_centre_sigma=None, keep_flat_run_pieces=None,
     border_pairs_take_arcs=None, reflection_inside_rim=None, seek_missing_partner=None,
-    thin_band_fit=None, front_band_fit=None, principal_point=None, edge_profile=None
+    thin_band_fit=None, front_band_fit=None, principal_point=None, edge_profile=None,
+    level_band_search=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn wafer_detect(
@@ -213,6 +215,7 @@ fn wafer_detect(
     front_band_fit: Option<bool>,
     principal_point: Option<(f64, f64)>,
     edge_profile: Option<&str>,
+    level_band_search: Option<bool>,
 ) -> PyResult<Vec<PyWaferEdge>> {
     let edge_profile = match edge_profile {
         None => EdgeProfile::default(),
@@ -257,6 +260,7 @@ fn wafer_detect(
         (&mut params.seek_missing_partner, seek_missing_partner),
         (&mut params.thin_band_fit, thin_band_fit),
         (&mut params.front_band_fit, front_band_fit),
+        (&mut params.level_band_search, level_band_search),
     ] {
         if let Some(v) = value {
             *slot = v;

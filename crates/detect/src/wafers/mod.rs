@@ -194,6 +194,11 @@ pub struct DetectParams {
     /// accepted fit replaces the pair's edge-point fits. Default true (no effect without
     /// `rim_offset`).
     pub front_band_fit: bool,
+    /// With [`DetectParams::rim_offset`] given and [`DetectParams::thin_band_fit`] on, also
+    /// searches the wafers seen almost edge-on (`b` of 1–4 px), whose rims no edge-point fit
+    /// finds: long bright bars across the image, measured by the thin column fit from a seed
+    /// of the bar's centre line and ends (see [`sliver`]). Default true.
+    pub level_band_search: bool,
     /// How the image forms an edge's profile, for the column fits of
     /// [`DetectParams::thin_band_fit`] and [`DetectParams::front_band_fit`]:
     /// [`EdgeProfile::Optical`] (a camera: the optics blur before the pixels integrate; the
@@ -238,6 +243,7 @@ impl Default for DetectParams {
             max_centre_sigma: 1.0,
             thin_band_fit: true,
             front_band_fit: true,
+            level_band_search: true,
             edge_profile: EdgeProfile::Optical,
             prior: None,
             rim_offset: None,
@@ -509,9 +515,46 @@ fn detect_wafers_on_pool<T: Pixel>(
                 );
             }
         }
+        if params.thin_band_fit && params.level_band_search {
+            // The bars are matched against the rims that pass the uncertainty screens: an
+            // edge-point fit of a wafer seen edge-on (a guess along its straight band) does
+            // not explain its bar.
+            edges = drop_uncertain(edges, params);
+            let found =
+                sliver::find_level_bands(image, &edges, up, prior, params.edge_profile, &mut noise);
+            if !found.is_empty() {
+                edges.extend(found);
+                edges = in_image_order(edges, up);
+            }
+        }
     }
     let edges = drop_uncertain(edges, params);
     Ok(edges)
+}
+
+/// `edges` with their wafers in image order along `up` (topmost first, by the first rim of
+/// each wafer, as [`pair_rims`] numbers them), each wafer's rims in their order, and the wafer
+/// ids renumbered 0, 1, … in that order.
+fn in_image_order(edges: Vec<WaferEdge>, up: Vector2<f64>) -> Vec<WaferEdge> {
+    let mut groups: Vec<Vec<WaferEdge>> = Vec::new();
+    for e in edges {
+        match groups.iter_mut().find(|g| g[0].wafer_id == e.wafer_id) {
+            Some(g) => g.push(e),
+            None => groups.push(vec![e]),
+        }
+    }
+    let height = |g: &Vec<WaferEdge>| -(g[0].ellipse.cx * up.x + g[0].ellipse.cy * up.y);
+    groups.sort_by(|x, y| height(x).total_cmp(&height(y)));
+    groups
+        .into_iter()
+        .enumerate()
+        .flat_map(|(id, g)| {
+            g.into_iter().map(move |mut e| {
+                e.wafer_id = id;
+                e
+            })
+        })
+        .collect()
 }
 
 /// Standard deviations of the centre `√(σ²_cx + σ²_cy)` and of the minor axis `σ_b` (pixels)
@@ -621,6 +664,7 @@ mod refine;
 mod rim_prior;
 mod rim_shared;
 mod seek;
+mod sliver;
 mod thin;
 mod validate;
 

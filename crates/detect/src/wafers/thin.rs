@@ -67,6 +67,21 @@
 //! benchmark's recall with the prior rose from 0.9740 to 0.9768 (seed 3) and from 0.9632 to
 //! 0.9721 (seed 4), precision from 0.9941 to 0.9941 and from 0.9894 to 0.9985.
 //!
+//! **Wafers seen edge-on** (`b` 1–4 px; found by `sliver.rs`, which also measures the ends of
+//! their band, the rims' tips `cx ± a`, to ≈ 0.1 px). Fitted from the truth with all six
+//! parameters free, the tips' columns let `a` run 0.2–0.9 % long and the centre slide by up to
+//! 2 px; with `cx` and `a` held at the truth, `b` came out up to 1.8 % off on the noisy renders but
+//! within 0.4 % on noise-free ones with the same screening, and within 1.2 % noise-free when the
+//! screening was told the noisy images' noise level: the columns near the band's ends, in front of
+//! the carrier (slot ridges in the window, their mirror images in the faces), are 1–2 grey levels
+//! RMS off the model, under one column's noise but coherent over tens of columns, and move the
+//! band's edges there by 0.05–0.15 px. So such a fit holds `cx` and `a` at the measured ends and
+//! screens the columns also in runs of 21 ([`quiet_runs`]: a run's pooled mean square residual
+//! against the median column's, within 3 standard errors). From the truth with held ends the run
+//! screen brought the benchmark's edge-on wafers (seeds 3 and 4, nine wafers) from 10 of 18 rims
+//! within 1 % to 16 of 18. The run screen on every thin fit (free `cx`, `a`) cost recall instead
+//! (seed 3 0.9797 → 0.9768, seed 4 0.9721 → 0.9691): it stays with the held ends.
+//!
 //! Both models: an edge crossing a column at slope `s` is blurred along the column by
 //! `σ·√(1 + s²)` (for the staircase, its kernel's σ); clipped samples (a saturated band) are censored — they stay out of the
 //! levels' solve and only require the model to reach the clip level; the Jacobian is
@@ -105,7 +120,7 @@ const MAX_B_ABOVE: f64 = 10.0;
 
 /// Whether the pair `upper`, `lower` is thin ([`Model::Thin`]): both rims' `b` under
 /// [`MAX_B_ABOVE`] for a wafer seen from above, under [`MAX_B`] from below.
-fn is_thin(upper: &Ellipse, lower: &Ellipse) -> bool {
+pub(super) fn is_thin(upper: &Ellipse, lower: &Ellipse) -> bool {
     let limit = if lower.b > upper.b {
         MAX_B_ABOVE
     } else {
@@ -157,6 +172,13 @@ const SUBSET_TOL: f64 = 1.0;
 const MAX_FIT_COLUMNS: usize = 150;
 /// Rows of the image summed by [`noise_sigma`]: every this many.
 const NOISE_ROW_STRIDE: usize = 16;
+/// The parameters held at the seed's values when the fit is told the band's ends
+/// ([`refit_pair`]'s `ends`): `cx` and `a`.
+const HELD_BY_ENDS: [usize; 2] = [0, 2];
+/// Half-width (columns) of the runs of [`quiet_runs`].
+const RUN_HALF: usize = 10;
+/// Standard errors of a run's mean square residual over the reference in [`quiet_runs`].
+const RUN_KAPPA: f64 = 3.0;
 /// Floor (grey levels) of the noise estimate used as a scale.
 const MIN_NOISE: f64 = 0.5;
 /// A sample at or above this grey level counts as clipped (censored), as in `band.rs`.
@@ -220,7 +242,7 @@ pub(super) fn noise_sigma<T: Pixel>(image: &GrayView<'_, T>) -> f64 {
 /// `θ` follows the same way: in the ellipse frame the row's point `(x', y')` turns with `θ` as
 /// `∂x'/∂θ = y'`, `∂y'/∂θ = −x'`, so `∂F/∂θ = 2x'y'(1/a² − 1/b²)`. The slope of the arc in
 /// the column direction is `−∂y/∂cx`.
-fn arc_row(e: &[f64; 5], x: f64, side: f64) -> Option<(f64, [f64; 5])> {
+pub(super) fn arc_row(e: &[f64; 5], x: f64, side: f64) -> Option<(f64, [f64; 5])> {
     let [cx, cy, a, b, theta] = *e;
     let ellipse = Ellipse {
         cx,
@@ -328,11 +350,16 @@ impl Profile {
         }
     }
 
-    /// `(Φ(t), dΦ/dt, dΦ/dσ)`.
+    /// `(Φ(t), dΦ/dt, dΦ/dσ)` of the profile of blur `σ·widen` (an edge crossing the column at
+    /// a slope: `widen = √(1 + s²)`), for this profile of blur `sigma`: exact for the Gaussian;
+    /// for the staircase the weights to first order in `δ = σ·(widen − 1)` (the slopes of the
+    /// column fits' edges are under 0.1, so `δ` < 0.004 px and the error under 10⁻⁵ of an
+    /// edge's step), which spares a table per edge and column.
     #[inline]
-    fn at(&self, t: f64) -> (f64, f64, f64) {
+    fn widened(&self, t: f64, sigma: f64, widen: f64) -> (f64, f64, f64) {
         match self {
             Self::Optical(inv) => {
+                let inv = inv / widen;
                 let (cdf, d) = cdf_and_density(t * inv);
                 (cdf, d * inv, -d * t * inv * inv)
             }
@@ -352,10 +379,22 @@ impl Profile {
                 } else {
                     let i = (k + r) as usize;
                     let frac = t - k + 0.5;
-                    (cum[i] + w[i] * frac, w[i], cum_ds[i] + w_ds[i] * frac)
+                    let delta = sigma * (widen - 1.0);
+                    let wi = w[i] + w_ds[i] * delta;
+                    (
+                        cum[i] + cum_ds[i] * delta + wi * frac,
+                        wi,
+                        cum_ds[i] + w_ds[i] * frac,
+                    )
                 }
             }
         }
+    }
+
+    /// `(Φ(t), dΦ/dt, dΦ/dσ)` of this profile.
+    #[cfg(test)]
+    fn at(&self, t: f64) -> (f64, f64, f64) {
+        self.widened(t, 0.0, 1.0)
     }
 }
 
@@ -508,6 +547,7 @@ fn evaluate<const E: usize, const L: usize>(
     let mut out = Vec::with_capacity(columns.len());
     let mut basis = Vec::new();
     let rims = pair.rims(&u)?;
+    let profile = Profile::new(pair.profile, sigma);
     for (c, &keep) in columns.iter().zip(kept) {
         if !keep {
             out.push(None);
@@ -518,8 +558,6 @@ fn evaluate<const E: usize, const L: usize>(
         let de: [[f64; 5]; E] = std::array::from_fn(|j| rows[j].1);
         // Blur along the column of each edge, from its slope `dEⱼ/dx = −∂Eⱼ/∂cx`: σ·widen[j].
         let widen: [f64; E] = std::array::from_fn(|j| (1.0 + de[j][0] * de[j][0]).sqrt());
-        let prof: [Profile; E] =
-            std::array::from_fn(|j| Profile::new(pair.profile, sigma * widen[j]));
         // Basis of the levels and the normal equations of the unclipped samples.
         basis.clear();
         let mut btb = SMatrix::<f64, L, L>::zeros();
@@ -530,7 +568,7 @@ fn evaluate<const E: usize, const L: usize>(
             let mut dens = [0.0; E];
             let mut dsig = [0.0; E];
             for j in 0..E {
-                let (cdf, d, ds) = prof[j].at(y - e[j]);
+                let (cdf, d, ds) = profile.widened(y - e[j], sigma, widen[j]);
                 phi[j] = cdf;
                 dens[j] = d;
                 dsig[j] = ds * widen[j];
@@ -604,6 +642,7 @@ fn solve<const E: usize, const L: usize>(
     kept: &[bool],
     start: Option<Evaluation>,
     tol: f64,
+    held: &[usize],
 ) -> Option<(Vector6<f64>, f64, usize, Matrix6<f64>)> {
     let mut lambda = 1e-3;
     let first = match start {
@@ -620,11 +659,18 @@ fn solve<const E: usize, const L: usize>(
             for k in 0..6 {
                 a[(k, k)] += lambda * jtj[(k, k)].max(1e-12);
             }
-            let step = cholesky_solve::<6>(&a, &(-jtr))?;
+            let mut g = jtr;
+            for &k in held {
+                a.row_mut(k).fill(0.0);
+                a.column_mut(k).fill(0.0);
+                a[(k, k)] = 1.0;
+                g[k] = 0.0;
+            }
+            let step = cholesky_solve::<6>(&a, &(-g))?;
             // The decrease the linearised model predicts for the step: when it is below the
             // convergence threshold, no trial is worth its evaluation (at the optimum every
             // trial fails, and ten of them would only raise λ).
-            let predicted = -(step.dot(&jtr) * 2.0 + step.dot(&(jtj * step)));
+            let predicted = -(step.dot(&g) * 2.0 + step.dot(&(jtj * step)));
             if predicted <= threshold {
                 break;
             }
@@ -661,7 +707,9 @@ fn fit_columns<const E: usize, const L: usize>(
     u0: [f64; 5],
     columns: &[Column],
     noise: f64,
+    ends: bool,
 ) -> Option<ColumnFit> {
+    let held: &[usize] = if ends { &HELD_BY_ENDS } else { &[] };
     let noise = noise.max(MIN_NOISE);
     // The solves before the last (from the edge-point fit, then after the first screening)
     // run on an even subset of at most MAX_FIT_COLUMNS columns; the screening and the last
@@ -678,7 +726,7 @@ fn fit_columns<const E: usize, const L: usize>(
         } else {
             SUBSET_TOL
         };
-        let (q, ss, n, jtj) = solve::<E, L>(pair, p, columns, &kept, start.take(), tol)?;
+        let (q, ss, n, jtj) = solve::<E, L>(pair, p, columns, &kept, start.take(), tol, held)?;
         p = q;
         if round == ROUNDS {
             let count = kept.iter().filter(|&&k| k).count();
@@ -700,10 +748,15 @@ fn fit_columns<const E: usize, const L: usize>(
         finite.sort_by(f64::total_cmp);
         let median = *finite.get(finite.len() / 2)?;
         let limit = COLUMN_OUTLIER * median.max(noise);
+        let runs = if ends {
+            quiet_runs(&evaluation, noise)
+        } else {
+            vec![true; evaluation.len()]
+        };
         kept = column_rms
             .iter()
             .enumerate()
-            .map(|(i, &v)| v <= limit && (last || subset(i)))
+            .map(|(i, &v)| v <= limit && runs[i] && (last || subset(i)))
             .collect();
         if last {
             // The kept columns' part.
@@ -718,12 +771,79 @@ fn fit_columns<const E: usize, const L: usize>(
     None
 }
 
+/// The covariance of a fit whose `cx` and `a` ([`HELD_BY_ENDS`]) were held at values measured
+/// elsewhere — the band's two ends, each to a standard deviation `end_sd` (so `cx` and `a`, their
+/// mean and half difference, to `end_sd/√2` each, uncorrelated): the free parameters' conditional
+/// covariance `H_ff⁻¹·s²` plus the held ones' propagated through the optimum's shift
+/// `G = −H_ff⁻¹·H_fh` (`H` = `JᵀJ`, `s²` the residual variance); `None` when `H_ff` is
+/// singular.
+pub(super) fn held_covariance(jtj: &Matrix6<f64>, s2: f64, end_sd: f64) -> Option<Matrix6<f64>> {
+    const FREE: [usize; 4] = [1, 3, 4, 5];
+    let hff = SMatrix::<f64, 4, 4>::from_fn(|i, j| jtj[(FREE[i], FREE[j])]);
+    let hfh = SMatrix::<f64, 4, 2>::from_fn(|i, j| jtj[(FREE[i], HELD_BY_ENDS[j])]);
+    let inv = hff.try_inverse()?;
+    let g = -inv * hfh;
+    let var_held = 0.5 * end_sd * end_sd;
+    let cff = inv * s2 + g * g.transpose() * var_held;
+    let cfh = g * var_held;
+    let mut cov = Matrix6::zeros();
+    for i in 0..4 {
+        for j in 0..4 {
+            cov[(FREE[i], FREE[j])] = cff[(i, j)];
+        }
+        for j in 0..2 {
+            cov[(FREE[i], HELD_BY_ENDS[j])] = cfh[(i, j)];
+            cov[(HELD_BY_ENDS[j], FREE[i])] = cfh[(i, j)];
+        }
+    }
+    for j in 0..2 {
+        cov[(HELD_BY_ENDS[j], HELD_BY_ENDS[j])] = var_held;
+    }
+    Some(cov)
+}
+
+/// Whether the columns around each column of `e` are at the noise level: the pooled mean
+/// square residual of the columns within [`RUN_HALF`] of it, against the median column's
+/// (floored at `noise²`), within [`RUN_KAPPA`] standard errors of a mean of that many squared
+/// Gaussian residuals (`√(2/n)`). Clutter behind a wafer seen edge-on (the carrier's slot
+/// ridges and their mirror images in the faces, near the band's ends) moves the band's edges by
+/// 0.05–0.15 px in columns whose residual is only 1–2 grey levels RMS, under the noise of one
+/// column but coherent over tens of columns; the tips' columns are the ones that fix `b` there.
+fn quiet_runs(e: &Evaluation, noise: f64) -> Vec<bool> {
+    let mut ms: Vec<f64> = e
+        .iter()
+        .flatten()
+        .map(|c| c.ss / c.n.max(1) as f64)
+        .collect();
+    ms.sort_by(f64::total_cmp);
+    let Some(&median) = ms.get(ms.len() / 2) else {
+        return vec![true; e.len()];
+    };
+    let reference = median.max(noise * noise);
+    (0..e.len())
+        .map(|i| {
+            let run = &e[i.saturating_sub(RUN_HALF)..(i + RUN_HALF + 1).min(e.len())];
+            let (ss, n) = run
+                .iter()
+                .flatten()
+                .fold((0.0, 0usize), |(s, n), c| (s + c.ss, n + c.n));
+            n == 0 || ss / n as f64 <= reference * (1.0 + RUN_KAPPA * (2.0 / n as f64).sqrt())
+        })
+        .collect()
+}
+
 /// Refits the two rims `upper` and `lower` of one level wafer with `model` (module doc) on
 /// `image`, whose noise is `noise` grey levels; `None` when the pair does not suit the model
 /// (`Thin`: both rims' `b` under [`MAX_B`]; `Band`: wider), is not level enough for
 /// the column model, or the fit is not accepted. The rims keep their edge points; their
 /// residuals are recomputed against the new ellipses and their covariances are the fit's
-/// (scaled by its residual variance), propagated to the lower rim through the prior.
+/// (scaled by its residual variance), propagated to the lower rim through the prior. The side
+/// of the front arcs (+1: the band below the centre, the wafer seen from above) is `front`
+/// when given, else the side of the rims' points' median row. With `ends` (the standard
+/// deviation, pixels, of the band's two ends measured in the image: a wafer seen edge-on,
+/// `sliver.rs`) `cx` and `a` are held at the seed's values ([`HELD_BY_ENDS`]), the columns are
+/// also screened in runs ([`quiet_runs`]), and the covariance carries the ends' uncertainty
+/// ([`held_covariance`]).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn refit_pair<T: Pixel>(
     image: &GrayView<'_, T>,
@@ -734,6 +854,8 @@ pub(super) fn refit_pair<T: Pixel>(
     noise: f64,
     model: Model,
     profile: EdgeProfile,
+    front: Option<f64>,
+    ends: Option<f64>,
 ) -> Option<(WaferEdge, WaferEdge)> {
     let eu = &upper.ellipse;
     // An upright camera and level rims: the column model's premises (NaN fails).
@@ -751,7 +873,7 @@ pub(super) fn refit_pair<T: Pixel>(
     }
     let mut ys: Vec<f64> = points.iter().map(|p| p.y).collect();
     ys.sort_by(f64::total_cmp);
-    let front = if ys[ys.len() / 2] > eu.cy { 1.0 } else { -1.0 };
+    let front = front.unwrap_or(if ys[ys.len() / 2] > eu.cy { 1.0 } else { -1.0 });
     let pair = Pair {
         map: RimMap::new(prior, image.width(), image.height(), front, up),
         profile,
@@ -792,8 +914,8 @@ pub(super) fn refit_pair<T: Pixel>(
         return None;
     }
     let (p, ss, n, jtj, kept_count) = match model {
-        Model::Thin => fit_columns::<3, 4>(&pair, u0, &columns, noise)?,
-        Model::Band => fit_columns::<2, 3>(&pair, u0, &columns, noise)?,
+        Model::Thin => fit_columns::<3, 4>(&pair, u0, &columns, noise, ends.is_some())?,
+        Model::Band => fit_columns::<2, 3>(&pair, u0, &columns, noise, ends.is_some())?,
     };
     let rms = (ss / n.max(1) as f64).sqrt();
     let u = [p[0], p[1], p[2], p[3], p[4]];
@@ -810,8 +932,12 @@ pub(super) fn refit_pair<T: Pixel>(
         Model::Thin => 4,
         Model::Band => 3,
     };
-    let s2 = ss / (n.saturating_sub(6 + levels * kept_count)).max(1) as f64;
-    let cov6 = jtj.try_inverse()? * s2;
+    let held = if ends.is_some() { 2 } else { 0 };
+    let s2 = ss / (n.saturating_sub(6 - held + levels * kept_count)).max(1) as f64;
+    let cov6 = match ends {
+        None => jtj.try_inverse().map(|c| c * s2),
+        Some(sd) => held_covariance(&jtj, s2, sd),
+    }?;
     let cov_u: Matrix5<f64> = cov6.fixed_view::<5, 5>(0, 0).into_owned();
     let rims = pair.rims(&u)?;
     let cov_l = rims.chain * cov_u * rims.chain.transpose();
@@ -864,7 +990,7 @@ pub(super) fn refit_level_wafers<T: Pixel>(
         }
         let sigma = *noise.get_or_insert_with(|| noise_sigma(image));
         if let Some((u, l)) = refit_pair(
-            image, &edges[i], &edges[j], up, prior, sigma, model, profile,
+            image, &edges[i], &edges[j], up, prior, sigma, model, profile, None, None,
         ) {
             edges[i] = u;
             edges[j] = l;
@@ -874,7 +1000,7 @@ pub(super) fn refit_level_wafers<T: Pixel>(
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::super::tests::{benchmark_scene, hit_and_wrong};
     use super::*;
     use crate::wafers::{DetectParams, detect_wafers};
@@ -1112,12 +1238,12 @@ mod tests {
 
     /// A benchmark scene's parameters: `k` (disturbance slots above the target), the camera
     /// `(x, y, dz)`, yaw and pitch (degrees), gain, gradient, noise seed.
-    type SceneParams = (usize, (f64, f64, f64), f64, f64, f64, [f64; 2], u64);
+    pub(in crate::wafers) type SceneParams = (usize, (f64, f64, f64), f64, f64, f64, [f64; 2], u64);
 
     /// With the rim offset prior and `model`'s column fit on (`switch(true)`), both rims of
     /// `wafer` in the scene are hits (benchmark rule, renderer ground truth) and no detection is
     /// wrong; with it off, not both are hits.
-    fn assert_column_fit_hits(
+    pub(in crate::wafers) fn assert_column_fit_hits(
         scene: SceneParams,
         wafer: usize,
         switch: impl Fn(&mut DetectParams, bool),
