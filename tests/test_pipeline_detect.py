@@ -112,7 +112,8 @@ def test_detector_options_carry_the_wafer_and_camera(session, monkeypatch):
     cfg = session.config
     k = _k(session)
     opts = pipeline.detector_options(k, cfg.wafer_radius, cfg.wafer_thickness)
-    assert set(opts) == {"thickness_ratio", "focal_length", "principal_point", "edge_profile"}
+    assert set(opts) == {"thickness_ratio", "focal_length", "principal_point", "edge_profile", "level_band_search"}
+    assert opts["level_band_search"] is False
     assert opts["edge_profile"] == "optical"
     assert (
         pipeline.detector_options(k, cfg.wafer_radius, cfg.wafer_thickness, edge_profile="pixel")["edge_profile"]
