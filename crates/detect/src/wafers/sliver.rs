@@ -35,7 +35,7 @@
 //! mirrored in the wafer's face).
 
 use super::rim_prior::RimOffsetPrior;
-use super::thin::{EdgeProfile, Model, arc_row, is_thin, refit_pair};
+use super::thin::{EdgeProfile, Model, arc_row, refit_pair};
 use super::{GrayView, Pixel, RimKind, WaferEdge};
 use autoteach_geometry::conic::Ellipse;
 use nalgebra::{Matrix3, Point2, Vector2, Vector3};
@@ -89,6 +89,22 @@ struct Chain {
     last: usize,
 }
 
+/// The contrast of a bar whose peak is `c`, with `prev` and `next` the rows next to it and
+/// `above` and `below` the rows [`BAR_REACH`] away: `c` over the brighter of those two, when `c`
+/// is a local maximum (the first of equal rows) and the contrast reaches `min_contrast`.
+#[inline]
+fn bar_contrast(
+    above: f32,
+    prev: f32,
+    c: f32,
+    next: f32,
+    below: f32,
+    min_contrast: f32,
+) -> Option<f32> {
+    let contrast = c - above.max(below);
+    (contrast >= min_contrast && c >= prev && c > next).then_some(contrast)
+}
+
 /// The peak rows of the bars of every [`STRIDE`]-th column (sub-pixel by the parabola through
 /// the peak and its neighbours), with contrast at least `min_contrast`: one list per sampled
 /// column, in row order. The image is read row by row (its memory order).
@@ -111,12 +127,13 @@ fn bars<T: Pixel>(image: &GrayView<'_, T>, min_contrast: f64) -> Vec<Vec<f64>> {
             row(y + BAR_REACH),
         );
         for (k, &x) in xs.iter().enumerate() {
-            let c = cur[x].grey();
-            if c - above[x].grey().max(below[x].grey()) < min_contrast {
+            // Most pixels fail on the contrast alone: the neighbours are read after it.
+            let (c, a, b) = (cur[x].grey(), above[x].grey(), below[x].grey());
+            if c - a.max(b) < min_contrast {
                 continue;
             }
             let (up, down) = (prev[x].grey(), next[x].grey());
-            if !(c >= up && c > down) {
+            if bar_contrast(a, up, c, down, b, min_contrast).is_none() {
                 continue;
             }
             let den = f64::from(up) - 2.0 * f64::from(c) + f64::from(down);
@@ -141,19 +158,23 @@ fn bar_near<T: Pixel>(
 ) -> Option<(f64, f64)> {
     let (w, h) = (image.width(), image.height());
     let data = image.data();
-    let g = |r: usize| f64::from(data[r * w + x].grey());
+    let g = |r: usize| data[r * w + x].grey();
     let lo = (y - END_ROWS).floor().max(BAR_REACH as f64) as usize;
     let hi = ((y + END_ROWS).ceil() as usize).min(h.checked_sub(BAR_REACH + 1)?);
     let mut best: Option<(f64, f64)> = None;
     for r in lo..=hi {
-        let c = g(r);
-        let contrast = c - g(r - BAR_REACH).max(g(r + BAR_REACH));
-        if c >= g(r - 1)
-            && c > g(r + 1)
-            && contrast >= min_contrast
+        let bar = bar_contrast(
+            g(r - BAR_REACH),
+            g(r - 1),
+            g(r),
+            g(r + 1),
+            g(r + BAR_REACH),
+            min_contrast as f32,
+        );
+        if let Some(contrast) = bar
             && best.is_none_or(|(b, _)| (r as f64 - y).abs() < (b - y).abs())
         {
-            best = Some((r as f64, contrast));
+            best = Some((r as f64, f64::from(contrast)));
         }
     }
     best
@@ -368,14 +389,20 @@ fn band_edges<T: Pixel>(image: &GrayView<'_, T>, x: usize, y: f64) -> Option<(f6
     Some((cross(-1, top_level)?, cross(1, bottom_level)?))
 }
 
-/// Least-squares fit of the bar's centre line (module doc, step 4) for given `cx`, `a`:
+/// The basis of the bar's centre line at column `x` (module doc, step 4): its row is
+/// `(c₀, c₁, s) · (1, x − cx, √(1 − ((x − cx)/a)²))`.
+fn line_basis(x: f64, cx: f64, a: f64) -> Vector3<f64> {
+    let u = (x - cx) / a;
+    Vector3::new(1.0, x - cx, (1.0 - u * u).max(0.0).sqrt())
+}
+
+/// Least-squares fit of the bar's centre line ([`line_basis`]) for given `cx`, `a`:
 /// `(c₀, c₁, s)`.
 fn centre_line(points: &[(f64, f64)], cx: f64, a: f64) -> Option<Vector3<f64>> {
     let mut ata = Matrix3::zeros();
     let mut aty = Vector3::zeros();
     for &(x, y) in points {
-        let u = (x - cx) / a;
-        let row = Vector3::new(1.0, x - cx, (1.0 - u * u).max(0.0).sqrt());
+        let row = line_basis(x, cx, a);
         ata += row * row.transpose();
         aty += row * y;
     }
@@ -387,13 +414,8 @@ fn centre_line(points: &[(f64, f64)], cx: f64, a: f64) -> Option<Vector3<f64>> {
 /// wafer's mirror-like face, it is a neighbour's band reflected there.
 fn explained(edges: &[WaferEdge], x: f64, y: f64) -> bool {
     edges.iter().any(|e| {
-        let p = [
-            e.ellipse.cx,
-            e.ellipse.cy,
-            e.ellipse.a,
-            e.ellipse.b,
-            e.ellipse.theta,
-        ];
+        let el = &e.ellipse;
+        let p = [el.cx, el.cy, el.a, el.b, el.theta];
         match (arc_row(&p, x, -1.0), arc_row(&p, x, 1.0)) {
             (Some((top, _)), Some((bottom, _))) => {
                 y >= top.min(bottom) - DUPLICATE_ROWS && y <= top.max(bottom) + DUPLICATE_ROWS
@@ -442,8 +464,7 @@ pub(super) fn find_level_bands<T: Pixel>(
         let (mut top, mut bottom) = (Vec::new(), Vec::new());
         let mut x = (xl + 1.0).ceil();
         while x < xr - 1.0 {
-            let u = (x - cx) / a;
-            let y = c[0] + c[1] * (x - cx) + c[2] * (1.0 - u * u).max(0.0).sqrt();
+            let y = c.dot(&line_basis(x, cx, a));
             if let Some((t, bt)) = band_edges(image, x as usize, y) {
                 top.push(Point2::new(x, t));
                 bottom.push(Point2::new(x, bt));
@@ -473,9 +494,6 @@ pub(super) fn find_level_bands<T: Pixel>(
         ) else {
             continue;
         };
-        if !is_thin(&upper, &lower) {
-            continue;
-        }
         let seed = |ellipse: Ellipse, points: Vec<Point2<f64>>, kind| WaferEdge {
             ellipse,
             points,

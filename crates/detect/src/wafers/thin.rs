@@ -120,7 +120,7 @@ const MAX_B_ABOVE: f64 = 10.0;
 
 /// Whether the pair `upper`, `lower` is thin ([`Model::Thin`]): both rims' `b` under
 /// [`MAX_B_ABOVE`] for a wafer seen from above, under [`MAX_B`] from below.
-pub(super) fn is_thin(upper: &Ellipse, lower: &Ellipse) -> bool {
+fn is_thin(upper: &Ellipse, lower: &Ellipse) -> bool {
     let limit = if lower.b > upper.b {
         MAX_B_ABOVE
     } else {
@@ -932,7 +932,11 @@ pub(super) fn refit_pair<T: Pixel>(
         Model::Thin => 4,
         Model::Band => 3,
     };
-    let held = if ends.is_some() { 2 } else { 0 };
+    let held = if ends.is_some() {
+        HELD_BY_ENDS.len()
+    } else {
+        0
+    };
     let s2 = ss / (n.saturating_sub(6 - held + levels * kept_count)).max(1) as f64;
     let cov6 = match ends {
         None => jtj.try_inverse().map(|c| c * s2),
