@@ -82,8 +82,9 @@ def test_detect_frontend_finds_the_slots_and_associates_every_edge(session, dete
     assert r.rms_px < 0.5
 
 
-def test_detect_frontend_is_robust_to_missed_detections_and_false_arcs(session, detections, monkeypatch):
-    rng = np.random.default_rng(0)
+def _damaged(detections, seed):
+    """The detections with 40 % of the rims dropped, every fourth frame empty and a false arc."""
+    rng = np.random.default_rng(seed)
     damaged = []
     for f, edges in enumerate(detections):
         keep = [e for e in edges if rng.random() > 0.4]  # recall cut by 40 %
@@ -94,7 +95,11 @@ def test_detect_frontend_is_robust_to_missed_detections_and_false_arcs(session, 
             e = keep[0]
             keep.append(type(e)(**{**e.__dict__, "points": np.asarray(e.points) + [0.0, 25.0]}))
         damaged.append(keep)
-    r = _run(session, damaged, monkeypatch, window=0, baseline=False, use_ukf=False)
+    return damaged
+
+
+def test_detect_frontend_is_robust_to_missed_detections_and_false_arcs(session, detections, monkeypatch):
+    r = _run(session, _damaged(detections, 0), monkeypatch, window=0, baseline=False, use_ukf=False)
     assert r.frontend_stats["spurious_slots"] == []
     assert r.frontend_stats["gated"]["edges_rejected"] > 0
     assert _check_associations(session, r) == 0
@@ -106,6 +111,17 @@ def test_detect_frontend_is_robust_to_missed_detections_and_false_arcs(session, 
         assert np.all(np.isnan(r.wafer_params[w]))
     assert len(sparse) <= 2
     assert r.errors["wafer_center_mm"] < 1.0
+
+
+def test_detect_frontend_is_robust_over_damage_patterns(session, detections, monkeypatch):
+    # Damage patterns under which the tilted wafer of slot 25 (1° about y, seen in about ten
+    # frames) stopped in a second minimum of the height–tilt valley (0.1° and 2.2–2.8 mm off)
+    # before the per-wafer basin search; errors against the simulator's truth.
+    for seed in (18, 26, 39, 41, 45):
+        r = _run(session, _damaged(detections, seed), monkeypatch, window=0, baseline=False, use_ukf=False)
+        assert r.frontend_stats["spurious_slots"] == [], seed
+        assert r.errors["wafer_center_mm"] < 1.0, (seed, r.errors)
+        assert r.errors["wafer_tilt_deg"] < 0.1, (seed, r.errors)
 
 
 def test_detector_options_carry_the_wafer_and_camera(session, monkeypatch):

@@ -1036,13 +1036,17 @@ def handeye_slam_mot(
     estimate_links: list[int] = [],
     free_camera: tuple[list[float], NDArray[np.float64] | None, list[float]] | None = None,
     point_sigma_scale: NDArray[np.float64] | None = None,
+    basin_search: bool = False,
 ) -> dict[str, object]:
     """SLAM-MOT calibration (000_3b1454b2b2194811.txt §5.3): batch (and sliding-window) solve with covariances.
 
     ``free_camera = (motion_sigma (6), odometry (F-1, 4, 4) or None, odometry_sigma (6))`` switches to
     per-frame camera poses tied by the robot motion factor of eqs. (5.10)–(5.12).
     ``point_sigma_scale`` (one factor per point, > 0): point ``i`` has the standard deviation
-    ``pixel_sigma · point_sigma_scale[i]`` (eq. (5.5) per point).
+    ``pixel_sigma · point_sigma_scale[i]`` (eq. (5.5) per point). ``basin_search``: after the
+    batch solve, every wafer whose edge residuals stand out is re-fitted alone (camera poses fixed)
+    from a grid of tilts and heights, and the batch solve is repeated from a better basin when one
+    is found; the wafers moved are ``basins_moved``.
     """
 
 def handeye_ukf(

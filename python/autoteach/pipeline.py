@@ -940,6 +940,7 @@ def autoteach(
     min_track_frames: int = 5,
     min_wafer_frames: int = 8,
     reset_tilts: bool = True,
+    basin_search: bool = True,
     gate_px: tuple[float, ...] = (3.0, 1.5, 1.0),
     min_band_px: float = 2.5,
     band_weights: bool = True,
@@ -1003,6 +1004,12 @@ def autoteach(
             the first estimate.
         reset_tilts: detect front end: also run the gating chain from level wafers after the first
             estimate and keep the chain that explains more edges (see the code comment).
+        basin_search: after every batch solve, re-fit each wafer whose edge residuals stand out
+            (over twice the median wafer's RMS) alone from a grid of tilts and heights with the
+            camera poses fixed, and solve again from a better basin when one halves its cost
+            (``SlamMot::solve_batch_with_basins``: a wafer seen from one side in few frames can
+            stop in a second minimum of the height–tilt valley). The wafers moved by the last
+            solve are ``frontend_stats["basins_moved"]`` (slots).
         min_wafer_frames: detect front end: wafers gated into fewer frames are reported as not
             estimated (too few views to constrain a wafer pose; listed in ``frontend_stats``).
         gate_px: detect front end: after each first estimate every detected edge is associated
@@ -1245,6 +1252,7 @@ def autoteach(
         reference_wafer=int(ref),
         huber=huber,
         max_iterations=int(max_iterations),
+        basin_search=bool(basin_search),
     )
     args = (
         k,
@@ -1273,9 +1281,16 @@ def autoteach(
         best: tuple[int, Observations, tuple[Any, ...]] | None = None
         for reset in (False, True) if reset_tilts else (False,):
             first, cand_obs, cand_args = tracked, obs, args
+            failed = False
             for gi, gate in enumerate(gate_px):
                 if gi > 0:
-                    first = _core.handeye_slam_mot(*cand_args, factor="conic", window=0, **common)
+                    try:
+                        first = _core.handeye_slam_mot(*cand_args, factor="conic", window=0, **common)
+                    except InvalidInputError:
+                        # This chain's estimate put a rim behind a camera (its gated edges
+                        # mixed wafers): the chain is abandoned, the other may still hold.
+                        failed = True
+                        break
                 wafers_first = np.asarray(first["wafers"], dtype=np.float64).copy()
                 if gi == 0 and reset:
                     wafers_first[:, 3:] = 0.0
@@ -1307,12 +1322,13 @@ def autoteach(
                 )
             # Edges explained (before the band filter, which only thins their points).
             n_explained = int(cand_obs.stats.get("rims_associated", len(cand_obs)))
-            if len(cand_obs) > 0 and (best is None or n_explained > best[0]):
+            if not failed and len(cand_obs) > 0 and (best is None or n_explained > best[0]):
                 best = (n_explained, cand_obs, cand_args)
         if best is None:
             raise InvalidInputError(
-                f"no detected edge lies within {gate_px} px of the projected wafer estimates: the first "
-                "estimate from the tracked rims is inconsistent with the detections"
+                f"no detected edge lies within {gate_px} px of the projected wafer estimates, or every "
+                "gating chain's estimate put a rim behind a camera: the first estimate from the tracked "
+                "rims is inconsistent with the detections"
             )
         _, obs, args = best
         obs = _drop_sparse_wafers(obs, min_wafer_frames)
@@ -1330,6 +1346,7 @@ def autoteach(
         **common,
     )
     timings["slam_mot_s"] = time.perf_counter() - t0
+    frontend_stats["basins_moved"] = [int(obs.slots[w]) for w in sol["basins_moved"]]
     stages.update()
 
     base_hat = np.asarray(sol["base_pose"])
@@ -1431,7 +1448,8 @@ def autoteach(
         frontend_stats["spurious_slots"] = [int(obs.slots[w]) for w in seen if truth_index[w] < 0]
     if baseline:
         t0 = time.perf_counter()
-        chain_only = {k: v for k, v in common.items() if k != "free_camera"}
+        # The seed's baseline as it is: no basin search.
+        chain_only = {k: v for k, v in common.items() if k not in ("free_camera", "basin_search")}
         base_sol = _core.handeye_slam_mot(
             *args,
             factor="point",

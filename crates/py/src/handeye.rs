@@ -4,7 +4,7 @@
 //! `autoteach.pipeline.autoteach`.
 
 use autoteach_estimate::handeye::{
-    EdgeFactor, EdgeObservation, FreeCamera, PriorSigmas, Rim, SlamMot, SlamMotConfig,
+    BasinSearch, EdgeFactor, EdgeObservation, FreeCamera, PriorSigmas, Rim, SlamMot, SlamMotConfig,
     SlamMotSolution, SlamMotState, UkfNoise, WaferGeometry, WindowRecord, theoretical_resolution,
 };
 use autoteach_geometry::lie::se3_log;
@@ -127,13 +127,15 @@ fn history_list<'py>(py: Python<'py>, hist: &[WindowRecord]) -> PyResult<Bound<'
 /// `points[obs_start[i]:obs_start[i+1]]`; `obs_rims` is 0 for the upper rim, 1 for the lower.
 /// With `window > 0` the sliding-window run precedes the batch solve and its history is
 /// returned; with `init_heights = (z_min, z_max, step)` the non-reference wafers' heights are
-/// first found by a 1-D search. Returns a dict (see `autoteach.pipeline`).
+/// first found by a 1-D search. With `basin_search` the batch solve is followed by the
+/// per-wafer basin search (`SlamMot::solve_batch_with_basins`, default settings); the wafers it
+/// moved are `basins_moved`. Returns a dict (see `autoteach.pipeline`).
 #[pyfunction]
 #[pyo3(signature = (k, robot_params, wafer_radius, wafer_thickness, encoders, obs_frames, obs_wafers, obs_rims,
     obs_start, points, initial_base, initial_offsets, initial_wafers, *, pixel_sigma=0.5, estimate_offsets=vec![1, 3],
     reference_wafer=0, huber=Some(3.0), factor="conic", n_model=360, rounds=3, max_iterations=50, window=0,
     init_heights=None, prior_sigmas=(0.035, 0.02, 0.035), encoder_sigma=None, estimate_mount=false,
-    estimate_links=vec![], free_camera=None, point_sigma_scale=None))]
+    estimate_links=vec![], free_camera=None, point_sigma_scale=None, basin_search=false))]
 #[allow(clippy::too_many_arguments)]
 fn handeye_slam_mot<'py>(
     py: Python<'py>,
@@ -166,6 +168,7 @@ fn handeye_slam_mot<'py>(
     estimate_links: Vec<usize>,
     free_camera: Option<FreeCameraArgs<'py>>,
     point_sigma_scale: Option<Bound<'py, PyAny>>,
+    basin_search: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let k = k_matrix(k)?;
     let params = read_robot_params(robot_params)?;
@@ -298,7 +301,7 @@ fn handeye_slam_mot<'py>(
         }
     };
     let n_wafers = wafers.len();
-    let (sol, hist, init) = convert::detached(py, move || {
+    let (sol, hist, init, moved) = convert::detached(py, move || {
         let slam = SlamMot::new(config, enc, observations, n_wafers).map_err(errors::estimate)?;
         let mut state = SlamMotState::new(base, offsets, wafers);
         if let Some((lo, hi, step)) = init_heights {
@@ -321,10 +324,19 @@ fn handeye_slam_mot<'py>(
                 state = last.state.clone();
             }
         }
-        let sol = slam.solve_batch(&state).map_err(errors::estimate)?;
-        Ok((sol, hist, init))
+        let (sol, moved) = if basin_search {
+            slam.solve_batch_with_basins(&state, &BasinSearch::default())
+                .map_err(errors::estimate)?
+        } else {
+            (
+                slam.solve_batch(&state).map_err(errors::estimate)?,
+                Vec::new(),
+            )
+        };
+        Ok((sol, hist, init, moved))
     })?;
     let d = solution_dict(py, &sol)?;
+    d.set_item("basins_moved", moved)?;
     d.set_item("history", history_list(py, &hist)?)?;
     d.set_item("initial", state_dict(py, &init)?)?;
     Ok(d)

@@ -32,7 +32,7 @@ pub use ukf_model::{
 pub use wafer::{Rim, WAFER_DIM, WaferGeometry, rim_pose, wafer_from_center_normal, wafer_normal};
 pub mod slam;
 pub use slam::{
-    EdgeFactor, EdgeObservation, FreeCamera, LINK_NAMES, PriorSigmas, SlamMot, SlamMotConfig,
-    SlamMotSolution, SlamMotState, Uncertainty, WindowRecord, edge_residuals,
+    BasinSearch, EdgeFactor, EdgeObservation, FreeCamera, LINK_NAMES, PriorSigmas, SlamMot,
+    SlamMotConfig, SlamMotSolution, SlamMotState, Uncertainty, WindowRecord, edge_residuals,
     theoretical_resolution,
 };

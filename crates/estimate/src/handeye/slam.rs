@@ -19,6 +19,9 @@ use crate::lsq::{
 };
 use crate::{EstimateError, Result};
 
+mod basins;
+pub use basins::BasinSearch;
+
 /// Tracked edge points of one rim of one wafer in one frame (a camera observation `z_{k,t}`
 /// of Fig. 5.5).
 #[derive(Debug, Clone, PartialEq)]
@@ -638,6 +641,8 @@ struct Blocks {
     mount: Option<BlockId>,
     links: Option<BlockId>,
     cameras: Vec<Option<BlockId>>,
+    /// Each frame's joint-noise block `n_t` (with [`SlamMotConfig::encoder_sigma`]).
+    noise: Vec<Option<BlockId>>,
 }
 
 impl Blocks {
@@ -997,6 +1002,7 @@ impl SlamMot {
                 mount,
                 links,
                 cameras,
+                noise,
             },
             n_res,
         ))
@@ -1025,11 +1031,28 @@ impl SlamMot {
     }
 
     /// Per-frame camera poses: the free pose variables where they exist, else the chain.
+    /// The camera pose of every frame as the solve's edge residuals see it: the free pose, or
+    /// the chain's with the frame's estimated joint noise `n_t` added to the offsets (the
+    /// residuals' [`EdgeResidual::chain`]), else the chain's of `state`.
     fn frame_poses(&self, p: &Problem, b: &Blocks, state: &SlamMotState) -> Vec<Isometry3<f64>> {
         let mut poses = self.camera_poses(state);
         for (f, c) in b.cameras.iter().enumerate() {
             if let Some(c) = c {
                 poses[f] = se3_from_params(p.values(*c));
+            }
+        }
+        let robot = WaferRobot {
+            params: state.robot_params(&self.config.robot_params),
+            base: state.base,
+        };
+        for (f, nb) in b.noise.iter().enumerate() {
+            if let Some(nb) = nb {
+                let n = p.values(*nb);
+                let mut offsets = state.offsets;
+                for (k, &j) in NOISE_JOINTS.iter().enumerate() {
+                    offsets[j] += n[k];
+                }
+                poses[f] = robot.camera_pose(&(self.encoders[f] - offsets)) * state.mount;
             }
         }
         poses
@@ -1420,6 +1443,7 @@ impl SlamMot {
                 mount: b.mount,
                 links: b.links,
                 cameras: b.cameras.clone(),
+                noise: b.noise.clone(),
             };
             state = self.read_state(&p, &full, &state);
             // Posterior → next prior (all wafers seen so far, the reference excluded: fixed).
