@@ -124,6 +124,13 @@ pub const LINK_NAMES: [&str; 3] = ["l1", "l2", "l4"];
 /// Joints whose per-frame encoder noise is modelled (the others do not move the camera).
 const NOISE_JOINTS: [usize; 4] = [0, 1, 3, 4];
 
+/// `offsets` with a frame's joint noise `n_t` (one value per [`NOISE_JOINTS`] entry) added.
+fn add_joint_noise(offsets: &mut Joints, n: &[f64]) {
+    for (k, &j) in NOISE_JOINTS.iter().enumerate() {
+        offsets[j] += n[k];
+    }
+}
+
 impl SlamMotConfig {
     /// Defaults: 0.5 px edge noise, offsets of θ2 and θ4, wafer 0 as reference, a 1e-6 rad
     /// yaw gauge, Huber at 3σ, the conic factor, 50 iterations.
@@ -367,10 +374,7 @@ impl EdgeResidual {
             offsets[j] = params[1 + i][0];
         }
         if let Some(i) = inoise {
-            let n = params[i];
-            for (k, &j) in NOISE_JOINTS.iter().enumerate() {
-                offsets[j] += n[k];
-            }
+            add_joint_noise(&mut offsets, params[i]);
         }
         let mut links = self.fixed_links;
         if let Some(i) = ilinks {
@@ -752,11 +756,26 @@ impl SlamMot {
 
     /// Camera poses `T_wc` of every frame for a state (eq. (5.9)).
     pub fn camera_poses(&self, state: &SlamMotState) -> Vec<Isometry3<f64>> {
+        self.chain_poses(state, |_| state.offsets)
+    }
+
+    /// Camera poses `T_wc` through the chain of `state` with the zero offsets `offsets(t)` of
+    /// frame `t`.
+    fn chain_poses(
+        &self,
+        state: &SlamMotState,
+        offsets: impl Fn(usize) -> Joints,
+    ) -> Vec<Isometry3<f64>> {
         let robot = WaferRobot {
             params: state.robot_params(&self.config.robot_params),
             base: state.base,
         };
-        let qs: Vec<Joints> = self.encoders.iter().map(|q| q - state.offsets).collect();
+        let qs: Vec<Joints> = self
+            .encoders
+            .iter()
+            .enumerate()
+            .map(|(t, q)| q - offsets(t))
+            .collect();
         let poses = robot.camera_poses(&qs);
         if state.mount == Isometry3::identity() {
             poses
@@ -1035,24 +1054,16 @@ impl SlamMot {
     /// the chain's with the frame's estimated joint noise `n_t` added to the offsets (the
     /// residuals' [`EdgeResidual::chain`]), else the chain's of `state`.
     fn frame_poses(&self, p: &Problem, b: &Blocks, state: &SlamMotState) -> Vec<Isometry3<f64>> {
-        let mut poses = self.camera_poses(state);
+        let mut poses = self.chain_poses(state, |t| {
+            let mut offsets = state.offsets;
+            if let Some(nb) = b.noise[t] {
+                add_joint_noise(&mut offsets, p.values(nb));
+            }
+            offsets
+        });
         for (f, c) in b.cameras.iter().enumerate() {
             if let Some(c) = c {
                 poses[f] = se3_from_params(p.values(*c));
-            }
-        }
-        let robot = WaferRobot {
-            params: state.robot_params(&self.config.robot_params),
-            base: state.base,
-        };
-        for (f, nb) in b.noise.iter().enumerate() {
-            if let Some(nb) = nb {
-                let n = p.values(*nb);
-                let mut offsets = state.offsets;
-                for (k, &j) in NOISE_JOINTS.iter().enumerate() {
-                    offsets[j] += n[k];
-                }
-                poses[f] = robot.camera_pose(&(self.encoders[f] - offsets)) * state.mount;
             }
         }
         poses

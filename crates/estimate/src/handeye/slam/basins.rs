@@ -265,7 +265,8 @@ impl SlamMot {
                 }
             }
             tilts.sort_by(|a, b| a.0.total_cmp(&b.0));
-            // The best tilts at least two grid steps apart, refined alone.
+            // The best tilts at least two grid steps apart (grid tilts differ by whole steps,
+            // so 1.5 steps separates them), refined alone.
             let mut chosen: Vec<Vector5<f64>> = Vec::new();
             for (_, w) in tilts {
                 if chosen.len() >= search.starts {
