@@ -46,6 +46,20 @@ def test_demo_prints_json(tmp_path, capsys):
     assert json.loads((tmp_path / "session_seed3.json").read_text())["frames"] == 2
 
 
+def test_demo_no_log_writes_no_log_and_a_kept_log_reads_back_bit_exactly(tmp_path, capsys):
+    kept, skipped = tmp_path / "kept", tmp_path / "skipped"
+    args = ["demo", "--frames", "2", "--seed", "4", "--no-autoteach", "-q"]
+    assert main([*args, "--out", str(skipped), "--no-log"]) == 0
+    assert "log:" not in capsys.readouterr().out
+    assert not list(skipped.glob("*.mcap"))
+    assert main([*args, "--out", str(kept), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    again, direct = read_log(summary["log"]), simulate_session(seed=4, frames=2)
+    for name in ("images", "joints_encoder", "joints_true", "timestamps", "camera_poses", "wafer_poses"):
+        a, b = getattr(again, name), getattr(direct, name)
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), name
+
+
 def test_demo_prints_a_table(tmp_path, capsys):
     assert main(["demo", "--frames", "1", "--out", str(tmp_path), "--quiet"]) == 0
     text = capsys.readouterr().out

@@ -3,7 +3,7 @@
 Commands::
 
     autoteach simulate --seed 7 --frames 200 --out session.mcap   # simulate and write a log
-    autoteach demo [--seed N] [--frames N] [--out DIR] [--ukf-odometry slam|vo] [--json]  # simulate, auto-teach, report
+    autoteach demo [--seed N] [--frames N] [--out DIR] [--no-log] [--json]  # simulate, auto-teach, report
     autoteach info LOG.mcap [--json]                              # describe a log
 
 User errors (bad arguments, unreadable logs, invalid configurations) print one line to stderr
@@ -84,6 +84,12 @@ def _parser() -> argparse.ArgumentParser:
         "--no-autoteach", dest="autoteach", action="store_false", help="only simulate, do not run auto-teaching"
     )
     demo.add_argument(
+        "--no-log",
+        dest="log",
+        action="store_false",
+        help="do not keep the simulated session's MCAP log (about 0.7 MB per frame, 144 MB for 200 frames)",
+    )
+    demo.add_argument(
         "--frontend",
         choices=("detect", "simulated"),
         default="detect",
@@ -110,12 +116,15 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _simulate_and_write(args: argparse.Namespace, out: Path) -> tuple[Any, dict[str, Any]]:
+def _simulate_and_write(args: argparse.Namespace, out: Path | None) -> tuple[Any, dict[str, Any]]:
+    """Simulate a session; write its MCAP log to ``out`` unless ``out`` is None."""
     from autoteach.io import write_log
     from autoteach.sim import simulate_session
 
     progress = _progress_enabled(args)
     session = simulate_session(seed=args.seed, frames=args.frames, progress=progress)
+    if out is None:
+        return session, session.summary()
     t0 = time.perf_counter()
     compression = getattr(args, "compression", "zstd")
     write_log(session, out, compression=None if compression == "none" else compression, progress=progress)
@@ -141,7 +150,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
-    out = args.out / f"session_seed{args.seed}.mcap"
+    out = args.out / f"session_seed{args.seed}.mcap" if args.log else None
     t_start = time.perf_counter()
     session, summary = _simulate_and_write(args, out)
     summary_path = args.out / f"session_seed{args.seed}.json"
