@@ -120,3 +120,29 @@ def test_module_entry_point(tmp_path):
     assert "autoteach: error: cannot read log" in proc.stderr and "Traceback" not in proc.stderr
     proc = subprocess.run([sys.executable, "-m", "autoteach", "--version"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and proc.stdout.startswith("autoteach ")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["simulate", "--frames", "99999999999999999999", "--out", "x.mcap"],
+        ["calibrate", "--simulate", "--seed", "-1"],
+        ["active", "--trials", "0"],
+    ],
+)
+def test_bad_arguments_give_one_line_and_status_2(argv, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "error:" in err
+    assert not any(len(token) > 40 for token in err.split())  # no 300-digit numbers echoed
+
+
+def test_a_file_that_is_not_npz_is_a_one_line_error(capsys, tmp_path):
+    bad = tmp_path / "views.npz"
+    bad.write_text("not an archive")
+    assert main(["calibrate", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a readable .npz" in err

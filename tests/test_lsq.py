@@ -230,6 +230,31 @@ def test_bundle_adjust_takes_and_returns_4x4_poses() -> None:
         bundle_adjust(K, bad, init_points, obs, pi, xi)
 
 
+@pytest.mark.parametrize("dtype", [complex, object, bool, "datetime64[s]", str])
+def test_bundle_adjust_refuses_arrays_that_are_not_real_numbers(dtype) -> None:
+    """Regression: complex K was cast to its real part and solved silently."""
+    K, _, _, obs, pi, xi, init_poses, init_points = _small_scene()
+    if dtype is complex:
+        bad = np.asarray(K) + 5j
+    elif dtype == "datetime64[s]":
+        bad = np.zeros((3, 3), dtype=dtype)
+    else:
+        bad = np.asarray(K).astype(dtype)
+    with pytest.raises(InvalidInputError, match="K must be"):
+        bundle_adjust(bad, init_poses, init_points, obs, pi, xi)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [({"max_iterations": -1}, "max_iterations must be a non-negative"), ({"ftol": -1.0}, "ftol must be")],
+)
+def test_negative_solver_settings_are_named(kwargs, match) -> None:
+    """Regression: max_iterations=-1 raised a bare OverflowError from the binding."""
+    K, _, _, obs, pi, xi, init_poses, init_points = _small_scene()
+    with pytest.raises(InvalidInputError, match=match):
+        bundle_adjust(K, init_poses, init_points, obs, pi, xi, **kwargs)
+
+
 def test_index_arrays_of_any_integer_type_give_the_same_result() -> None:
     """Lists, int32/uint16 arrays and int64 arrays are the same indices (int64 crosses as one slice)."""
     K, _, _, obs, pi, xi, init_poses, init_points = _small_scene()

@@ -16,12 +16,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from autoteach.commands.args import int_in_range, seed
 from autoteach.errors import AutoteachError, InternalError
 
 EXIT_USER_ERROR = 2
@@ -31,23 +33,10 @@ def _progress_enabled(args: argparse.Namespace) -> bool:
     return not args.quiet and sys.stderr.isatty()
 
 
-def _int_at_least(minimum: int, requirement: str) -> Callable[[str], int]:
-    """An argparse ``type`` parsing an integer ``>= minimum``; ``requirement`` words the error."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{requirement}, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"{requirement}, got {value}")
-        return value
-
-    return parse
-
-
-_seed = _int_at_least(0, "seed must be a non-negative integer")
-_frames = _int_at_least(1, "frames must be a positive integer")
+#: At most this many frames: a session's images are held in memory (0.9 MB per 1280×720 frame).
+MAX_FRAMES = 100_000
+_seed = seed
+_frames = int_in_range(1, f"frames must be an integer in [1, {MAX_FRAMES}]", MAX_FRAMES)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -272,6 +261,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("autoteach: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print("autoteach: error: not enough memory for this request (try fewer frames or points)", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except Exception as exc:  # noqa: BLE001 - the CLI prints one line, never a traceback
+        if os.environ.get("AUTOTEACH_DEBUG"):
+            raise
+        print(
+            f"autoteach: internal error (please report; AUTOTEACH_DEBUG=1 shows the traceback): "
+            f"{type(exc).__name__}: {exc}",
+            file=sys.stderr,
+        )
+        return 1
 
 
 if __name__ == "__main__":

@@ -55,7 +55,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
-from autoteach._convert import as_f64
+from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
 from autoteach.geometry import so3_exp, so3_log
 
@@ -74,20 +74,15 @@ F64Array = NDArray[np.float64]
 
 
 def _matrix(a: ArrayLike, name: str) -> F64Array:
-    try:
-        m = np.array(a, dtype=np.float64, copy=True)
-    except (TypeError, ValueError) as e:
-        raise InvalidInputError(f"{name} must be a real matrix: {e}") from None
+    # as_f64 refuses complex, object, string, bool and datetime arrays (a cast would drop data).
+    m = np.array(as_f64(a, name), dtype=np.float64, copy=True)
     if m.ndim != 2:
         raise InvalidInputError(f"{name} must be two-dimensional, got shape {m.shape}")
     return m
 
 
 def _vector(a: ArrayLike, name: str) -> F64Array:
-    try:
-        return np.array(a, dtype=np.float64, copy=True).reshape(-1)
-    except (TypeError, ValueError) as e:
-        raise InvalidInputError(f"{name} must be a real vector: {e}") from None
+    return np.array(as_f64(a, name), dtype=np.float64, copy=True).reshape(-1)
 
 
 class MerweScaledSigmaPoints:
@@ -664,13 +659,20 @@ _LOSSES = ("linear", "huber", "cauchy", "tukey")
 def _solver_kwargs(
     method: str, linear_solver: str, max_iterations: int, ftol: float, gtol: float, xtol: float
 ) -> dict[str, Any]:
+    iterations = as_int(max_iterations, "max_iterations")
+    if iterations < 0:
+        raise InvalidInputError(f"max_iterations must be a non-negative integer, got {iterations}")
+    tolerances = {name: as_float(v, name) for name, v in (("ftol", ftol), ("gtol", gtol), ("xtol", xtol))}
+    for name, v in tolerances.items():
+        if v < 0.0:
+            raise InvalidInputError(f"{name} must be a non-negative number, got {v}")
     return {
         "method": method,
         "linear_solver": linear_solver,
-        "max_iterations": int(max_iterations),
-        "function_tolerance": float(ftol),
-        "gradient_tolerance": float(gtol),
-        "parameter_tolerance": float(xtol),
+        "max_iterations": iterations,
+        "function_tolerance": tolerances["ftol"],
+        "gradient_tolerance": tolerances["gtol"],
+        "parameter_tolerance": tolerances["xtol"],
     }
 
 
