@@ -274,3 +274,30 @@ def test_detect_wafers_on_an_easy_image() -> None:
     s = score_frame(dets, scene)
     assert s.found >= 1
     assert all(e <= 1.0 for e in s.centre_errors)
+
+
+@pytest.mark.parametrize("sigma", [0.0, 0.7, 2.0])
+def test_coverage_table_matches_closed_form(sigma: float) -> None:
+    from autoteach.sim.appearance import _coverage_table
+
+    rng = np.random.default_rng(2)
+    d = rng.uniform(-12, 12, 5000)
+    ang = rng.uniform(0, 2 * math.pi, 5000)
+    nx, ny = np.cos(ang), np.sin(ang)
+    tol = 5e-4 if sigma == 0 else 2e-4  # the box-only profile has kinks
+    assert np.max(np.abs(_coverage_table(sigma)(d, nx, ny) - edge_coverage(d, nx, ny, sigma))) < tol
+
+
+def test_band_distances_match_orthogonal_distance() -> None:
+    """The renderer's band distances (Sampson where the curve is flat, exact elsewhere) against exact ones."""
+    from autoteach.sim.appearance import _Boundary, _Conic, _window
+
+    cases = [(640.3, 360.2, 375.0, 25.0, 0.02), (600.0, 300.0, 200.0, 3.0, -0.05), (600.0, 300.0, 350.0, 1.0, 0.0)]
+    for e in (Ellipse(*c) for c in cases + [(600.0, 300.0, 150.0, 140.0, 0.5)]):
+        c = _Conic(e)
+        win = _window([c], 8, 1280, 720)
+        b = _Boundary(c, win)
+        exact = e.distance(np.column_stack([win.bx, win.by]))
+        assert np.max(np.abs(b.d - exact)) < 0.005
+        near = np.abs(exact) < 3.0
+        assert np.max(np.abs(b.d - exact)[near]) < 0.0025
