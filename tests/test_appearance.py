@@ -296,7 +296,7 @@ def test_band_distances_match_orthogonal_distance() -> None:
     for e in (Ellipse(*c) for c in cases + [(600.0, 300.0, 150.0, 140.0, 0.5)]):
         c = _Conic(e)
         win = _window([c], 8, 1280, 720)
-        b = _Boundary(c, win)
+        b = _Boundary(c, win, 12.0)
         exact = e.distance(np.column_stack([win.bx, win.by]))
         assert np.max(np.abs(b.d - exact)) < 0.005
         near = np.abs(exact) < 3.0

@@ -739,6 +739,14 @@ class _CoverageTable:
         self.table = edge_coverage(dd, np.sqrt(1.0 - qq * qq), qq, sigma)
 
     def __call__(self, d: NDArray[np.float64], nx: NDArray[np.float64], ny: NDArray[np.float64]) -> NDArray[np.float64]:
+        out = (d < 0).astype(np.float64)
+        near = np.abs(d) < self.reach
+        if near.all():
+            return self._lookup(d, nx, ny)
+        out[near] = self._lookup(d[near], nx[near], ny[near])
+        return out
+
+    def _lookup(self, d: NDArray[np.float64], nx: NDArray[np.float64], ny: NDArray[np.float64]) -> NDArray[np.float64]:
         q = np.minimum(np.abs(nx), np.abs(ny)) * (self.Q_STEPS / math.sqrt(0.5))
         fd = (np.clip(d, self.d0, -self.d0) - self.d0) / self.STEP
         iq = np.minimum(q.astype(np.intp), self.Q_STEPS - 1)
@@ -829,6 +837,7 @@ class _Window:
     band: NDArray[np.bool_]
     bx: NDArray[np.float64]
     by: NDArray[np.float64]
+    own: list[NDArray[np.bool_]]  # per conic, which band pixels are within its own band
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -851,8 +860,9 @@ def _window(conics: list[_Conic], r: int, width: int, height: int) -> _Window | 
         return None
     xs = np.arange(x0, x1, dtype=np.float64)
     rows = np.arange(y0, y1, dtype=np.float64)[:, None]
-    band = np.zeros((y1 - y0, x1 - x0), dtype=bool)
+    bands = []
     for c in conics:
+        band = np.zeros((y1 - y0, x1 - x0), dtype=bool)
         top, bot = c.column_roots(xs)
         for curve in (top, bot):
             lo = _sliding(curve, r, np.fmin) - r
@@ -863,8 +873,11 @@ def _window(conics: list[_Conic], r: int, width: int, height: int) -> _Window | 
         hi = _sliding(bot, r, np.fmax) + r
         thin = (_sliding(bot - top, r, np.fmin) <= 2 * r + 2) & np.isfinite(lo)
         band |= thin[None, :] & (rows >= lo[None, :]) & (rows <= hi[None, :])
-    iy, ix = np.nonzero(band)
-    return _Window(x0, x1, y0, y1, band, (ix + x0).astype(np.float64), (iy + y0).astype(np.float64))
+        bands.append(band)
+    union = np.logical_or.reduce(bands)
+    iy, ix = np.nonzero(union)
+    own = [b[union] for b in bands]
+    return _Window(x0, x1, y0, y1, union, (ix + x0).astype(np.float64), (iy + y0).astype(np.float64), own)
 
 
 def _inside(conic: _Conic, win: _Window) -> NDArray[np.float64]:
@@ -883,23 +896,36 @@ class _Boundary:
     between ``n`` and the ellipse's normal at the line's foot point; where the estimated
     difference ``|d|·(1 − cos Δθ)`` exceeds 0.001 px, or the line misses the ellipse, the exact
     orthogonal distance (:meth:`Ellipse.distance`) is used (near the tips of flat ellipses), and
-    so it is inside where the chord along the minor axis is shorter than that distance.
+    so it is inside where the chord along the minor axis is shorter than that distance. Pixels
+    farther than ``reach`` (where only the sign matters) keep the line distance.
     """
 
     TOL = 0.001
 
-    def __init__(self, conic: _Conic, win: _Window) -> None:
+    def __init__(self, conic: _Conic, win: _Window, reach: float = math.inf, index: int = 0) -> None:
         self.conic = conic
         self.win = win
+        self.inside = _inside(conic, win)
+        own = win.own[index]
+        # Band pixels of the other conics only need the sign: coverage 0 or 1.
+        inside_band = self.inside[win.band] > 0
+        self.d = np.where(inside_band, -(reach + 10.0), reach + 10.0)
+        self.nx, self.ny = np.ones(len(own)), np.zeros(len(own))
+        if own.any():
+            d, nx, ny = self._distances(win.bx[own], win.by[own], reach)
+            self.d[own], self.nx[own], self.ny[own] = d, nx, ny
+
+    def _distances(
+        self, x: NDArray[np.float64], y: NDArray[np.float64], reach: float
+    ) -> tuple[NDArray[np.float64], ...]:
+        conic = self.conic
         C = conic.C
-        x, y = win.bx, win.by
         gx = 2.0 * (C[0, 0] * x + C[0, 1] * y + C[0, 2])
         gy = 2.0 * (C[0, 1] * x + C[1, 1] * y + C[1, 2])
         gn = np.hypot(gx, gy)
         ok = gn > 1e-12
         gs = np.where(ok, gn, 1.0)
         nx, ny = gx / gs, gy / gs
-        self.nx, self.ny = nx, ny
         q = conic.value(x, y)
         hnn = 2.0 * (C[0, 0] * nx * nx + 2.0 * C[0, 1] * nx * ny + C[1, 1] * ny * ny)
         disc = gs * gs - 2.0 * hnn * q
@@ -911,7 +937,9 @@ class _Boundary:
         fgx = C[0, 0] * fx + C[0, 1] * fy + C[0, 2]
         fgy = C[0, 1] * fx + C[1, 1] * fy + C[1, 2]
         cos = (fgx * nx + fgy * ny) / np.maximum(np.hypot(fgx, fgy), 1e-300)
-        exact = ~ok | (np.abs(d) * (1.0 - cos) > self.TOL)
+        err = np.abs(d) * (1.0 - cos)
+        # Beyond `reach` only the sign matters (coverage is exactly 0 or 1 there).
+        exact = ~ok | ((err > self.TOL) & (np.abs(d) - 10.0 * err < reach))
         # Inside a flat ellipse near its major axis the gradient line runs to the tip, another
         # stationary point of the distance: the chord along the minor axis is shorter there.
         e = conic.ellipse
@@ -919,11 +947,10 @@ class _Boundary:
         gu = gx * ux + gy * uy
         cu = C[0, 0] * ux * ux + 2.0 * C[0, 1] * ux * uy + C[1, 1] * uy * uy
         chord = (np.sqrt(np.maximum(gu * gu - 4.0 * cu * q, 0.0)) - np.abs(gu)) / (2.0 * cu)
-        exact |= (q < 0) & (chord < np.abs(d) - self.TOL)
+        exact |= (q < 0) & (chord < np.abs(d) - self.TOL) & (chord < reach)
         if exact.any():
             d[exact] = conic.ellipse.distance(np.column_stack([x[exact], y[exact]]))
-        self.d = d
-        self.inside = _inside(conic, win)
+        return d, nx, ny
 
 
 def _fill(win: _Window, base: NDArray[np.float64], band_values: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -1227,7 +1254,8 @@ def _paint_wafer(img: NDArray[np.float64], w: _Wafer, p: SceneParams, layout: _L
     win = _window(conics, r, p.width, p.height)
     if win is None:
         return
-    bounds = [_Boundary(c, win) for c in conics]
+    reach = _coverage_table(sigma).reach + extra
+    bounds = [_Boundary(c, win, reach, i) for i, c in enumerate(conics)]
     cam, far = bounds[0], bounds[1]
     c_s = _region([cam, far], sigma)
     c_f = _region([cam], sigma)
