@@ -301,3 +301,45 @@ def test_band_distances_match_orthogonal_distance() -> None:
         assert np.max(np.abs(b.d - exact)) < 0.005
         near = np.abs(exact) < 3.0
         assert np.max(np.abs(b.d - exact)[near]) < 0.0025
+
+
+def test_scenes_command_writes_pgm_and_truth(tmp_path: object) -> None:
+    import json
+    import pathlib
+
+    from autoteach.cli import main
+
+    out = pathlib.Path(str(tmp_path))
+    assert main(["scenes", "--family", "dark_face", "--seed", "3", "--out", str(out), "--quiet"]) == 0
+    raw = (out / "dark_face_3.pgm").read_bytes()
+    header = b"P5\n1280 720\n255\n"
+    assert raw.startswith(header) and len(raw) == len(header) + 1280 * 720
+    truth = json.loads((out / "dark_face_3.json").read_text())
+    scene = render_carrier_image("dark_face", 3)
+    assert np.array_equal(np.frombuffer(raw[len(header) :], np.uint8).reshape(720, 1280), scene.image)
+    w = next(w for w in scene.wafers if w.present)
+    assert truth["wafers"][0]["upper"]["ellipse"] == w.upper.ellipse.as_array().tolist()
+
+
+def test_jpeg_like_matches_opencv_closely() -> None:
+    """The JPEG-like step against OpenCV's real JPEG codec at the same quality (same luminance table)."""
+    import cv2
+
+    from autoteach.sim.appearance import jpeg_like
+
+    img = render_carrier_image("bright_face", 6).image
+    for q in (50, 90):
+        ours = jpeg_like(img, q).astype(int)
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, q])
+        ref = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE).astype(int)
+        assert np.mean(np.abs(ours - ref)) < 0.5
+        assert np.mean(np.abs(ours - img.astype(int))) > 0.1  # it does change the image
+
+
+def test_tilted_wafers_truth_on_projected_circle() -> None:
+    s = render_carrier_image("bright_face", 12, tilt_sigma=0.01, shift_sigma=0.002)
+    for w in s.wafers:
+        if w.present:
+            assert abs(np.linalg.norm(w.normal) - 1) < 1e-12 and w.normal[2] < 1 - 1e-6
+            for r in (w.upper, w.lower):
+                assert np.max(np.abs(r.ellipse.distance(r.points))) < 1e-6

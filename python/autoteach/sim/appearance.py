@@ -82,6 +82,7 @@ __all__ = [
     "default_pose",
     "draw_params",
     "edge_coverage",
+    "jpeg_like",
     "look_at_pose",
     "render_carrier_image",
     "render_scene",
@@ -170,7 +171,12 @@ class SceneParams:
         blobs: Number of specular blobs.
         carrier_lines: Number of vertical carrier lines in front of the stack.
         occluders: Number of opaque occluders (discs, blade-like bars) in front of the stack.
+        tilt_sigma: Standard deviation of each wafer's tilt about the world ``x`` and ``y`` axes
+            (radians; a wafer resting unevenly in its slot).
+        shift_sigma: Standard deviation of each wafer's horizontal offset from the stack axis (m).
         blur_sigma: Optical Gaussian PSF σ (pixels), applied with the unit pixel aperture.
+        jpeg_quality: JPEG-like compression of the 8-bit image (8×8 DCT blocks, the standard
+            luminance table scaled to this quality, 1–100; 0: none).
         gamma: Camera response exponent (``out = 255·(E/255)^gamma``).
         vignetting: Relative darkening at the image corners.
         gradient: Uneven light: relative gain slope across the image ``(x, y)``.
@@ -209,7 +215,10 @@ class SceneParams:
     blobs: int = 0
     carrier_lines: int = 0
     occluders: int = 0
+    tilt_sigma: float = 0.0
+    shift_sigma: float = 0.0
     blur_sigma: float = 0.7
+    jpeg_quality: int = 0
     gamma: float = 1.0
     vignetting: float = 0.05
     gradient: tuple[float, float] = (0.0, 0.0)
@@ -275,6 +284,8 @@ class WaferTruth:
         present: A wafer is in the slot.
         upper: Its upper rim, or ``None`` for an empty slot.
         lower: Its lower rim, or ``None`` for an empty slot.
+        centre: The wafer's centre (world, m), ``None`` for an empty slot.
+        normal: Its unit normal (world; the upper rim is at ``centre + t/2·normal``).
 
     """
 
@@ -282,6 +293,8 @@ class WaferTruth:
     present: bool
     upper: RimTruth | None
     lower: RimTruth | None
+    centre: NDArray[np.float64] | None = None
+    normal: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True)
@@ -365,6 +378,8 @@ def _validate(p: SceneParams) -> None:
         "line_width": (0.05, 20.0),
         "reflection": (0.0, 1.0),
         "blur_sigma": (0.0, 20.0),
+        "tilt_sigma": (0.0, 0.1),
+        "shift_sigma": (0.0, 0.05),
         "gamma": (0.05, 20.0),
         "vignetting": (0.0, 0.95),
         "light_spot": (-0.9, 5.0),
@@ -380,7 +395,7 @@ def _validate(p: SceneParams) -> None:
             raise InvalidInputError(f"{name} must be a real number, got {v!r}")
         if not (math.isfinite(float(v)) and lo <= float(v) <= hi):
             raise InvalidInputError(f"{name} must be finite and in [{lo}, {hi}], got {v!r}")
-    for name in ("blobs", "carrier_lines", "occluders"):
+    for name in ("blobs", "carrier_lines", "occluders", "jpeg_quality"):
         _check_int(getattr(p, name), name, 0, 100)
     _check_int(p.width, "width", 16, 8192)
     _check_int(p.height, "height", 16, 8192)
@@ -436,6 +451,8 @@ def _base(rng: np.random.Generator, family: str) -> dict[str, Any]:
         "face_texture": float(rng.uniform(0.0, 0.1)),
         "background_texture": float(rng.uniform(0.0, 0.15)),
         "blur_sigma": float(rng.uniform(0.4, 1.0)),
+        "tilt_sigma": math.radians(float(rng.uniform(0.0, 0.2))),
+        "shift_sigma": float(rng.uniform(0.0, 0.001)),
         "gamma": float(rng.uniform(0.9, 1.1)),
         "vignetting": float(rng.uniform(0.0, 0.15)),
         "gradient": (float(rng.uniform(-0.1, 0.1)), float(rng.uniform(-0.1, 0.1))),
@@ -519,6 +536,7 @@ def _family(rng: np.random.Generator, family: str) -> dict[str, Any]:
             blur_sigma=float(rng.uniform(0.5, 2.0)),
             noise_sigma=float(rng.uniform(2.0, 8.0)),
             shot_noise=float(rng.uniform(0.0, 0.1)),
+            jpeg_quality=int(rng.integers(40, 96)) if rng.random() < 0.5 else 0,
         )
         return out
     if family == "elevation":
@@ -1024,6 +1042,8 @@ class _Wafer:
 
     slot: int
     z: float
+    centre: NDArray[np.float64]
+    normal: NDArray[np.float64]
     upper: Ellipse
     lower: Ellipse
     camera_above: bool
@@ -1053,10 +1073,22 @@ class _Layout:
     blobs: list[tuple[float, float, float, float]]  # u, v, sigma (px), amplitude
     spot: tuple[float, float, float]  # u, v, sigma (px)
     plate_gap: float  # gap to the carrier's top plate (m), mirrored in the top wafer
+    tilts: NDArray[np.float64]  # per slot (rx, ry) in units of tilt_sigma
+    shifts: NDArray[np.float64]  # per slot (dx, dy) in units of shift_sigma
 
 
-def _circle_image(K: NDArray[np.float64], T_cw: NDArray[np.float64], p: SceneParams, z: float) -> Ellipse:
-    return project_circle(K, T_cw, [0.0, 0.0, z], [0.0, 0.0, 1.0], p.wafer_radius)
+def _circle_image(
+    K: NDArray[np.float64], T_cw: NDArray[np.float64], p: SceneParams, centre: NDArray[np.float64], normal: Any
+) -> Ellipse:
+    return project_circle(K, T_cw, centre, normal, p.wafer_radius)
+
+
+def _wafer_frame(p: SceneParams, layout: _Layout, slot: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Centre and unit normal of the wafer in ``slot``: slot height, tilt ``Ry·Rx``, horizontal offset."""
+    rx, ry = layout.tilts[slot - 1] * p.tilt_sigma
+    dx, dy = layout.shifts[slot - 1] * p.shift_sigma
+    normal = np.array([math.sin(ry) * math.cos(rx), -math.sin(rx), math.cos(ry) * math.cos(rx)])
+    return np.array([dx, dy, (slot - 1) * p.slot_pitch]), normal
 
 
 def _project(K: NDArray[np.float64], T_cw: NDArray[np.float64], X: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -1073,9 +1105,11 @@ def _wafers(p: SceneParams, K: NDArray[np.float64], T_wc: NDArray[np.float64], l
     for slot, here in zip(p.slots, p.present, strict=True):
         if not here:
             continue
-        z = (slot - 1) * p.slot_pitch
-        if abs(zc - z) <= h:
-            raise DegenerateGeometryError(f"the camera (z = {zc:.4f} m) is inside wafer {slot}'s edge face")
+        centre, normal = _wafer_frame(p, layout, slot)
+        z = float(centre[2])
+        height = float(np.dot(T_wc[:3, 3] - centre, normal))
+        if abs(height) <= h:
+            raise DegenerateGeometryError(f"the camera (z = {zc:.4f} m) is in the plane of wafer {slot}'s edge face")
         side = p.side * float(layout.side_gain[slot - 1])
         if p.mixed_polarity and layout.side_gain[slot - 1] < 1.0:
             side = max(2.0 * p.background - p.side, 0.0)
@@ -1083,12 +1117,14 @@ def _wafers(p: SceneParams, K: NDArray[np.float64], T_wc: NDArray[np.float64], l
             _Wafer(
                 slot=slot,
                 z=z,
-                upper=_circle_image(K, T_cw, p, z + h),
-                lower=_circle_image(K, T_cw, p, z - h),
-                camera_above=zc > z,
+                centre=centre,
+                normal=normal,
+                upper=_circle_image(K, T_cw, p, centre + h * normal, normal),
+                lower=_circle_image(K, T_cw, p, centre - h * normal, normal),
+                camera_above=height > 0,
                 side=side,
                 face=p.face,
-                order=abs(zc - z),
+                order=abs(height),
             )
         )
     if p.reflection > 0:
@@ -1107,7 +1143,9 @@ def _wafers(p: SceneParams, K: NDArray[np.float64], T_wc: NDArray[np.float64], l
                 gap = (plane - (below[-1] + h)) if below else layout.plate_gap
                 zs = (plane + gap, plane + gap + p.wafer_thickness)
             try:
-                w.virtual = (_circle_image(K, T_cw, p, zs[0]), _circle_image(K, T_cw, p, zs[1]))
+                c0 = w.centre + (zs[0] - w.z) * w.normal
+                c1 = w.centre + (zs[1] - w.z) * w.normal
+                w.virtual = (_circle_image(K, T_cw, p, c0, w.normal), _circle_image(K, T_cw, p, c1, w.normal))
             except DegenerateGeometryError:
                 w.virtual = None
     return sorted(out, key=lambda w: -w.order)
@@ -1148,7 +1186,10 @@ def _draw_layout(p: SceneParams, rng: np.random.Generator) -> _Layout:
         for _ in range(p.blobs)
     ]
     spot = (float(rng.uniform(0, p.width)), float(rng.uniform(0, p.height)), float(rng.uniform(150, 400)))
-    return _Layout(background, face, gain, posts, occluders, blobs, spot, float(rng.uniform(0.005, 0.020)))
+    plate = float(rng.uniform(0.005, 0.020))
+    tilts = rng.standard_normal((MAX_SLOTS, 2))
+    shifts = rng.standard_normal((MAX_SLOTS, 2))
+    return _Layout(background, face, gain, posts, occluders, blobs, spot, plate, tilts, shifts)
 
 
 def _front_point(wafers: list[_Wafer], fu: float, fv: float, p: SceneParams) -> tuple[float, float]:
@@ -1369,6 +1410,48 @@ def _camera_response(
     return np.rint(e, out=e).astype(np.uint8)
 
 
+_JPEG_LUMA = np.array(
+    [
+        [16, 11, 10, 16, 24, 40, 51, 61],
+        [12, 12, 14, 19, 26, 58, 60, 55],
+        [14, 13, 16, 24, 40, 57, 69, 56],
+        [14, 17, 22, 29, 51, 87, 80, 62],
+        [18, 22, 37, 56, 68, 109, 103, 77],
+        [24, 35, 55, 64, 81, 104, 113, 92],
+        [49, 64, 78, 87, 103, 121, 120, 101],
+        [72, 92, 95, 98, 112, 100, 103, 99],
+    ],
+    dtype=np.float64,
+)
+
+
+def _dct_matrix() -> NDArray[np.float64]:
+    k = np.arange(8)
+    d = np.cos(np.pi * (2 * k[None, :] + 1) * k[:, None] / 16.0) * math.sqrt(2.0 / 8.0)
+    d[0] /= math.sqrt(2.0)
+    return d
+
+
+def jpeg_like(image: NDArray[np.uint8], quality: int) -> NDArray[np.uint8]:
+    """Baseline-JPEG-like luminance compression: 8×8 orthonormal DCT, the standard table scaled to ``quality``.
+
+    The IJG scaling (``5000/q`` below 50, ``200 − 2q`` above), coefficients rounded to multiples
+    of the table, inverse DCT, rounding and clipping; no chroma, no entropy coding (lossless).
+    """
+    q = _check_int(quality, "quality", 1, 100)
+    scale = 5000.0 / q if q < 50 else 200.0 - 2.0 * q
+    table = np.maximum(np.floor((_JPEG_LUMA * scale + 50.0) / 100.0), 1.0)
+    h, w = image.shape
+    ph, pw = -h % 8, -w % 8
+    x = np.pad(image.astype(np.float64), ((0, ph), (0, pw)), mode="edge") - 128.0
+    blocks = x.reshape((h + ph) // 8, 8, (w + pw) // 8, 8)
+    d = _dct_matrix()
+    coef = np.einsum("ij,ajbk,lk->aibl", d, blocks, d, optimize=True)
+    coef = np.rint(coef / table[None, :, None, :]) * table[None, :, None, :]
+    out = np.einsum("ji,ajbk,kl->aibl", d, coef, d, optimize=True).reshape(h + ph, w + pw)[:h, :w]
+    return np.clip(np.rint(out + 128.0), 0, 255).astype(np.uint8)
+
+
 # --------------------------------------------------------------------------------------------
 # Sharp radiance at points (truth: edge contrast) and occlusion
 # --------------------------------------------------------------------------------------------
@@ -1410,12 +1493,21 @@ def _radiance_at(
 
 
 def _rim_geometry(
-    slot: int, z: float, p: SceneParams, K: NDArray[np.float64], T_cw: NDArray[np.float64], ctx: tuple
+    slot: int,
+    centre: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    p: SceneParams,
+    K: NDArray[np.float64],
+    T_cw: NDArray[np.float64],
+    ctx: tuple,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
     """Projected samples of a rim circle, and which are in the image and which are occluded."""
     _, wafers, posts, occ = ctx
     phi = 2.0 * math.pi * np.arange(RIM_SAMPLES) / RIM_SAMPLES
-    X = np.column_stack([p.wafer_radius * np.cos(phi), p.wafer_radius * np.sin(phi), np.full_like(phi, z)])
+    u = np.cross(normal, [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    X = centre + p.wafer_radius * (np.outer(np.cos(phi), u) + np.outer(np.sin(phi), v))
     pts = _project(K, T_cw, X)
     x, y = pts[:, 0], pts[:, 1]
     in_image = (x >= 1.0) & (x <= p.width - 2.0) & (y >= 1.0) & (y <= p.height - 2.0)
@@ -1498,14 +1590,16 @@ def render_scene(
     radiance = _render_radiance(params, layout, wafers, posts, occ, blobs)
     noise_rng = np.random.default_rng(np.random.SeedSequence([seed, frame, 0x5EED]))
     image = _camera_response(radiance, params, layout, noise_rng)
+    if params.jpeg_quality:
+        image = jpeg_like(image, params.jpeg_quality)
     T_cw = _inverse(T)
     ctx = (layout, wafers, posts, occ)
     by_slot = {w.slot: w for w in wafers}
     h = 0.5 * params.wafer_thickness
     geo = {}
     for w in wafers:
-        for kind, z, e in (("upper", w.z + h, w.upper), ("lower", w.z - h, w.lower)):
-            geo[(w.slot, kind)] = (e, *_rim_geometry(w.slot, z, params, K, T_cw, ctx))
+        for kind, c, e in (("upper", w.centre + h * w.normal, w.upper), ("lower", w.centre - h * w.normal, w.lower)):
+            geo[(w.slot, kind)] = (e, *_rim_geometry(w.slot, c, w.normal, params, K, T_cw, ctx))
     keys = list(geo)
     contrast = dict(zip(keys, _edge_contrast([(geo[k][0], geo[k][1]) for k in keys], params, ctx), strict=True))
     truth = []
@@ -1533,7 +1627,9 @@ def render_scene(
                     camera_side=(kind == "upper") == w.camera_above,
                 )
             )
-        truth.append(WaferTruth(slot=slot, present=True, upper=rims[0], lower=rims[1]))
+        truth.append(
+            WaferTruth(slot=slot, present=True, upper=rims[0], lower=rims[1], centre=w.centre, normal=w.normal)
+        )
     return CarrierScene(image=image, K=K, T_wc=T, params=params, wafers=truth, seed=seed)
 
 
