@@ -1362,20 +1362,21 @@ def _paint_blobs(img: NDArray[np.float64], blobs: list[tuple[float, float, float
         img[y0:y1, x0:x1] += amp * np.outer(gy, gx)
 
 
-def _gain(p: SceneParams, layout: _Layout) -> NDArray[np.float64] | None:
+def _gain(p: SceneParams, layout: _Layout) -> NDArray[np.float32] | None:
     """Illumination gain: vignetting, a linear gradient and a broad spot (``None``: uniform)."""
     if p.vignetting == 0 and p.gradient == (0.0, 0.0) and p.light_spot == 0:
         return None
-    xh = (np.arange(p.width) - 0.5 * p.width) / (0.5 * p.width)
-    yh = (np.arange(p.height) - 0.5 * p.height) / (0.5 * p.height)
-    g = 1.0 - p.vignetting * 0.5 * (yh[:, None] ** 2 + xh[None, :] ** 2)
-    g = g * (1.0 + p.gradient[0] * xh[None, :] + p.gradient[1] * yh[:, None])
+    f32 = np.float32
+    xh = ((np.arange(p.width) - 0.5 * p.width) / (0.5 * p.width)).astype(f32)
+    yh = ((np.arange(p.height) - 0.5 * p.height) / (0.5 * p.height)).astype(f32)
+    g = (f32(1.0) - f32(0.5 * p.vignetting) * yh * yh)[:, None] - (f32(0.5 * p.vignetting) * xh * xh)[None, :]
+    g *= (f32(1.0) + f32(p.gradient[1]) * yh)[:, None] + (f32(p.gradient[0]) * xh)[None, :]
     if p.light_spot:
         su, sv, ss = layout.spot
-        gx = np.exp(-0.5 * ((np.arange(p.width) - su) / ss) ** 2)
-        gy = np.exp(-0.5 * ((np.arange(p.height) - sv) / ss) ** 2)
-        g = g * (1.0 + p.light_spot * np.outer(gy, gx))
-    return np.maximum(g, 0.05).astype(np.float32)
+        gx = np.exp(-0.5 * ((np.arange(p.width) - su) / ss) ** 2).astype(f32)
+        gy = np.exp(-0.5 * ((np.arange(p.height) - sv) / ss) ** 2).astype(f32)
+        g *= f32(1.0) + f32(p.light_spot) * np.outer(gy, gx)
+    return np.maximum(g, f32(0.05), out=g)
 
 
 def _render_radiance(
@@ -1399,13 +1400,17 @@ def _camera_response(
     e = radiance.astype(np.float32)
     g = _gain(p, layout)
     if g is not None:
-        e = e * g
-    e = np.maximum(e, 0.0)
+        e *= g
+    np.maximum(e, 0.0, out=e)
     if p.gamma != 1.0:
-        e = np.float32(255.0) * (e * np.float32(1.0 / 255.0)) ** np.float32(p.gamma)
+        e *= np.float32(1.0 / 255.0)
+        np.power(e, np.float32(p.gamma), out=e)
+        e *= np.float32(255.0)
     if p.noise_sigma > 0 or p.shot_noise > 0:
         sd = np.sqrt(p.noise_sigma**2 + p.shot_noise * np.minimum(e, 255.0)) if p.shot_noise > 0 else p.noise_sigma
-        e = e + sd * rng.standard_normal(e.shape, dtype=np.float32)
+        noise = rng.standard_normal(e.shape, dtype=np.float32)
+        noise *= sd
+        e += noise
     np.clip(e, 0.0, 255.0, out=e)
     return np.rint(e, out=e).astype(np.uint8)
 
@@ -1474,7 +1479,9 @@ def _radiance_at(
         in_f = cam.value(x, y) < 0
         in_s = in_f | (far.value(x, y) < 0)
         side = _side_radiance(w, p, x, y)
-        face = _face_radiance(p, layout, x, y)
+        face = np.full(len(x), p.face)
+        if p.face_texture and in_f.any():
+            face[in_f] = _face_radiance(p, layout, x[in_f], y[in_f])
         new = np.where(in_f, face, np.where(in_s, side, val))
         if w.virtual is not None:
             v0, v1 = _Conic(w.virtual[0]), _Conic(w.virtual[1])
