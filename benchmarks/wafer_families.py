@@ -16,7 +16,7 @@ size, intrinsics, wafer radius, camera poses), CLEAR-MOT (MOTA, identity switche
 registered in each frame against the wafers with a visible rim.
 
 Run: ``python benchmarks/wafer_families.py [--images N] [--families a,b] [--detectors wafers,ellipses]
-[--sweep-frames 40] [--json]``. Times are single-threaded when ``RAYON_NUM_THREADS=1``.
+[--sweep-frames 40] [--json] [--out FILE]``. Times are single-threaded when ``RAYON_NUM_THREADS=1``.
 """
 
 from __future__ import annotations
@@ -98,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sweep-frames", type=int, default=40, help="frames of the tracking sweep (0: skip)")
     ap.add_argument("--seed", type=int, default=1000, help="first seed (default 1000)")
     ap.add_argument("--json", action="store_true", help="print JSON")
+    ap.add_argument("--out", default=None, help="also write the JSON here, updated after every family")
     args = ap.parse_args(argv)
     families = [f for f in args.families.split(",") if f]
     unknown = [f for f in families if f not in FAMILIES]
@@ -113,8 +114,10 @@ def main(argv: list[str] | None = None) -> int:
             first = next(iter(dets))
             r["tracking"] = {"detector": first, **run_sweep(family, args.sweep_frames, args.seed, dets[first])}
         results[family] = r
-        if not args.json:
-            print(f"{family} ({args.images} images, render {r['median_render_ms']:.0f} ms)", file=sys.stderr)
+        if args.out:
+            with open(args.out, "w") as fh:
+                json.dump(results, fh, indent=1, default=float)
+        print(f"{family} ({args.images} images, render {r['median_render_ms']:.0f} ms)", file=sys.stderr, flush=True)
     if args.json:
         print(json.dumps(results, indent=1, default=float))
         return 0
