@@ -24,9 +24,10 @@ API (stable):
 
 A :class:`CarrierScene` holds ``image`` (uint8, ``(720, 1280)``), ``K`` (3×3), ``T_wc``
 (camera-to-world, 4×4; the world frame has the stack axis along ``z`` through the origin, slot
-``k``'s mid-plane at ``z = (k − 1)·pitch``), the :class:`SceneParams` and ``wafers``: one
-:class:`WaferTruth` per slot with ``slot``, ``present``, the ``upper`` and ``lower``
-:class:`RimTruth` (``None`` for an empty slot). A :class:`RimTruth` has the exact ``ellipse``,
+``k``'s mid-plane at ``z = (k − 1)·pitch``, each wafer slightly tilted and offset), the
+:class:`SceneParams` and ``wafers``: one :class:`WaferTruth` per slot with ``slot``, ``present``,
+the ``upper`` and ``lower`` :class:`RimTruth` (``None`` for an empty slot) and the wafer's
+``centre`` and ``normal``. A :class:`RimTruth` has the exact ``ellipse``,
 its ``kind``, sampled ``points`` (the rim circle at :data:`RIM_SAMPLES` angles, projected) with
 per-sample flags ``in_image``, ``occluded`` and ``edge`` (an image edge of at least
 :data:`MIN_EDGE_CONTRAST` grey levels there), ``visible_fraction`` (fraction of samples that are
