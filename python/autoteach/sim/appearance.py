@@ -309,6 +309,7 @@ class CarrierScene:
         params: The scene parameters.
         wafers: One :class:`WaferTruth` per slot, bottom first.
         seed: The seed of the scene's random streams.
+        extra: Free-form metadata for callers (empty when generated).
 
     """
 
