@@ -266,14 +266,34 @@ def test_mot_frames_known_answer() -> None:
 
 
 def test_detect_wafers_on_an_easy_image() -> None:
-    """The current detector on one clean bright-face image: its matches are real (centre < 1 px)."""
+    """The current detector on one clean bright-face image, scored two ways that must agree.
+
+    The rims of the scene are more than 2 px apart and the match gate is 1 px, so each detection
+    can match at most one rim: a brute-force count of detections within the gates of a visible
+    rim equals the one-to-one assignment's count.
+    """
     from autoteach.detect import detect_wafers
 
     scene = render_carrier_image("bright_face", 2, wafers=3, noise_sigma=1.0)
     dets = detect_wafers(scene.image)
     s = score_frame(dets, scene)
-    assert s.found >= 1
-    assert all(e <= 1.0 for e in s.centre_errors)
+    rims = scene.rims
+    centres = np.array([[r.ellipse.cx, r.ellipse.cy] for r in rims])
+    assert min(np.hypot(*(a - b)) for i, a in enumerate(centres) for b in centres[i + 1 :]) > 2.0
+    hits = set()
+    for d in dets:
+        e = d.ellipse
+        for j, r in enumerate(rims):
+            t = r.ellipse
+            if (
+                math.hypot(e.cx - t.cx, e.cy - t.cy) <= 1.0
+                and abs(e.a / t.a - 1) <= 0.015
+                and abs(e.b / t.b - 1) <= 0.015
+                and r.visible
+            ):
+                hits.add(j)
+    assert s.found == len(hits) >= 2
+    assert s.visible == sum(r.visible for r in rims) and s.detections == len(dets)
 
 
 @pytest.mark.parametrize("sigma", [0.0, 0.7, 2.0])
