@@ -265,16 +265,46 @@ fn detect_on_pool<T: Pixel>(
                 .then_some(det)
         })
         .collect();
-    if let Some(width) = params.max_line_width {
-        found = lines::pair_line_edges(found, width);
-    }
+    sort_by_score(&mut found);
+    let found = drop_duplicates(found, assembly.residual_threshold);
+    let mut found = match params.max_line_width {
+        Some(width) => lines::pair_line_edges(found, width),
+        None => found,
+    };
+    sort_by_score(&mut found);
+    Ok(found)
+}
+
+/// Sorts by decreasing score (ties by centre, so the order is deterministic).
+fn sort_by_score(found: &mut [EllipseDetection]) {
     found.sort_by(|p, q| {
         q.score
             .total_cmp(&p.score)
             .then(p.ellipse.cx.total_cmp(&q.ellipse.cx))
             .then(p.ellipse.cy.total_cmp(&q.ellipse.cy))
     });
-    Ok(found)
+}
+
+/// Two segments of one ellipse that Algorithm 2 left apart (their union failed the overlap
+/// rule where their arcs share pixels) are one detection: a detection whose points lie, on
+/// average, within the combination threshold of a higher-scored detection's ellipse of the
+/// same polarity is dropped. `found` is sorted by decreasing score.
+fn drop_duplicates(found: Vec<EllipseDetection>, threshold: f64) -> Vec<EllipseDetection> {
+    let mut kept: Vec<EllipseDetection> = Vec::with_capacity(found.len());
+    for d in found {
+        let duplicate = kept.iter().any(|k| {
+            k.polarity == d.polarity && {
+                let n = d.points.len().max(1) as f64;
+                let mean: f64 =
+                    d.points.iter().map(|p| k.ellipse.sampson_distance(p)).sum::<f64>() / n;
+                mean <= threshold
+            }
+        });
+        if !duplicate {
+            kept.push(d);
+        }
+    }
+    kept
 }
 
 /// The a-contrario test of one segment: its detection with the score, or `None` when the
