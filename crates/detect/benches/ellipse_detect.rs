@@ -50,8 +50,14 @@ fn synthetic() -> (Vec<u8>, usize, usize) {
     let mut img = vec![120f64; w * h];
     for &(cx, cy, a, b, t, grey) in &ellipses {
         let (s, c) = f64::sin_cos(t);
-        let (x0, x1) = ((cx - a - 2.0).max(0.0) as usize, ((cx + a + 2.0) as usize).min(w - 1));
-        let (y0, y1) = ((cy - a - 2.0).max(0.0) as usize, ((cy + a + 2.0) as usize).min(h - 1));
+        let (x0, x1) = (
+            (cx - a - 2.0).max(0.0) as usize,
+            ((cx + a + 2.0) as usize).min(w - 1),
+        );
+        let (y0, y1) = (
+            (cy - a - 2.0).max(0.0) as usize,
+            ((cy + a + 2.0) as usize).min(h - 1),
+        );
         for y in y0..=y1 {
             for x in x0..=x1 {
                 let mut inside = 0.0;

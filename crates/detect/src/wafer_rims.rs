@@ -74,12 +74,22 @@ impl Default for WaferGeometry {
 
 impl WaferGeometry {
     fn validate(&self) -> Result<Vector2<f64>> {
-        let bad = |what, value, reason| Err(DetectError::InvalidParameter { what, value, reason });
+        let bad = |what, value, reason| {
+            Err(DetectError::InvalidParameter {
+                what,
+                value,
+                reason,
+            })
+        };
         if !(self.radius > 0.0 && self.radius.is_finite()) {
             return bad("radius", self.radius, "must be finite and positive");
         }
         if !(self.thickness > 0.0 && self.thickness < self.radius) {
-            return bad("thickness", self.thickness, "must be positive and under the radius");
+            return bad(
+                "thickness",
+                self.thickness,
+                "must be positive and under the radius",
+            );
         }
         let up = Vector2::new(self.up[0], self.up[1]);
         let n = up.norm();

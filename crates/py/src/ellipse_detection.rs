@@ -5,9 +5,7 @@
 //! wraps the detections; the friendly front is `autoteach.detect.detect_ellipses`.
 
 use autoteach_detect::edges::{GrayView, Pixel};
-use autoteach_detect::ellipse_detection::{
-    EllipseDetectParams, EllipseDetection, detect_ellipses,
-};
+use autoteach_detect::ellipse_detection::{EllipseDetectParams, EllipseDetection, detect_ellipses};
 use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
@@ -256,7 +254,10 @@ fn wafer_rims_detect(
     } else {
         return Err(bad_dtype(image));
     };
-    Ok(rims.into_iter().map(|inner| PyWaferEdge { inner }).collect())
+    Ok(rims
+        .into_iter()
+        .map(|inner| PyWaferEdge { inner })
+        .collect())
 }
 
 /// The error for an unsupported dtype.

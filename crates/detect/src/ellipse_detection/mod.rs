@@ -131,7 +131,13 @@ impl Default for EllipseDetectParams {
 
 impl EllipseDetectParams {
     fn validate(&self) -> Result<()> {
-        let bad = |what, value, reason| Err(DetectError::InvalidParameter { what, value, reason });
+        let bad = |what, value, reason| {
+            Err(DetectError::InvalidParameter {
+                what,
+                value,
+                reason,
+            })
+        };
         if self.min_arc_points < 5 {
             return bad(
                 "min_arc_points",
@@ -140,7 +146,11 @@ impl EllipseDetectParams {
             );
         }
         if !(self.min_semi_minor >= 0.0 && self.min_semi_minor.is_finite()) {
-            return bad("min_semi_minor", self.min_semi_minor, "must be finite and >= 0");
+            return bad(
+                "min_semi_minor",
+                self.min_semi_minor,
+                "must be finite and >= 0",
+            );
         }
         for (what, v) in [
             ("max_semi_major", self.max_semi_major),
@@ -295,8 +305,12 @@ fn drop_duplicates(found: Vec<EllipseDetection>, threshold: f64) -> Vec<EllipseD
         let duplicate = kept.iter().any(|k| {
             k.polarity == d.polarity && {
                 let n = d.points.len().max(1) as f64;
-                let mean: f64 =
-                    d.points.iter().map(|p| k.ellipse.sampson_distance(p)).sum::<f64>() / n;
+                let mean: f64 = d
+                    .points
+                    .iter()
+                    .map(|p| k.ellipse.sampson_distance(p))
+                    .sum::<f64>()
+                    / n;
                 mean <= threshold
             }
         });

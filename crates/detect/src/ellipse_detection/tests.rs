@@ -70,7 +70,9 @@ fn add_noise(img: &mut [f32], sigma: f64, seed: u64) {
 }
 
 fn to_u8(img: &[f32]) -> Vec<u8> {
-    img.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect()
+    img.iter()
+        .map(|v| v.round().clamp(0.0, 255.0) as u8)
+        .collect()
 }
 
 fn detect(img: &[u8], w: usize, h: usize, params: &EllipseDetectParams) -> Vec<EllipseDetection> {
