@@ -429,3 +429,15 @@ def detect_wafers(
         )
         for e in edges
     ]
+
+
+# --- general ellipse detection (issue 42) ---
+from autoteach.ellipse_detection import (  # noqa: E402
+    EllipseDetection,
+    EllipseDetectOptions,
+    WaferGeometry,
+    detect_ellipses,
+    detect_wafer_rims,
+)
+
+__all__ += ["EllipseDetectOptions", "EllipseDetection", "WaferGeometry", "detect_ellipses", "detect_wafer_rims"]

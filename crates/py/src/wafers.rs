@@ -19,7 +19,7 @@ use crate::geometry::PyEllipse;
 /// One detected wafer rim (`autoteach._core.WaferEdge`); see `autoteach.detect.WaferEdge`.
 #[pyclass(name = "WaferEdge", module = "autoteach._core", frozen)]
 pub struct PyWaferEdge {
-    inner: WaferEdge,
+    pub(crate) inner: WaferEdge,
 }
 
 #[pymethods]
