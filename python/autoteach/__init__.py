@@ -7,6 +7,7 @@ Submodules (each imported on first access, so ``import autoteach`` stays cheap a
 - :mod:`autoteach.sim` -- the simulated wafer-handling robot and carrier (sessions with ground truth).
 - :mod:`autoteach.io` -- MCAP session logs (write and read).
 - :mod:`autoteach.detect` -- wafer-rim detection, ellipse fitting, CPD, global voting, polygon detection.
+- :mod:`autoteach.ellipse_detection` -- the general a-contrario elliptic-arc detector (also in ``detect``).
 - :mod:`autoteach.track` -- multi-wafer tracking (hierarchical GMM association, track management).
 - :mod:`autoteach.estimate` -- unscented Kalman filter and sparse nonlinear least squares.
 - :mod:`autoteach.pipeline` -- auto-teaching end to end: :func:`autoteach` (UKF + SLAM-MOT).
@@ -42,6 +43,7 @@ if TYPE_CHECKING:
         calib,
         cli,
         detect,
+        ellipse_detection,
         estimate,
         geometry,
         io,
@@ -60,6 +62,7 @@ SUBMODULES = (
     "calib",
     "cli",
     "detect",
+    "ellipse_detection",
     "estimate",
     "geometry",
     "io",
@@ -89,6 +92,7 @@ __all__ = [
     "calib",
     "cli",
     "detect",
+    "ellipse_detection",
     "estimate",
     "geometry",
     "io",

@@ -457,7 +457,10 @@ def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, 
     if images.ndim != 3 or images.shape[0] == 0:
         raise InvalidInputError("the session has no images: the detection front end cannot run")
     if not images.any():
-        raise InvalidInputError(f"all {images.shape[0]} images are black (every pixel 0): nothing can be detected")
+        raise InvalidInputError(
+            f"all {images.shape[0]} images are black (every pixel 0; a session simulated with render=False "
+            "has no images): nothing can be detected"
+        )
     with ThreadPoolExecutor(max(1, int(workers))) as ex:
         it = ex.map(lambda im: detect_wafers(im, **options), images)
         return list(tqdm(it, total=len(images), desc="detecting", unit="frame", disable=not progress, leave=False))
