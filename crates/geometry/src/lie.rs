@@ -198,7 +198,7 @@ fn q_coeff3(t: f64) -> f64 {
 /// every angle, with the series of sin(θ/2)/θ near zero.
 pub fn quat_exp(w: &Vector3<f64>) -> UnitQuaternion<f64> {
     let t = w.norm();
-    if !(t <= HUGE_ANGLE) {
+    if t > HUGE_ANGLE {
         let (t, u) = angle_axis(w);
         let h = 0.5 * t;
         return UnitQuaternion::new_unchecked(Quaternion::from_parts(h.cos(), u * h.sin()));
@@ -234,7 +234,7 @@ pub fn quat_log(q: &UnitQuaternion<f64>) -> Vector3<f64> {
 /// (Solà App. B, Exp map), with series near θ = 0.
 pub fn so3_exp(w: &Vector3<f64>) -> Rotation3<f64> {
     let t = w.norm();
-    if !(t <= HUGE_ANGLE) {
+    if t > HUGE_ANGLE {
         let (t, u) = angle_axis(w);
         let ux = hat(&u);
         return Rotation3::from_matrix_unchecked(
@@ -282,7 +282,7 @@ pub fn so3_log(r: &Rotation3<f64>) -> Vector3<f64> {
 /// (Solà App. B, left Jacobian), series near zero. It is also the `V(ω)` of [`se3_exp`].
 pub fn so3_left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
     let t = w.norm();
-    if !(t <= HUGE_ANGLE) {
+    if t > HUGE_ANGLE {
         let (t, u) = angle_axis(w);
         let ux = hat(&u);
         return Matrix3::identity() + ux * ((1.0 - t.cos()) / t) + ux * ux * (1.0 - t.sin() / t);

@@ -243,7 +243,8 @@ pub fn matrix_to_rotation(
 ) -> PyResult<nalgebra::Rotation3<f64>> {
     let orth = orthonormality_defect(r);
     // Written so that NaN fails: a huge matrix overflows RᵀR to NaN, which must not pass.
-    if !(orth <= ROTATION_TOL && r.determinant() > 0.0) {
+    let is_rotation = orth <= ROTATION_TOL && r.determinant() > 0.0;
+    if !is_rotation {
         return Err(errors::invalid_input(format!(
             "{name} is not a rotation matrix (|RᵀR − I| = {orth:.3e}, det R = {:.6})",
             r.determinant()
@@ -310,7 +311,8 @@ pub fn matrix_to_isometry(
     let last_ok =
         (m[(3, 0)].abs() + m[(3, 1)].abs() + m[(3, 2)].abs() + (m[(3, 3)] - 1.0).abs()) <= 1e-9;
     // Written so that NaN fails (see `matrix_to_rotation`).
-    if !(orth <= ROTATION_TOL && r.determinant() > 0.0 && last_ok) {
+    let is_rigid = orth <= ROTATION_TOL && r.determinant() > 0.0 && last_ok;
+    if !is_rigid {
         return Err(errors::invalid_input(format!(
             "{name} is not a rigid transform (|RᵀR − I| = {orth:.3e}, det R = {:.6}, last row {:?})",
             r.determinant(),

@@ -866,7 +866,7 @@ impl PyEllipse {
         let c = matrix3(C, "C")?;
         // The core uses the symmetric part; the Python API promises to refuse an asymmetric C.
         let asym = (c - c.transpose()).norm();
-        if !(asym <= 1e-9 * c.norm()) {
+        if asym.is_nan() || asym > 1e-9 * c.norm() {
             return Err(errors::invalid_input(format!(
                 "C must be a symmetric 3×3 conic matrix, got |C − Cᵀ| = {asym:.3e} (|C| = {:.3e})",
                 c.norm()

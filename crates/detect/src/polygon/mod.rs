@@ -361,7 +361,7 @@ fn vote(refs: &[Option<Segment>], e: &[Edge], o: &PolygonOptions) -> Result<Houg
     // The size in f64, written so that NaN fails: a `usize` product of huge extents would
     // saturate, then wrap, and pass the limit.
     let total = n_rot as f64 * scales.len() as f64 * rows_f * cols_f;
-    if !(total <= 2e8) {
+    if total.is_nan() || total > 2e8 {
         return Err(DetectError::InvalidParameter {
             what: "cell",
             value: o.cell,
