@@ -37,7 +37,7 @@ fn rendered() -> (Vec<u8>, usize, usize) {
 fn synthetic() -> (Vec<u8>, usize, usize) {
     let (w, h) = (1280usize, 720usize);
     // (cx, cy, a, b, theta, grey inside)
-    let ellipses = [
+    let ellipses: [(f64, f64, f64, f64, f64, f64); 8] = [
         (200.0, 180.0, 120.0, 80.0, 0.2, 200.0),
         (520.0, 200.0, 60.0, 58.0, 0.0, 40.0),
         (860.0, 180.0, 200.0, 40.0, -0.1, 180.0),
