@@ -4,14 +4,14 @@
 //! options, runs [`autoteach_detect::ellipse_detection::detect_ellipses`] without the GIL and
 //! wraps the detections; the friendly front is `autoteach.detect.detect_ellipses`.
 
+use autoteach_detect::DetectError;
 use autoteach_detect::edges::{GrayView, Pixel};
 use autoteach_detect::ellipse_detection::{EllipseDetectParams, EllipseDetection, detect_ellipses};
-use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 use crate::convert;
-use crate::errors;
 use crate::geometry::PyEllipse;
+use crate::gray::{GrayJob, on_gray_image};
 use crate::wafers::PyWaferEdge;
 use autoteach_detect::wafer_rims::{WaferGeometry, WaferRimParams, detect_wafer_rims};
 
@@ -86,27 +86,24 @@ impl PyEllipseDetection {
     }
 }
 
-/// Runs the detector on a 2-D array of one pixel type.
-fn run<T: Pixel + numpy::Element>(
-    py: Python<'_>,
-    arr: PyReadonlyArray2<'_, T>,
-    params: &EllipseDetectParams,
-) -> PyResult<Vec<EllipseDetection>> {
-    let shape = arr.shape();
-    let (h, w) = (shape[0], shape[1]);
-    // A C-contiguous array is read in place; any other view is copied row-major first.
-    let copied: Vec<T>;
-    let data: &[T] = match arr.as_slice() {
-        Ok(slice) if arr.is_c_contiguous() => slice,
-        _ => {
-            copied = arr.as_array().iter().copied().collect();
-            &copied
-        }
-    };
-    convert::detached(py, || {
-        let view = GrayView::new(data, w, h).map_err(errors::detect)?;
-        detect_ellipses(&view, params).map_err(errors::detect)
-    })
+/// The ellipse detector as a [`GrayJob`].
+struct EllipseJob<'a>(&'a EllipseDetectParams);
+
+impl GrayJob for EllipseJob<'_> {
+    type Output = Vec<EllipseDetection>;
+    fn run<T: Pixel>(&self, view: &GrayView<'_, T>) -> Result<Self::Output, DetectError> {
+        detect_ellipses(view, self.0)
+    }
+}
+
+/// The geometric rim pairing as a [`GrayJob`].
+struct RimJob<'a>(&'a WaferRimParams);
+
+impl GrayJob for RimJob<'_> {
+    type Output = Vec<autoteach_detect::wafers::WaferEdge>;
+    fn run<T: Pixel>(&self, view: &GrayView<'_, T>) -> Result<Self::Output, DetectError> {
+        detect_wafer_rims(view, self.0)
+    }
 }
 
 /// Detects ellipses in a grayscale image `(height, width)` of dtype uint8 (0–255), uint16
@@ -139,55 +136,11 @@ fn ellipse_detect(
         max_line_width,
         gradient_noise,
     };
-    check_2d(image)?;
-    let found = if let Ok(a) = image.extract::<PyReadonlyArray2<'_, u8>>() {
-        run(py, a, &params)?
-    } else if let Ok(a) = image.extract::<PyReadonlyArray2<'_, u16>>() {
-        // 16-bit: scaled to 0–1 floats (the detector's grey scale is 0–255 either way).
-        let shape = a.shape();
-        let (h, w) = (shape[0], shape[1]);
-        let unit: Vec<f32> = a
-            .as_array()
-            .iter()
-            .map(|&v| f32::from(v) / 65535.0)
-            .collect();
-        convert::detached(py, || {
-            let view = GrayView::new(&unit, w, h).map_err(errors::detect)?;
-            detect_ellipses(&view, &params).map_err(errors::detect)
-        })?
-    } else if let Ok(a) = image.extract::<PyReadonlyArray2<'_, f32>>() {
-        run(py, a, &params)?
-    } else if let Ok(a) = image.extract::<PyReadonlyArray2<'_, f64>>() {
-        run(py, a, &params)?
-    } else {
-        return Err(bad_dtype(image));
-    };
+    let found = on_gray_image(py, image, &EllipseJob(&params), true)?;
     Ok(found
         .into_iter()
         .map(|inner| PyEllipseDetection { inner })
         .collect())
-}
-
-/// Runs [`detect_wafer_rims`] on a 2-D array of one pixel type.
-fn run_rims<T: Pixel + numpy::Element>(
-    py: Python<'_>,
-    arr: PyReadonlyArray2<'_, T>,
-    params: &WaferRimParams,
-) -> PyResult<Vec<autoteach_detect::wafers::WaferEdge>> {
-    let shape = arr.shape();
-    let (h, w) = (shape[0], shape[1]);
-    let copied: Vec<T>;
-    let data: &[T] = match arr.as_slice() {
-        Ok(slice) if arr.is_c_contiguous() => slice,
-        _ => {
-            copied = arr.as_array().iter().copied().collect();
-            &copied
-        }
-    };
-    convert::detached(py, || {
-        let view = GrayView::new(data, w, h).map_err(errors::detect)?;
-        detect_wafer_rims(&view, params).map_err(errors::detect)
-    })
 }
 
 /// Wafer rims from general ellipse detections paired by geometry (radius and thickness in
@@ -232,66 +185,11 @@ fn wafer_rims_detect(
             gradient_noise,
         },
     };
-    check_2d(image)?;
-    let rims = if let Ok(a) = image.extract::<PyReadonlyArray2<'_, u8>>() {
-        run_rims(py, a, &params)?
-    } else if let Ok(a) = image.extract::<PyReadonlyArray2<'_, u16>>() {
-        let shape = a.shape();
-        let (h, w) = (shape[0], shape[1]);
-        let unit: Vec<f32> = a
-            .as_array()
-            .iter()
-            .map(|&v| f32::from(v) / 65535.0)
-            .collect();
-        convert::detached(py, || {
-            let view = GrayView::new(&unit, w, h).map_err(errors::detect)?;
-            detect_wafer_rims(&view, &params).map_err(errors::detect)
-        })?
-    } else if let Ok(a) = image.extract::<PyReadonlyArray2<'_, f32>>() {
-        run_rims(py, a, &params)?
-    } else if let Ok(a) = image.extract::<PyReadonlyArray2<'_, f64>>() {
-        run_rims(py, a, &params)?
-    } else {
-        return Err(bad_dtype(image));
-    };
+    let rims = on_gray_image(py, image, &RimJob(&params), true)?;
     Ok(rims
         .into_iter()
         .map(|inner| PyWaferEdge { inner })
         .collect())
-}
-
-/// The error for an unsupported dtype.
-fn bad_dtype(image: &Bound<'_, PyAny>) -> PyErr {
-    let dtype = image
-        .getattr("dtype")
-        .map(|d| d.to_string())
-        .unwrap_or_else(|_| "unknown".into());
-    errors::invalid_input(format!(
-        "image must have dtype uint8, uint16, float32 or float64, got {dtype}"
-    ))
-}
-
-/// Fails unless `image` is a 2-D array.
-fn check_2d(image: &Bound<'_, PyAny>) -> PyResult<()> {
-    let ndim = image
-        .getattr("ndim")
-        .and_then(|n| n.extract::<usize>())
-        .map_err(|_| {
-            errors::invalid_input(format!(
-                "image must be a 2-D NumPy array, got a {}",
-                image
-                    .get_type()
-                    .name()
-                    .map(|n| n.to_string())
-                    .unwrap_or_default()
-            ))
-        })?;
-    if ndim != 2 {
-        return Err(errors::invalid_input(format!(
-            "image must be 2-D (height, width) grayscale, got {ndim} dimensions"
-        )));
-    }
-    Ok(())
 }
 
 /// Adds the ellipse-detection functions and class to the module.

@@ -14,6 +14,7 @@ mod ellipse_detection;
 pub mod errors;
 mod estimate;
 mod geometry;
+mod gray;
 mod handeye;
 mod lsq;
 mod polygon;
