@@ -226,14 +226,4 @@ def detect_wafer_rims(
         semi_major_range=rng,
         **fields,
     )
-    return [
-        WaferEdge(
-            ellipse=Ellipse._wrap(e.ellipse),
-            points=e.points,
-            residual=e.residual,
-            kind=e.kind,
-            wafer_id=e.wafer_id,
-            covariance=e.covariance,
-        )
-        for e in rims
-    ]
+    return [WaferEdge._from_core(e) for e in rims]
