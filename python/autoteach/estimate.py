@@ -440,6 +440,7 @@ class UnscentedKalmanFilter:
         self.P: F64Array = np.eye(dim_x)
         self.Q: F64Array = np.asarray(self._inner.Q)
         self.R: F64Array = np.asarray(self._inner.R)
+        self._noise_dims = (self.Q.shape[0], self.R.shape[0])
         self.x_prior = self.x.copy()
         self.P_prior = self.P.copy()
         self.x_post = self.x.copy()
@@ -481,7 +482,7 @@ class UnscentedKalmanFilter:
     # -- synchronisation with the compiled filter ---------------------------------------------
 
     def _qr(self) -> tuple[F64Array, F64Array]:
-        q_dim, r_dim = np.shape(self._inner.Q)[0], np.shape(self._inner.R)[0]
+        q_dim, r_dim = self._noise_dims
         return _noise(self.Q, q_dim, "Q"), _noise(self.R, r_dim, "R")
 
     def _push(self) -> None:
@@ -513,7 +514,8 @@ class UnscentedKalmanFilter:
         if post:
             self.x_post = self.x.copy()
             self.P_post = self.P.copy()
-        Q, R = self._qr()  # noqa: N806
+        # Q and R are those sent by the _push that preceded this call.
+        Q, R = self._qr() if self._synced is None else self._synced[2:]  # noqa: N806
         self._synced = (x.copy(), self.P.copy(), Q, R)
 
     def _custom(self, UT: Any) -> bool:  # noqa: N803
