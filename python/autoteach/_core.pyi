@@ -1171,3 +1171,53 @@ class ActiveSystem:
     ) -> dict[str, _Any]: ...
 
 # --- end active ---
+
+# --- ellipse detection (issue 42) ---
+
+class EllipseDetection:
+    """One detected ellipse; see :class:`autoteach.detect.EllipseDetection`."""
+
+    @property
+    def ellipse(self) -> Ellipse: ...
+    @property
+    def points(self) -> NDArray[np.float64]: ...
+    @property
+    def covariance(self) -> NDArray[np.float64] | None: ...
+    @property
+    def residual(self) -> float: ...
+    @property
+    def score(self) -> float: ...
+    @property
+    def polarity(self) -> int: ...
+
+def ellipse_detect(
+    image: NDArray[np.uint8] | NDArray[np.uint16] | NDArray[np.float32] | NDArray[np.float64],
+    *,
+    min_arc_points: int = 12,
+    min_semi_minor: float = 2.0,
+    max_semi_major: float | None = None,
+    max_gap: float | None = None,
+    blur_sigma: float = 0.0,
+    max_nfa: float = 1.0,
+    max_line_width: float | None = None,
+    gradient_noise: float | None = None,
+) -> list[EllipseDetection]:
+    """Detect ellipses; see :func:`autoteach.detect.detect_ellipses`."""
+
+def wafer_rims_detect(
+    image: NDArray[np.uint8] | NDArray[np.uint16] | NDArray[np.float32] | NDArray[np.float64],
+    *,
+    radius: float = 75.0,
+    thickness: float = 0.775,
+    up: tuple[float, float] = (0.0, -1.0),
+    semi_major_range: tuple[float, float] | None = None,
+    min_arc_points: int = 12,
+    min_semi_minor: float = 2.0,
+    max_gap: float | None = None,
+    blur_sigma: float = 0.0,
+    max_nfa: float = 1.0,
+    gradient_noise: float | None = None,
+) -> list[WaferEdge]:
+    """Wafer rims by geometry; see :func:`autoteach.detect.detect_wafer_rims`."""
+
+# --- end ellipse detection ---

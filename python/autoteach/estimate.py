@@ -55,7 +55,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
+from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
+from autoteach.geometry import so3_exp, so3_log
 from autoteach.sigma_points import (
     JulierSigmaPoints,
     MerweScaledSigmaPoints,
@@ -85,20 +87,15 @@ F64Array = NDArray[np.float64]
 
 
 def _matrix(a: ArrayLike, name: str) -> F64Array:
-    try:
-        m = np.array(a, dtype=np.float64, copy=True)
-    except (TypeError, ValueError) as e:
-        raise InvalidInputError(f"{name} must be a real matrix: {e}") from None
+    # as_f64 refuses complex, object, string, bool and datetime arrays (a cast would drop data).
+    m = np.array(as_f64(a, name), dtype=np.float64, copy=True)
     if m.ndim != 2:
         raise InvalidInputError(f"{name} must be two-dimensional, got shape {m.shape}")
     return m
 
 
 def _vector(a: ArrayLike, name: str) -> F64Array:
-    try:
-        return np.array(a, dtype=np.float64, copy=True).reshape(-1)
-    except (TypeError, ValueError) as e:
-        raise InvalidInputError(f"{name} must be a real vector: {e}") from None
+    return np.array(as_f64(a, name), dtype=np.float64, copy=True).reshape(-1)
 
 
 class LinearModel:
@@ -975,13 +972,20 @@ _LOSSES = ("linear", "huber", "cauchy", "tukey")
 def _solver_kwargs(
     method: str, linear_solver: str, max_iterations: int, ftol: float, gtol: float, xtol: float
 ) -> dict[str, Any]:
+    iterations = as_int(max_iterations, "max_iterations")
+    if iterations < 0:
+        raise InvalidInputError(f"max_iterations must be a non-negative integer, got {iterations}")
+    tolerances = {name: as_float(v, name) for name, v in (("ftol", ftol), ("gtol", gtol), ("xtol", xtol))}
+    for name, v in tolerances.items():
+        if v < 0.0:
+            raise InvalidInputError(f"{name} must be a non-negative number, got {v}")
     return {
         "method": method,
         "linear_solver": linear_solver,
-        "max_iterations": int(max_iterations),
-        "function_tolerance": float(ftol),
-        "gradient_tolerance": float(gtol),
-        "parameter_tolerance": float(xtol),
+        "max_iterations": iterations,
+        "function_tolerance": tolerances["ftol"],
+        "gradient_tolerance": tolerances["gtol"],
+        "parameter_tolerance": tolerances["xtol"],
     }
 
 
@@ -1001,7 +1005,9 @@ class BundleAdjustResult:
     """Result of :func:`bundle_adjust`."""
 
     poses: F64Array
-    """Optimised world-to-camera poses, N×6 (rotation vector, translation)."""
+    """Optimised world-to-camera poses ``T_cw``, N×4×4 (the project's pose convention)."""
+    pose_vectors: F64Array
+    """The same poses as N×6 (rotation vector, translation), scipy's bundle-adjustment layout."""
     points: F64Array
     """Optimised world points, M×3."""
     final_cost: float
@@ -1010,6 +1016,26 @@ class BundleAdjustResult:
     """Solver iterations (trial steps)."""
     summary: dict[str, Any] = field(default_factory=dict)
     """Solver summary: iterations, initial/final cost, termination, message, time_s, …"""
+
+
+def _pose_vectors(poses: ArrayLike) -> F64Array:
+    """Bundle-adjustment poses as N×6 (rotation vector, translation) from N×4×4 or N×6."""
+    arr = as_f64(poses, "poses")
+    if arr.ndim == 3 and arr.shape[1:] == (4, 4):
+        if not np.allclose(arr[:, 3, :], [0.0, 0.0, 0.0, 1.0]):
+            raise InvalidInputError("poses: the last row of every 4×4 pose must be [0, 0, 0, 1]")
+        return np.ascontiguousarray(np.concatenate([so3_log(arr[:, :3, :3]), arr[:, :3, 3]], axis=1))
+    return _matrix(arr, "poses")
+
+
+def _pose_matrices(vectors: F64Array) -> F64Array:
+    """N×4×4 poses from N×6 (rotation vector, translation)."""
+    out = np.zeros((len(vectors), 4, 4))
+    if len(vectors):
+        out[:, :3, :3] = so3_exp(vectors[:, :3])
+        out[:, :3, 3] = vectors[:, 3:]
+    out[:, 3, 3] = 1.0
+    return out
 
 
 def bundle_adjust(
@@ -1041,7 +1067,8 @@ def bundle_adjust(
 
     Args:
         K: 3×3 intrinsic matrix.
-        poses: N×6 world-to-camera poses, rotation vector then translation.
+        poses: world-to-camera poses ``T_cw``: N×4×4 matrices, or N×6 (rotation vector then
+            translation, scipy's bundle-adjustment layout).
         points: M×3 world points.
         observations: K×2 pixel observations.
         pose_index: K pose indices.
@@ -1065,7 +1092,8 @@ def bundle_adjust(
     """
     if loss not in _LOSSES:
         raise InvalidInputError(f"loss must be one of {_LOSSES}, got {loss!r}")
-    poses_m, points_m, obs_m = _matrix(poses, "poses"), _matrix(points, "points"), _matrix(observations, "observations")
+    poses_m = _pose_vectors(poses)
+    points_m, obs_m = _matrix(points, "points"), _matrix(observations, "observations")
     pi, xi = _index_array(pose_index, "pose_index"), _index_array(point_index, "point_index")
     fixed = [int(i) for i in fixed_poses]
     for name, idx, n in (
@@ -1091,8 +1119,10 @@ def bundle_adjust(
         fixed,
         **_solver_kwargs(method, linear_solver, max_iterations, ftol, gtol, xtol),
     )
+    poses_a = np.asarray(poses_a)
     return BundleAdjustResult(
-        poses=poses_a,
+        poses=_pose_matrices(poses_a),
+        pose_vectors=poses_a,
         points=points_a,
         final_cost=float(summary["final_cost"]),
         iterations=int(summary["iterations"]),
