@@ -195,7 +195,7 @@ mod tests {
                 &pts,
                 &xs,
                 &ps,
-                &[q.clone()],
+                std::slice::from_ref(&q),
                 &vec![1.0; steps],
                 None,
             )
