@@ -1211,6 +1211,7 @@ def wafer_rims_detect(
     thickness: float = 0.775,
     up: tuple[float, float] = (0.0, -1.0),
     semi_major_range: tuple[float, float] | None = None,
+    focal_length: float | None = None,
     min_arc_points: int = 12,
     min_semi_minor: float = 2.0,
     max_gap: float | None = None,
