@@ -38,7 +38,7 @@ def numpy_gain(state: active.ActiveState, q: np.ndarray) -> float:
 def fresh_state() -> active.ActiveState:
     """The nominal state after one noise-free measurement at the reduced planner's first pose."""
     state = active.ActiveState()
-    q0 = active.plan_next_pose(state).joints
+    q0 = active.plan_next_pose(state).best.joints
     state.update(q0, state.project(q0))
     return state
 
@@ -61,10 +61,10 @@ def main() -> None:
     state = fresh_state()
     rows = []
     t, plan = timed(lambda: active.plan_next_pose(state), args.repeats)
-    rows.append(("autoteach reduced search", t, plan.score, numpy_gain(state, plan.joints), plan.evaluated))
+    rows.append(("autoteach reduced search", t, plan.best.score, numpy_gain(state, plan.best.joints), plan.evaluated))
     for n in (2000, 20000):
         t, plan = timed(lambda n=n: active.plan_next_pose(state, method="sampling", samples=n, seed=1), args.repeats)
-        rows.append((f"autoteach sampling {n}", t, plan.score, numpy_gain(state, plan.joints), plan.evaluated))
+        rows.append((f"autoteach sampling {n}", t, plan.best.score, numpy_gain(state, plan.best.joints), plan.evaluated))
 
     evals = 0
 
@@ -73,7 +73,7 @@ def main() -> None:
         evals += 1
         q = np.array([x[0], x[1], x[2], x[2], x[3]])
         try:
-            return -active.plan_next_pose(state, candidates=q[None, :]).score
+            return -active.plan_next_pose(state, candidates=q[None, :]).best.score
         except UnreachablePoseError:
             return 0.0
 

@@ -560,7 +560,7 @@ def synthetic_detections(
                     points=pts,
                     kind=r["rim"],
                     wafer_id=int(rank),
-                    residual=fit.residual,
+                    residual=fit.residual_mean,
                     label=wafer,
                 )
                 edges.append(edge)
