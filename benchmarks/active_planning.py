@@ -64,7 +64,8 @@ def main() -> None:
     rows.append(("autoteach reduced search", t, plan.best.score, numpy_gain(state, plan.best.joints), plan.evaluated))
     for n in (2000, 20000):
         t, plan = timed(lambda n=n: active.plan_next_pose(state, method="sampling", samples=n, seed=1), args.repeats)
-        rows.append((f"autoteach sampling {n}", t, plan.best.score, numpy_gain(state, plan.best.joints), plan.evaluated))
+        gain = numpy_gain(state, plan.best.joints)
+        rows.append((f"autoteach sampling {n}", t, plan.best.score, gain, plan.evaluated))
 
     evals = 0
 

@@ -84,9 +84,10 @@ def _matrices(value: Any, name: str) -> list[F64Array]:
 
 @dataclass(frozen=True, slots=True)
 class ObservabilityIndices:
-    """Observability indices of Table 6.2 (the fields of ``autoteach_estimate::active::ObservabilityIndices``).
+    """Observability indices of Table 6.2.
 
-    With the singular values ``σ_1 ≥ … ≥ σ_m`` of the information matrix.
+    The fields of ``autoteach_estimate::active::design::ObservabilityIndices``; ``σ_1 ≥ … ≥ σ_m``
+    are the singular values of the information matrix.
     """
 
     o1: float
@@ -114,7 +115,10 @@ class ObservabilityIndices:
 
 @dataclass(frozen=True, slots=True)
 class ApproximateDesign:
-    """An approximate design on a finite candidate set (the fields of ``autoteach_estimate::active::ApproximateDesign``)."""
+    """An approximate design on a finite candidate set.
+
+    The fields of ``autoteach_estimate::active::design::ApproximateDesign``.
+    """
 
     weights: F64Array
     """Weight ``ω_i`` of each candidate (sum 1), eq. (6.1)."""
@@ -130,7 +134,7 @@ class ApproximateDesign:
 
 @dataclass(frozen=True, slots=True)
 class DetmaxResult:
-    """The result of :func:`detmax` (the fields of ``autoteach_estimate::active::DetmaxResult``)."""
+    """The result of :func:`detmax` (the fields of ``autoteach_estimate::active::design::DetmaxResult``)."""
 
     selected: list[int]
     """Indices of the selected candidates (sorted)."""
@@ -142,7 +146,10 @@ class DetmaxResult:
 
 @dataclass(frozen=True, slots=True)
 class UpdateSummary:
-    """Summary of one :meth:`ActiveState.update` (the fields of ``autoteach_estimate::active::UpdateSummary``)."""
+    """Summary of one :meth:`ActiveState.update`.
+
+    The fields of ``autoteach_estimate::active::model::UpdateSummary``.
+    """
 
     used: int
     """Corners used (detected and projectable under the estimate)."""
@@ -154,7 +161,7 @@ class UpdateSummary:
 
 @dataclass(frozen=True, slots=True)
 class HandEyeParams:
-    """Hand-eye parameter values (the fields of ``autoteach_estimate::active::HandEyeParams``)."""
+    """Hand-eye parameter values (the fields of ``autoteach_estimate::active::model::HandEyeParams``)."""
 
     opening: F64Array
     """Pose of the chamber opening in the world, ``T_wo`` (4×4)."""
@@ -240,7 +247,7 @@ def detmax(
 
 @dataclass(frozen=True, slots=True)
 class PlannedPose:
-    """A planned measurement pose (the fields of ``autoteach_estimate::active::PlannedPose``)."""
+    """A planned measurement pose (the fields of ``autoteach_estimate::active::planner::PlannedPose``)."""
 
     joints: F64Array
     """Encoder readings ``(θ1, θ2, θ3, θ4, h)`` to command."""
@@ -252,7 +259,7 @@ class PlannedPose:
 
 @dataclass(frozen=True, slots=True)
 class Rejections:
-    """Candidate rejections per constraint (the fields of ``autoteach_estimate::active::Rejections``)."""
+    """Candidate rejections per constraint (the fields of ``autoteach_estimate::active::planner::Rejections``)."""
 
     unreachable: int
     """Poses the robot cannot reach."""
@@ -273,7 +280,7 @@ class Rejections:
 
 @dataclass(frozen=True, slots=True)
 class Plan:
-    """The result of :func:`plan_next_pose` (the fields of ``autoteach_estimate::active::Plan``)."""
+    """The result of :func:`plan_next_pose` (the fields of ``autoteach_estimate::active::planner::Plan``)."""
 
     best: PlannedPose
     """The best feasible pose."""
@@ -311,7 +318,7 @@ class ActiveState:
         return list(self._inner.names)
 
     def estimate(self) -> HandEyeParams:
-        """The current estimate: ``opening`` (4×4 ``T_wo``), ``camera_translation`` (3, blade frame), ``joint_offsets`` (5)."""
+        """The current estimate: ``opening`` (4×4 ``T_wo``), ``camera_translation`` (3), ``joint_offsets`` (5)."""
         d = self._inner.estimate()
         return HandEyeParams(
             opening=np.asarray(d["opening"]),

@@ -688,7 +688,9 @@ def _index_array(a: ArrayLike, name: str) -> NDArray[np.int64]:
     return np.ascontiguousarray(arr, dtype=np.int64)
 
 
-_CONVERGED_TERMINATIONS = frozenset({"FunctionTolerance", "GradientTolerance", "ParameterTolerance", "NoFreeParameters"})
+_CONVERGED_TERMINATIONS = frozenset(
+    {"FunctionTolerance", "GradientTolerance", "ParameterTolerance", "NoFreeParameters"}
+)
 
 
 @dataclass(frozen=True, slots=True)

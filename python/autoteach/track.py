@@ -34,6 +34,7 @@ def _assign(cost: ArrayLike, maximize: bool = False) -> tuple[NDArray[np.intp], 
 
 
 __all__ = [
+    "Circle3",
     "Edge",
     "Track",
     "WaferTracker",
@@ -75,9 +76,24 @@ class Edge:
             self.ellipse = Ellipse(*_ellipse_array(self.ellipse, 0))
 
 
+@dataclass(frozen=True, slots=True)
+class Circle3:
+    """A circle in 3D (the fields of ``autoteach_detect::track::circle::Circle3``), metres."""
+
+    center: NDArray[np.float64]
+    """Centre ``(3,)``."""
+    normal: NDArray[np.float64]
+    """Unit normal ``(3,)`` of the circle's plane."""
+    radius: float
+    """Radius."""
+
+
 @dataclass
 class Track:
-    """One tracked wafer.
+    """One tracked wafer (the fields of ``autoteach_detect::track::Track``, updated in place by the tracker).
+
+    ``ellipse`` and ``circle`` are what the Rust ``Track::ellipse()`` and ``Track::circle()``
+    methods return.
 
     Attributes:
         id: track identifier.
@@ -87,10 +103,11 @@ class Track:
         history: ``(frame index, edge)`` of every edge registered to the track (the caller's
             edge objects).
         predicted: the predicted ellipse of the current frame (an ``Ellipse``), if any.
-        circle: ``(centre (3,), normal (3,), radius)`` of the estimated 3D rim (world frame), if
-            estimated.
+        circle: the estimated 3D rim (world frame), a :class:`Circle3`, if estimated.
         hits, missed, first_frame, last_frame: registered frames, consecutive misses, first and
             last registered frame.
+        edges: the edges (the caller's objects) registered in the last frame the track was seen
+            (one or two rims).
 
     """
 
@@ -100,11 +117,12 @@ class Track:
     confirmed: bool = False
     history: list[tuple[int, Any]] = field(default_factory=list)
     predicted: Ellipse | None = None
-    circle: tuple[NDArray[np.float64], NDArray[np.float64], float] | None = None
+    circle: Circle3 | None = None
     hits: int = 0
     missed: int = 0
     first_frame: int = 0
     last_frame: int = 0
+    edges: list[Any] = field(default_factory=list)
 
 
 def _get(obj: Any, name: str, default: Any = None) -> Any:
@@ -263,7 +281,8 @@ class WaferTracker:
             t.ellipse = None if d["ellipse"] is None else Ellipse(*d["ellipse"])
             t.predicted = None if d["predicted"] is None else Ellipse(*d["predicted"])
             c = d["circle"]
-            t.circle = None if c is None else (np.array(c[0]), np.array(c[1]), float(c[2]))
+            t.circle = None if c is None else Circle3(np.array(c[0]), np.array(c[1]), float(c[2]))
+            t.edges = [e for f, e in t.history if f == t.last_frame]
         return [t for t in self._tracks.values() if t.confirmed]
 
     def tracks(self, include_tentative: bool = False) -> list[Track]:
