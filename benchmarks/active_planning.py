@@ -93,13 +93,13 @@ def main() -> None:
 
     print(f"\nclosed loop, {args.trials} trials x 12 steps (seed 0): final error std [mm] / planning time")
     runs = {mode: active.run_trials(args.trials, 0, mode) for mode in ("reduced", "sampling", "baseline")}
-    names = runs["reduced"]["estimated"]
+    names = runs["reduced"].estimated
     idx = [active.PARAM_NAMES.index(n) for n in names]
     print(f"{'quantity':<16}" + "".join(f"{m:>12}" for m in runs))
     for n, i in zip(names, idx, strict=True):
-        print(f"{n:<16}" + "".join(f"{np.std(r['errors'][:, -1, i]):>12.4f}" for r in runs.values()))
+        print(f"{n:<16}" + "".join(f"{np.std(r.errors[:, -1, i]):>12.4f}" for r in runs.values()))
     for mode, r in runs.items():
-        ms = r["plan_times"].ravel() * 1e3
+        ms = r.plan_times.ravel() * 1e3
         print(f"planning time {mode:<9}: median {np.median(ms):.2f} ms, max {np.max(ms):.2f} ms")
 
 

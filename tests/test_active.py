@@ -238,10 +238,10 @@ def test_planner_bad_inputs_name_the_binding_constraint() -> None:
 def test_closed_loop_is_deterministic() -> None:
     a = active.run_trials(2, seed=5, mode="reduced", steps=4)
     b = active.run_trials(2, seed=5, mode="reduced", steps=4)
-    np.testing.assert_array_equal(a["errors"], b["errors"])
+    np.testing.assert_array_equal(a.errors, b.errors)
     c = active.run_trials(2, seed=5, mode="baseline", steps=4)
     # Same truth and start pose: identical first step.
-    np.testing.assert_array_equal(a["errors"][:, 0], c["errors"][:, 0])
+    np.testing.assert_array_equal(a.errors[:, 0], c.errors[:, 0])
     with pytest.raises(InvalidInputError):
         active.run_trials(1, mode="nope")
 

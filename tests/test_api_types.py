@@ -65,6 +65,12 @@ DATACLASSES: list[tuple[type, str, str, dict[str, str]]] = [
     (active.PlannedPose, "estimate/src/active/planner.rs", "PlannedPose", {}),
     (active.Plan, "estimate/src/active/planner.rs", "Plan", {}),
     (active.Rejections, "estimate/src/active/planner.rs", "Rejections", {}),
+    (
+        active.TrialRuns,
+        "estimate/src/active/closed_loop.rs",
+        "TrialResult",
+        {"names": "shared by the trials", "estimated": "shared by the trials", "power": "shared by the trials"},
+    ),
 ]
 
 # Existing class pattern (a Python class holding the compiled object): every Rust field is a
@@ -261,6 +267,10 @@ def test_active_results() -> None:
     u = state.update(q, state.project(q))
     _check(u, active.UpdateSummary)
     assert u.used == 4 and u.rms_px < 1e-6
+
+    runs = active.run_trials(1, seed=2, mode="baseline", steps=2)
+    _check(runs, active.TrialRuns)
+    assert runs.errors.shape == (1, 2, len(active.PARAM_NAMES)) and runs.indices.shape == (1, 2, 7)
 
 
 def test_calibration_results() -> None:

@@ -51,6 +51,7 @@ __all__ = [
     "Plan",
     "PlannedPose",
     "Rejections",
+    "TrialRuns",
     "UpdateSummary",
     "compare",
     "d_optimal_design",
@@ -402,6 +403,39 @@ def plan_next_pose(
     )
 
 
+@dataclass(frozen=True, slots=True)
+class TrialRuns:
+    """The trials of :func:`run_trials`, with the names and power they share.
+
+    The fields of ``autoteach_estimate::active::closed_loop::TrialResult``, stacked over the trials
+    (leading axis); errors are truth − estimate in report units (mm, deg).
+    """
+
+    errors: F64Array
+    """(trials, steps, 14) per step, truth − estimate of the full parameter vector (:data:`PARAM_NAMES`)."""
+    indices: F64Array
+    """(trials, steps, 7) per step, O1-O6 and log det of the information (report units), as
+    :data:`INDEX_NAMES` (the fields of :class:`ObservabilityIndices` but ``power``)."""
+    joints: F64Array
+    """(trials, steps, 5) per step, the encoder readings of the measurement pose."""
+    detected: F64Array
+    """(trials, steps) per step, the corners detected."""
+    plan_times: F64Array
+    """(trials, steps − 1) per planning step, the planner's wall time (s)."""
+    scores: F64Array
+    """(trials, steps − 1) per planning step, the planner's score (NaN for the baseline)."""
+    coupled: F64Array
+    """(trials, 3) final coupled error (mm) of the opening relative to the camera (x, y, z)."""
+    infeasible_steps: F64Array
+    """(trials,) planning steps where no feasible pose was found."""
+    names: list[str]
+    """:data:`PARAM_NAMES`, the columns of :attr:`errors`."""
+    estimated: list[str]
+    """The estimated parameters."""
+    power: float
+    """The O6 power ``P``."""
+
+
 def run_trials(
     trials: int = 10,
     seed: int = 0,
@@ -410,46 +444,51 @@ def run_trials(
     sigma_px: float | None = None,
     power: float | None = None,
     estimate: Sequence[str] | None = None,
-) -> dict[str, Any]:
+) -> TrialRuns:
     """Run the simulated closed loop (Fig. 6.1) for ``trials`` trials of one ``mode``.
 
     ``mode`` is ``"reduced"`` (active planning, reduced search), ``"sampling"`` (active planning,
     plain sampling) or ``"baseline"`` (the straight approach without planning). The same
-    ``(seed, trial)`` gives the same true parameters and start pose in every mode. Returns arrays:
-    ``errors`` (trials, steps, 14) truth − estimate in mm/deg (:data:`PARAM_NAMES`), ``indices``
-    (trials, steps, 7) O1-O6 and log det of the information in mm/deg units, ``joints``,
-    ``detected``, ``plan_times`` (s), ``scores``, ``coupled`` (trials, 3) and
-    ``infeasible_steps``.
+    ``(seed, trial)`` gives the same true parameters and start pose in every mode. Returns the
+    :class:`TrialRuns`: ``errors`` (trials, steps, 14) truth − estimate in mm/deg
+    (:data:`PARAM_NAMES`), ``indices`` (trials, steps, 7) O1-O6 and log det of the information in
+    mm/deg units, ``joints``, ``detected``, ``plan_times`` (s), ``scores``, ``coupled``
+    (trials, 3) and ``infeasible_steps``.
     """
     names = None if estimate is None else [str(n) for n in estimate]
-    return dict(
-        _core.active_run_trials(
-            int(trials),
-            int(seed),
-            str(mode),
-            None if steps is None else int(steps),
-            None if sigma_px is None else float(sigma_px),
-            None if power is None else float(power),
-            names,
-        )
+    d = _core.active_run_trials(
+        int(trials),
+        int(seed),
+        str(mode),
+        None if steps is None else int(steps),
+        None if sigma_px is None else float(sigma_px),
+        None if power is None else float(power),
+        names,
+    )
+    arrays = ("errors", "indices", "joints", "detected", "plan_times", "scores", "coupled", "infeasible_steps")
+    return TrialRuns(
+        **{k: np.asarray(d[k]) for k in arrays},
+        names=[str(n) for n in d["names"]],
+        estimated=[str(n) for n in d["estimated"]],
+        power=float(d["power"]),
     )
 
 
-def _final_stats(run: Mapping[str, Any]) -> dict[str, dict[str, float]]:
+def _final_stats(run: TrialRuns) -> dict[str, dict[str, float]]:
     """``{"std": …, "peak": …}`` of the final error of every estimated quantity over trials."""
-    final = run["errors"][:, -1, :]
+    final = run.errors[:, -1, :]
     out: dict[str, dict[str, float]] = {}
-    for name in run["estimated"]:
+    for name in run.estimated:
         e = final[:, PARAM_NAMES.index(name)]
         out[name] = {"std": float(np.std(e)), "peak": float(np.max(np.abs(e)))}
     for k, axis in enumerate("xyz"):
-        e = run["coupled"][:, k]
+        e = run.coupled[:, k]
         out[f"coupled_{axis}_mm"] = {"std": float(np.std(e)), "peak": float(np.max(np.abs(e)))}
     return out
 
 
-def _index_curves(run: Mapping[str, Any]) -> dict[str, dict[str, list[float]]]:
-    ind = run["indices"]
+def _index_curves(run: TrialRuns) -> dict[str, dict[str, list[float]]]:
+    ind = run.indices
     return {
         name: {"mean": np.mean(ind[:, :, k], axis=0).tolist(), "std": np.std(ind[:, :, k], axis=0).tolist()}
         for k, name in enumerate(INDEX_NAMES)
@@ -476,14 +515,14 @@ def compare(
     active = run_trials(trials, seed, "reduced", steps, sigma_px, power)
     baseline = run_trials(trials, seed, "baseline", steps, sigma_px, power)
     a, b = _final_stats(active), _final_stats(baseline)
-    translation = [n for n in active["estimated"] if n.endswith("_mm")]
+    translation = [n for n in active.estimated if n.endswith("_mm")]
     worst = max(translation, key=lambda n: b[n]["std"])
-    times = active["plan_times"].ravel() * 1e3
+    times = active.plan_times.ravel() * 1e3
     return {
         "trials": int(trials),
         "seed": int(seed),
-        "steps": int(active["errors"].shape[1]),
-        "power": float(active["power"]),
+        "steps": int(active.errors.shape[1]),
+        "power": float(active.power),
         "active": a,
         "baseline": b,
         "indices": {"active": _index_curves(active), "baseline": _index_curves(baseline)},
@@ -495,7 +534,7 @@ def compare(
         },
         "planning_time_ms": {"median": float(np.median(times)), "max": float(np.max(times))},
         "infeasible_steps": {
-            "active": int(np.sum(active["infeasible_steps"])),
-            "baseline": int(np.sum(baseline["infeasible_steps"])),
+            "active": int(np.sum(active.infeasible_steps)),
+            "baseline": int(np.sum(baseline.infeasible_steps)),
         },
     }
