@@ -45,6 +45,7 @@ DATACLASSES: list[tuple[type, str, str, dict[str, str]]] = [
     (polygon.PolygonDetection, "detect/src/polygon/mod.rs", "PolygonDetection", {}),
     (polygon.VoteMap, "detect/src/polygon/mod.rs", "VoteMap", {}),
     (track.Circle3, "detect/src/track/circle.rs", "Circle3", {}),
+    (track.UpdateTimings, "detect/src/track/mod.rs", "UpdateTimings", {}),
     (
         track.Track,
         "detect/src/track/mod.rs",
@@ -211,6 +212,9 @@ def test_wafer_edges_and_tracks() -> None:
         # The edges registered in the last frame are the caller's objects of that frame.
         assert t.edges and all(any(e is d for d in edges) for e in t.edges)
         assert t.edges == [e for f, e in t.history if f == t.last_frame]
+    timings = tracker.last_timings
+    _check(timings, track.UpdateTimings)
+    assert min(timings.predict, timings.associate, timings.manage) >= 0.0
 
 
 def test_estimate_results() -> None:

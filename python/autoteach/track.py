@@ -37,6 +37,7 @@ __all__ = [
     "Circle3",
     "Edge",
     "Track",
+    "UpdateTimings",
     "WaferTracker",
     "clear_mot",
     "idf1",
@@ -86,6 +87,22 @@ class Circle3:
     """Unit normal ``(3,)`` of the circle's plane."""
     radius: float
     """Radius."""
+
+
+@dataclass(frozen=True, slots=True)
+class UpdateTimings:
+    """Wall-clock seconds of the stages of the last :meth:`WaferTracker.update`.
+
+    The fields of ``autoteach_detect::track::UpdateTimings``.
+    """
+
+    predict: float
+    """Prediction of every track's segment (§4.2)."""
+    associate: float
+    """Association (Algorithm 5: point sets, kd-tree, kNN, E-step, cost matrix, assignment -- or the
+    greedy baseline)."""
+    manage: float
+    """Track management (Algorithm 4), including the multi-view 3D rim estimates."""
 
 
 @dataclass
@@ -233,15 +250,10 @@ class WaferTracker:
         return int(self._inner.frame)
 
     @property
-    def last_timings(self) -> dict[str, float]:
-        """Seconds spent in the stages of the last :meth:`update` (inside Rust).
-
-        ``predict`` (§4.2), ``associate`` (Algorithm 5: point sets, kd-tree, kNN, E-step, cost
-        matrix, assignment — or the greedy baseline) and ``manage`` (Algorithm 4, including the
-        multi-view 3D rim estimates).
-        """
+    def last_timings(self) -> UpdateTimings:
+        """Seconds spent in the stages of the last :meth:`update` (inside Rust), see :class:`UpdateTimings`."""
         p, a, m = self._inner.last_timings
-        return {"predict": float(p), "associate": float(a), "manage": float(m)}
+        return UpdateTimings(predict=float(p), associate=float(a), manage=float(m))
 
     def update(self, edges: Iterable[Any], camera_pose: ArrayLike | None = None) -> list[Track]:
         """Process one frame and return the live confirmed tracks.
