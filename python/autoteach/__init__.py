@@ -70,6 +70,7 @@ SUBMODULES = (
     "polygon",
     "registration",
     "report",
+    "sigma_points",
     "sim",
     "track",
 )
@@ -100,6 +101,7 @@ __all__ = [
     "polygon",
     "registration",
     "report",
+    "sigma_points",
     "sim",
     "track",
 ]

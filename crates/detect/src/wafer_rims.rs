@@ -39,8 +39,12 @@ use crate::{DetectError, Result};
 /// Relative tolerance of the rim offset `s`: perspective changes it by up to the wafer's depth
 /// span over its distance, `R/Z` (0.19 for a 150 mm wafer at 0.4 m); 0.3 covers `Z ≥ 0.25 m`.
 pub const RIM_OFFSET_TOLERANCE: f64 = 0.3;
-/// Largest relative difference of the two rims' semi-axes beyond their fits' 3σ: the rims are
-/// the same circle, imaged at depths `h/Z` apart (under 1 %) plus the fits' bias on partial arcs.
+/// Largest difference of the two rims' semi-axes beyond their fits' 3σ, relative to the
+/// semi-major axis `a`. The rims are one circle seen from heights `h` apart: the far rim's
+/// elevation differs by `h·cos φ/Z`, which changes `b = a·sin φ` by `a·(h/Z)·cos²φ` — a
+/// multiple of `a`, not of `b` (1.1 px at `a` = 446 px for 1 mm at 0.4 m, i.e. 2 % of a
+/// 53 px semi-minor axis) — and `a` by `a·h/Z` at most. 0.02 covers `Z ≥ 50 h` and the fits'
+/// bias on partial arcs.
 pub const RIM_AXIS_TOLERANCE: f64 = 0.02;
 /// Lines narrower than this fraction of the rim offset `s` count as one rim drawn as a line.
 const LINE_FRACTION: f64 = 0.75;
@@ -157,7 +161,7 @@ fn pair_cost(lower: &Candidate, upper: &Candidate, ratio: f64, up: &Vector2<f64>
     for k in [2usize, 3] {
         let (x, y) = if k == 2 { (l.a, u.a) } else { (l.b, u.b) };
         let var = |c: &Option<Matrix5<f64>>| c.map_or(0.0, |c| c[(k, k)].max(0.0));
-        let tol_k = RIM_AXIS_TOLERANCE * x.max(y)
+        let tol_k = RIM_AXIS_TOLERANCE * l.a.max(u.a)
             + 3.0 * (var(&lower.covariance) + var(&upper.covariance)).sqrt();
         if !((x - y).abs() <= tol_k) {
             return None;

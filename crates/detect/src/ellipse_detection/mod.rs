@@ -63,6 +63,7 @@
 pub mod a_contrario;
 pub mod lines;
 pub mod noise;
+pub mod refine;
 #[cfg(test)]
 mod tests;
 
@@ -277,6 +278,21 @@ fn detect_on_pool<T: Pixel>(
         .collect();
     sort_by_score(&mut found);
     let found = drop_duplicates(found, assembly.residual_threshold);
+    let refine_at = RefineAt {
+        threshold: assembly.residual_threshold,
+        edge_noise: *edge_noise,
+        log_nt,
+        rho,
+        min_score,
+    };
+    let mut found = refine_all(image, found, &refine_at);
+    sort_by_score(&mut found);
+    let found = drop_duplicates(found, assembly.residual_threshold);
+    let mut found: Vec<EllipseDetection> = found
+        .into_iter()
+        .filter(|d| d.score >= min_score && d.ellipse.b >= params.min_semi_minor)
+        .collect();
+    sort_by_score(&mut found);
     let mut found = match params.max_line_width {
         Some(width) => lines::pair_line_edges(found, width),
         None => found,
@@ -321,6 +337,67 @@ fn drop_duplicates(found: Vec<EllipseDetection>, threshold: f64) -> Vec<EllipseD
     kept
 }
 
+/// The constants of stage 4b: the combination threshold, the median edge noise (pixels), the
+/// a-contrario test's `log₁₀ N_tests` and `ρ`, and the lowest accepted score.
+struct RefineAt {
+    threshold: f64,
+    edge_noise: f64,
+    log_nt: f64,
+    rho: f64,
+    min_score: f64,
+}
+
+/// Stage 4b ([`refine`]): split arcs merged, supports trimmed of points within the edge
+/// operator's reach of other curves, robust refits, each refined detection validated again
+/// (a refinement whose test fails leaves the detection as it was).
+fn refine_all<T: Pixel>(
+    image: &GrayView<'_, T>,
+    found: Vec<EllipseDetection>,
+    at: &RefineAt,
+) -> Vec<EllipseDetection> {
+    let (log_nt, rho) = (at.log_nt, at.rho);
+    let merged = refine::merge_split(found, at.threshold);
+    let found: Vec<EllipseDetection> = merged
+        .into_iter()
+        .map(|(mut d, changed)| {
+            if changed {
+                d.score = score_of(image, &d.ellipse, &d.points, d.polarity, log_nt, rho)
+                    .unwrap_or(f64::NEG_INFINITY);
+            }
+            d
+        })
+        .collect();
+    let boxes = refine::boxes(&found, refine::OPERATOR_REACH);
+    (0..found.len())
+        .into_par_iter()
+        .map(|i| {
+            let original = &found[i];
+            refine::trim_and_refit(&found, &boxes, i, refine::OPERATOR_REACH, at.edge_noise)
+                .and_then(|mut d| {
+                    d.score = score_of(image, &d.ellipse, &d.points, d.polarity, log_nt, rho)?;
+                    (d.score >= at.min_score).then_some(d)
+                })
+                .unwrap_or_else(|| original.clone())
+        })
+        .collect()
+}
+
+/// `−log₁₀ NFA` of the ellipse `e` over the angular extent its `points` cover, or `None` when
+/// that extent covers no pixels.
+fn score_of<T: Pixel>(
+    image: &GrayView<'_, T>,
+    e: &Ellipse,
+    points: &[Vector2<f64>],
+    polarity: i8,
+    log_nt: f64,
+    rho: f64,
+) -> Option<f64> {
+    let ts: Vec<f64> = points.iter().map(|p| e.parameter_of(p)).collect();
+    let extent = a_contrario::covered_extent(&ts);
+    let al = a_contrario::count_alignment(image, e, extent, polarity, rho);
+    (al.n > 0).then(|| a_contrario::score(al.n, al.k, a_contrario::ALIGNMENT_PROBABILITY, log_nt))
+}
+
 /// The a-contrario test of one segment: its detection with the score, or `None` when the
 /// segment covers no pixels.
 pub(crate) fn validate<T: Pixel>(
@@ -330,13 +407,7 @@ pub(crate) fn validate<T: Pixel>(
     rho: f64,
 ) -> Option<EllipseDetection> {
     let e = segment.fit.ellipse;
-    let ts: Vec<f64> = segment.points.iter().map(|p| e.parameter_of(p)).collect();
-    let extent = a_contrario::covered_extent(&ts);
-    let al = a_contrario::count_alignment(image, &e, extent, segment.polarity, rho);
-    if al.n == 0 {
-        return None;
-    }
-    let score = a_contrario::score(al.n, al.k, a_contrario::ALIGNMENT_PROBABILITY, log_nt);
+    let score = score_of(image, &e, &segment.points, segment.polarity, log_nt, rho)?;
     Some(EllipseDetection {
         ellipse: e,
         points: segment.points.clone(),
