@@ -46,9 +46,7 @@ def test_recall_and_precision_per_family(family: str) -> None:
     for seed in SEEDS:
         scene = render_carrier_image(family, seed)
         p = scene.params
-        geometry = WaferGeometry(
-            radius=p.wafer_radius, thickness=p.wafer_thickness, focal_length=float(scene.K[0, 0])
-        )
+        geometry = WaferGeometry(radius=p.wafer_radius, thickness=p.wafer_thickness, focal_length=float(scene.K[0, 0]))
         rims = detect_wafer_rims(scene.image, geometry)
         scores.append(score_frame(rims, scene))
     s = summarize(scores)
