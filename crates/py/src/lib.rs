@@ -15,6 +15,7 @@ mod estimate;
 mod geometry;
 mod handeye;
 mod lsq;
+mod mapping;
 mod polygon;
 mod registration;
 mod sim;
@@ -37,6 +38,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
+    mapping::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
