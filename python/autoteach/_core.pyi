@@ -362,6 +362,16 @@ def merwe_sigma_points(x: F64Array, p: F64Array, alpha: float, beta: float, kapp
 def merwe_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[F64Array, F64Array]:
     """The weights ``(Wm, Wc)`` (each ``(2n+1,)``) of van der Merwe's scaled sigma points."""
 
+def family_sigma_points(
+    family_name: str, x: F64Array, p: F64Array, alpha: float = 1.0, beta: float = 0.0, kappa: float = 0.0
+) -> F64Array:
+    """Sigma points ``(N, n)`` of a family (``"merwe"``: alpha, beta, kappa; ``"julier"``: kappa; ``"simplex"``)."""
+
+def family_weights(
+    family_name: str, n: int, alpha: float = 1.0, beta: float = 0.0, kappa: float = 0.0
+) -> tuple[F64Array, F64Array]:
+    """The weights ``(Wm, Wc)`` of a sigma-point family."""
+
 class UkfLinearModel:
     """Built-in linear model ``x' = F x + B u``, ``z = H x`` (F (n, n), H (m, n), B (n, k) or None)."""
 
@@ -403,6 +413,7 @@ class UkfFilter:
         square_root: bool = False,
         augmented: bool = False,
         repair: bool = False,
+        family_name: str = "merwe",
     ) -> UkfFilter: ...
     @staticmethod
     def callbacks(
@@ -426,13 +437,29 @@ class UkfFilter:
         repair: bool = False,
         dim_w: int | None = None,
         dim_v: int | None = None,
+        family_name: str = "merwe",
+        draw: _Callable[[F64Array, F64Array], _Any] | None = None,
+        wm: F64Array | None = None,
+        wc: F64Array | None = None,
     ) -> UkfFilter:
         """A filter on Python callables, called as filterpy calls them.
 
         ``fx(x, dt, **fx_kwargs)`` (augmented: ``fx(x, dt, w, **fx_kwargs)``), ``hx(x, **hx_kwargs)``
         (augmented: ``hx(x, v, **hx_kwargs)``), ``x_mean(sigmas (2n+1, n), Wm)``, ``residual_x(a, b)``,
         ``state_add(x, dx)``, ``subtract(x, -offset)`` for the sigma points, ``sqrt(M)`` returning a matrix
-        whose rows are the sigma offsets.
+        whose rows are the sigma offsets. ``draw(x, P)`` with ``wm``, ``wc``: an external sigma-point
+        object's ``sigma_points`` (returning ``(N, n)``) and weights, used instead of ``family_name``.
+        """
+
+    def sigma_points(self, x: F64Array, p: F64Array) -> F64Array:
+        """Sigma points ``(N, n)`` of (x, P) as this filter draws them (family and hooks)."""
+
+    def rts_smoother(
+        self, xs: F64Array, ps: F64Array, qs: F64Array, dts: F64Array, us: F64Array | None = None
+    ) -> tuple[F64Array, F64Array, F64Array]:
+        """Unscented RTS smoother: ``(xs, Ps, Ks)`` from filtered ``xs`` (n, dim_x), ``Ps`` (n, dim_x, dim_x).
+
+        ``qs`` is (dim_x, dim_x) or (n, dim_x, dim_x), ``dts`` (n,). Built-in models run without the GIL.
         """
 
     def set_state(
@@ -1145,6 +1172,55 @@ class ActiveSystem:
 
 # --- end active ---
 
+# --- ellipse detection (issue 42) ---
+
+class EllipseDetection:
+    """One detected ellipse; see :class:`autoteach.detect.EllipseDetection`."""
+
+    @property
+    def ellipse(self) -> Ellipse: ...
+    @property
+    def points(self) -> NDArray[np.float64]: ...
+    @property
+    def covariance(self) -> NDArray[np.float64] | None: ...
+    @property
+    def residual(self) -> float: ...
+    @property
+    def score(self) -> float: ...
+    @property
+    def polarity(self) -> int: ...
+
+def ellipse_detect(
+    image: NDArray[np.uint8] | NDArray[np.uint16] | NDArray[np.float32] | NDArray[np.float64],
+    *,
+    min_arc_points: int = 12,
+    min_semi_minor: float = 2.0,
+    max_semi_major: float | None = None,
+    max_gap: float | None = None,
+    blur_sigma: float = 0.0,
+    max_nfa: float = 1.0,
+    max_line_width: float | None = None,
+    gradient_noise: float | None = None,
+) -> list[EllipseDetection]:
+    """Detect ellipses; see :func:`autoteach.detect.detect_ellipses`."""
+
+def wafer_rims_detect(
+    image: NDArray[np.uint8] | NDArray[np.uint16] | NDArray[np.float32] | NDArray[np.float64],
+    *,
+    radius: float = 75.0,
+    thickness: float = 0.775,
+    up: tuple[float, float] = (0.0, -1.0),
+    semi_major_range: tuple[float, float] | None = None,
+    min_arc_points: int = 12,
+    min_semi_minor: float = 2.0,
+    max_gap: float | None = None,
+    blur_sigma: float = 0.0,
+    max_nfa: float = 1.0,
+    gradient_noise: float | None = None,
+) -> list[WaferEdge]:
+    """Wafer rims by geometry; see :func:`autoteach.detect.detect_wafer_rims`."""
+
+# --- end ellipse detection ---
 # --- mapping (issue 32: occupancy-grid rasterization, seed 004 ch. 2) ---
 
 class Rasterizer:

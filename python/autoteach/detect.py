@@ -210,6 +210,18 @@ class WaferEdge:
     wafer_id: int
     covariance: NDArray[np.float64] | None
 
+    @classmethod
+    def _from_core(cls, e: _core.WaferEdge) -> WaferEdge:
+        """Wraps a compiled ``_core.WaferEdge`` (every wafer-rim detector returns these)."""
+        return cls(
+            ellipse=Ellipse._wrap(e.ellipse),
+            points=e.points,
+            residual=e.residual,
+            kind=e.kind,
+            wafer_id=e.wafer_id,
+            covariance=e.covariance,
+        )
+
 
 def detect_wafers(
     image: ArrayLike,
@@ -418,14 +430,16 @@ def detect_wafers(
         edge_profile=str(edge_profile),
         level_band_search=bool(level_band_search),
     )
-    return [
-        WaferEdge(
-            ellipse=Ellipse._wrap(e.ellipse),
-            points=e.points,
-            residual=e.residual,
-            kind=e.kind,
-            wafer_id=e.wafer_id,
-            covariance=e.covariance,
-        )
-        for e in edges
-    ]
+    return [WaferEdge._from_core(e) for e in edges]
+
+
+# --- general ellipse detection (issue 42) ---
+from autoteach.ellipse_detection import (  # noqa: E402
+    EllipseDetection,
+    EllipseDetectOptions,
+    WaferGeometry,
+    detect_ellipses,
+    detect_wafer_rims,
+)
+
+__all__ += ["EllipseDetectOptions", "EllipseDetection", "WaferGeometry", "detect_ellipses", "detect_wafer_rims"]

@@ -454,8 +454,13 @@ def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, 
     from autoteach.detect import detect_wafers
 
     images = np.asarray(images)
-    if images.ndim != 3 or images.shape[0] == 0 or not images.any():
+    if images.ndim != 3 or images.shape[0] == 0:
         raise InvalidInputError("the session has no images: the detection front end cannot run")
+    if not images.any():
+        raise InvalidInputError(
+            f"all {images.shape[0]} images are black (every pixel 0; a session simulated with render=False "
+            "has no images): nothing can be detected"
+        )
     with ThreadPoolExecutor(max(1, int(workers))) as ex:
         it = ex.map(lambda im: detect_wafers(im, **options), images)
         return list(tqdm(it, total=len(images), desc="detecting", unit="frame", disable=not progress, leave=False))
@@ -1120,6 +1125,13 @@ def autoteach(
     timings["frontend_s"] = time.perf_counter() - t0
     stages.update()
     if len(obs) == 0:
+        n_rims = sum(len(d) for d in detections) if frontend == "detect" else 0
+        if n_rims:
+            raise InvalidInputError(
+                f"{n_rims} wafer rims were detected in {session.n_frames} frames, but no track lasted "
+                f"min_track_frames = {min_track_frames} frames, so all were dropped: record a longer session "
+                "or lower min_track_frames"
+            )
         raise InvalidInputError(
             "no wafer edge was detected in any frame: nothing constrains the calibration "
             f"({session.n_frames} frames, front end {frontend!r})"

@@ -22,10 +22,16 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linear_sum_assignment
 
 from autoteach import _core
 from autoteach.errors import InvalidInputError
+from autoteach.geometry import Ellipse
+
+
+def _assign(cost: ArrayLike, maximize: bool = False) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The project's Jonker–Volgenant solver (:func:`autoteach.detect.linear_sum_assignment`)."""
+    return _core.linear_sum_assignment(np.ascontiguousarray(cost, dtype=np.float64), bool(maximize))
+
 
 __all__ = [
     "Edge",
@@ -45,7 +51,8 @@ class Edge:
     """One elliptic edge segment of a wafer rim (the fields of ``autoteach_detect::wafers::WaferEdge``).
 
     Attributes:
-        ellipse: ``(cx, cy, a, b, theta)`` (pixels, radians).
+        ellipse: the rim's ellipse (pixels, radians), an :class:`~autoteach.geometry.Ellipse`; five
+            numbers ``(cx, cy, a, b, theta)`` are accepted and converted.
         points: ``(N, 2)`` edge points ``(u, v)``; empty means the whole ellipse.
         kind: ``"upper"`` or ``"lower"`` rim.
         wafer_id: groups the two rims of one wafer within one frame.
@@ -55,13 +62,17 @@ class Edge:
 
     """
 
-    ellipse: NDArray[np.float64]
+    ellipse: Ellipse
     points: NDArray[np.float64]
     kind: str = "upper"
     wafer_id: int = 0
     residual: float = 0.0
     covariance: NDArray[np.float64] | None = None
     label: Any = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.ellipse, Ellipse):
+            self.ellipse = Ellipse(*_ellipse_array(self.ellipse, 0))
 
 
 @dataclass
@@ -70,12 +81,12 @@ class Track:
 
     Attributes:
         id: track identifier.
-        ellipse: latest registered ellipse ``(cx, cy, a, b, theta)`` (upper rim preferred).
+        ellipse: latest registered ellipse (upper rim preferred), an :class:`~autoteach.geometry.Ellipse`.
         visible: registered in the current frame.
         confirmed: registered in at least ``min_hits`` frames.
         history: ``(frame index, edge)`` of every edge registered to the track (the caller's
             edge objects).
-        predicted: the predicted ellipse of the current frame, if any.
+        predicted: the predicted ellipse of the current frame (an ``Ellipse``), if any.
         circle: ``(centre (3,), normal (3,), radius)`` of the estimated 3D rim (world frame), if
             estimated.
         hits, missed, first_frame, last_frame: registered frames, consecutive misses, first and
@@ -84,11 +95,11 @@ class Track:
     """
 
     id: int
-    ellipse: NDArray[np.float64] | None = None
+    ellipse: Ellipse | None = None
     visible: bool = False
     confirmed: bool = False
     history: list[tuple[int, Any]] = field(default_factory=list)
-    predicted: NDArray[np.float64] | None = None
+    predicted: Ellipse | None = None
     circle: tuple[NDArray[np.float64], NDArray[np.float64], float] | None = None
     hits: int = 0
     missed: int = 0
@@ -249,8 +260,8 @@ class WaferTracker:
             t = self._tracks.setdefault(tid, Track(id=tid))
             t.visible, t.confirmed, t.hits, t.missed = d["visible"], d["confirmed"], d["hits"], d["missed"]
             t.first_frame, t.last_frame = d["first_frame"], d["last_frame"]
-            t.ellipse = None if d["ellipse"] is None else np.array(d["ellipse"])
-            t.predicted = None if d["predicted"] is None else np.array(d["predicted"])
+            t.ellipse = None if d["ellipse"] is None else Ellipse(*d["ellipse"])
+            t.predicted = None if d["predicted"] is None else Ellipse(*d["predicted"])
             c = d["circle"]
             t.circle = None if c is None else (np.array(c[0]), np.array(c[1]), float(c[2]))
         return [t for t in self._tracks.values() if t.confirmed]
@@ -375,7 +386,7 @@ def clear_mot(
             # Larger than any sum of valid distances: the most valid pairs first, then the least cost.
             big = 1.0 + 2.0 * float(np.abs(sub).sum())
             cost = np.where(valid, sub, big)
-            r, c = linear_sum_assignment(cost)
+            r, c = _assign(cost)
             for a, b in zip(r, c, strict=True):
                 if ok[rows[a], cols[b]]:
                     g, h = gt[rows[a]], hyp[cols[b]]
@@ -433,7 +444,7 @@ def idf1(
         m = np.zeros((len(gts), len(hyps)))
         for (g, h), c in counts.items():
             m[gts[g], hyps[h]] = c
-        r, c = linear_sum_assignment(m, maximize=True)
+        r, c = _assign(m, maximize=True)
         idtp = int(m[r, c].sum())
     return {
         "idtp": float(idtp),
@@ -545,7 +556,7 @@ def synthetic_detections(
                     continue
                 e = fit.ellipse
                 edge = Edge(
-                    ellipse=np.array([e.cx, e.cy, e.a, e.b, e.theta]),
+                    ellipse=e,
                     points=pts,
                     kind=r["rim"],
                     wafer_id=int(rank),
@@ -554,9 +565,7 @@ def synthetic_detections(
                 )
                 edges.append(edge)
                 if rng.random() < p_duplicate:
-                    edges.append(
-                        Edge(edge.ellipse.copy(), pts.copy(), edge.kind, edge.wafer_id, edge.residual, None, wafer)
-                    )
+                    edges.append(Edge(edge.ellipse, pts.copy(), edge.kind, edge.wafer_id, edge.residual, None, wafer))
         for k in range(rng.poisson(false_arcs)):
             a = rng.uniform(30.0, 400.0)
             b = rng.uniform(3.0, min(a, 120.0))
@@ -568,6 +577,6 @@ def synthetic_detections(
             y = ell[3] * np.sin(t)
             pts = np.stack([ell[0] + c * x - s * y, ell[1] + s * x + c * y], axis=1)
             pts += rng.normal(0.0, pixel_noise, pts.shape)
-            edges.append(Edge(ell, pts, "upper" if k % 2 == 0 else "lower", 10_000 + k, 0.0, None, None))
+            edges.append(Edge(Ellipse(*ell), pts, "upper" if k % 2 == 0 else "lower", 10_000 + k, 0.0, None, None))
         out.append(edges)
     return out

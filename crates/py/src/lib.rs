@@ -10,9 +10,11 @@ mod active;
 mod calib;
 pub mod convert;
 mod detect;
+mod ellipse_detection;
 pub mod errors;
 mod estimate;
 mod geometry;
+mod gray;
 mod handeye;
 mod lsq;
 mod mapping;
@@ -38,6 +40,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
+    ellipse_detection::register(m)?;
     mapping::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
