@@ -21,13 +21,63 @@ pub fn wrap_angle(a: f64) -> f64 {
     }
 }
 
-/// `(sin θ / θ, (1 − cos θ) / θ)` with their Taylor series near θ = 0.
-fn sinc_terms(th: f64) -> (f64, f64) {
-    if th.abs() < 1e-6 {
-        (1.0 - th * th / 6.0, th / 2.0 - th * th * th / 24.0)
+/// Below this |θ| the closed form `(θ − sin θ)/θ³` is replaced by its Taylor series.
+///
+/// Derivation (unit roundoff u = 2⁻⁵³ ≈ 1.1e-16): `sin θ` carries an absolute rounding error
+/// of about u·|θ|, and `θ − sin θ ≈ θ³/6`, so the closed form has a relative error of about
+/// 6u/θ² (1e-7 at θ = 1e-4, the precision loss the pose-graph Jacobian suffered). The series
+/// of [`THETA_MINUS_SIN_SERIES`] stops after the θ¹⁰ term, so its relative truncation error
+/// is about 6·θ¹²/15!. The two are equal where θ¹⁴ = u·15!, θ ≈ 0.53; at the threshold 0.5
+/// the closed form's error is 6u/0.25 ≈ 2.7e-15 and the series' 6·0.5¹²/15! ≈ 1.1e-15, so
+/// neither branch is worse than a few ulp anywhere. The test
+/// `right_jacobian_matches_its_power_series` pins this against an independent sum.
+const SE2_SERIES_ANGLE: f64 = 0.5;
+
+/// `(−1)^k / (2k+3)!` for k = 0..5: the series of `(θ − sin θ)/θ³` in θ².
+const THETA_MINUS_SIN_SERIES: [f64; 6] = [
+    1.0 / 6.0,
+    -1.0 / 120.0,
+    1.0 / 5040.0,
+    -1.0 / 362_880.0,
+    1.0 / 39_916_800.0,
+    -1.0 / 6_227_020_800.0,
+];
+
+/// `sin θ / θ`. The quotient has no cancellation (relative error ≈ 2u at every θ ≠ 0); the
+/// series `1 − θ²/6 + θ⁴/120` only avoids 0/0 and is used below 1e-3, where its truncation
+/// error θ⁶/5040 < 2e-22 is far below u.
+fn sinc(th: f64) -> f64 {
+    if th.abs() < 1e-3 {
+        let t2 = th * th;
+        1.0 - t2 / 6.0 * (1.0 - t2 / 20.0)
     } else {
-        (th.sin() / th, (1.0 - th.cos()) / th)
+        th.sin() / th
     }
+}
+
+/// `(1 − cos θ)/θ²`, computed as `½·sinc(θ/2)²` (= 2 sin²(θ/2)/θ²): no cancellation, so no
+/// threshold (the textbook `1 − cos θ` loses all digits below θ ≈ 1e-8).
+fn one_minus_cos_sq(th: f64) -> f64 {
+    let s = sinc(0.5 * th);
+    0.5 * s * s
+}
+
+/// `(θ − sin θ)/θ³`, the series below [`SE2_SERIES_ANGLE`].
+fn theta_minus_sin_cu(th: f64) -> f64 {
+    if th.abs() < SE2_SERIES_ANGLE {
+        let t2 = th * th;
+        THETA_MINUS_SIN_SERIES
+            .iter()
+            .rev()
+            .fold(0.0, |acc, &c| acc * t2 + c)
+    } else {
+        (th - th.sin()) / (th * th * th)
+    }
+}
+
+/// `(sin θ / θ, (1 − cos θ) / θ)`, accurate to a few ulp at every θ.
+fn sinc_terms(th: f64) -> (f64, f64) {
+    (sinc(th), th * one_minus_cos_sq(th))
 }
 
 /// Exp: tangent `[ρx, ρy, θ]` → pose `[x, y, θ]`, `t = V(θ)·ρ` (Solà eq. (156)).
@@ -89,32 +139,25 @@ pub fn se2_adjoint(x: &[f64; 3]) -> Matrix3<f64> {
     Matrix3::new(c, -s, x[1], s, c, -x[0], 0.0, 0.0, 1.0)
 }
 
-/// The right Jacobian `J_r(δ)` of SE(2) (Solà eq. (163)).
+/// The right Jacobian `J_r(δ)` of SE(2) (Solà eq. (163)):
+///
+/// `J_r = [[A, B, ρ₁D − ρ₂C], [−B, A, ρ₁C + ρ₂D], [0, 0, 1]]` with `A = sin θ/θ`,
+/// `B = (1 − cos θ)/θ`, `C = (1 − cos θ)/θ²`, `D = (θ − sin θ)/θ²` — eq. (163)'s third
+/// column regrouped so that each coefficient is evaluated without cancellation (see
+/// [`SE2_SERIES_ANGLE`]); at θ = 0 it is `I − ½ ad(δ)` exactly.
 pub fn se2_right_jacobian(d: &[f64; 3]) -> Matrix3<f64> {
     let (r1, r2, th) = (d[0], d[1], d[2]);
-    if th.abs() < 1e-6 {
-        // First-order expansion: J_r ≈ I − ½ ad(δ).
-        return Matrix3::new(
-            1.0,
-            th / 2.0,
-            -r2 / 2.0,
-            -th / 2.0,
-            1.0,
-            r1 / 2.0,
-            0.0,
-            0.0,
-            1.0,
-        );
-    }
-    let (s, c) = th.sin_cos();
-    let t2 = th * th;
+    let a = sinc(th);
+    let c = one_minus_cos_sq(th);
+    let b = th * c;
+    let dd = th * theta_minus_sin_cu(th);
     Matrix3::new(
-        s / th,
-        (1.0 - c) / th,
-        (th * r1 - r2 + r2 * c - r1 * s) / t2,
-        (c - 1.0) / th,
-        s / th,
-        (r1 + th * r2 - r1 * c - r2 * s) / t2,
+        a,
+        b,
+        r1 * dd - r2 * c,
+        -b,
+        a,
+        r1 * c + r2 * dd,
         0.0,
         0.0,
         1.0,
@@ -319,11 +362,48 @@ mod tests {
         assert!(Manifold::Se2.validate(&[0.0, f64::NAN, 0.0], "x").is_err());
     }
 
+    /// `J_r(τ) = Σ_k (−ad τ)^k / (k+1)!` summed term by term (Solà eq. (41) with the se(2)
+    /// adjoint `ad τ = [[0, −θ, ρ₂], [θ, 0, −ρ₁], [0, 0, 0]]`): an evaluation independent of
+    /// eq. (163)'s closed form and of its series branch.
+    fn right_jacobian_by_power_series(d: &[f64; 3]) -> Matrix3<f64> {
+        let ad = Matrix3::new(0.0, -d[2], d[1], d[2], 0.0, -d[0], 0.0, 0.0, 0.0);
+        let mut term = Matrix3::identity();
+        let mut sum = Matrix3::identity();
+        for k in 1..60 {
+            let next: Matrix3<f64> = term * ad;
+            term = next * (-1.0 / (k as f64 + 1.0));
+            sum += term;
+        }
+        sum
+    }
+
     #[test]
-    #[ignore = "known bug: J_r's full formula loses precision for |θ| < 1e-4 (θ² denominator); the small-angle branch needs a wider threshold and a second-order series"]
+    fn right_jacobian_matches_its_power_series() {
+        // Both sides of the series threshold, and the angles where the old closed form lost
+        // digits (6u/θ² relative error: 7e-9 at θ = 1e-4, 7e-3 at θ = 1e-7).
+        for th in [
+            0.0, 1e-12, 1e-8, 1e-7, 1e-5, 1e-4, 1e-3, 0.1, 0.4999, 0.5, 0.5001, 1.3, -2.7,
+        ] {
+            let tau = [1.7, -0.8, th];
+            let jr = se2_right_jacobian(&tau);
+            let truth = right_jacobian_by_power_series(&tau);
+            let err = (jr - truth).amax();
+            assert!(
+                err < 1e-14,
+                "θ = {th:e}: |J_r − series| = {err:e}\n{jr}\n{truth}"
+            );
+        }
+    }
+
+    #[test]
     fn right_jacobian_matches_finite_differences() {
         // Exp(τ + δ) ≈ Exp(τ)·Exp(J_r(τ) δ).
-        for tau in [[0.4, -0.3, 1.1], [1.0, 2.0, 1e-8], [-2.0, 0.5, -2.5]] {
+        for tau in [
+            [0.4, -0.3, 1.1],
+            [1.0, 2.0, 1e-8],
+            [1.0, 2.0, 3e-5],
+            [-2.0, 0.5, -2.5],
+        ] {
             let jr = se2_right_jacobian(&tau);
             let h = 1e-6;
             for i in 0..3 {
