@@ -6,7 +6,8 @@ semi-axes within 1.5 % of a visible true rim) with these detectors on identical 
 
 - ``wafers``: ``detect_wafers`` with its default options (the unchanged pipeline path);
 - ``wafer_rims``: ``detect_wafer_rims`` given the scene's physical inputs only (wafer radius and
-  thickness; ``up`` is image up, the generator's camera is upright);
+  thickness, the focal length of the intrinsics; ``up`` is image up, the generator's camera is
+  upright);
 - ``ellipses``: ``detect_ellipses`` with default options (all accepted edges, no pairing).
 
 Run: ``RAYON_NUM_THREADS=1 PYTHONPATH=python:benchmarks python benchmarks/wafer_rims_families.py --images 10``.
@@ -26,7 +27,7 @@ from wafer_families import run_family  # type: ignore[import-not-found]
 
 def _rims(scene: CarrierScene) -> list:
     p = scene.params
-    geo = detect.WaferGeometry(radius=p.wafer_radius, thickness=p.wafer_thickness)
+    geo = detect.WaferGeometry(radius=p.wafer_radius, thickness=p.wafer_thickness, focal_length=float(scene.K[0, 0]))
     return detect.detect_wafer_rims(scene.image, geo)
 
 

@@ -41,13 +41,13 @@ def test_bundle_adjust_reaches_scipys_cost(linear_solver: str) -> None:
     K, poses_true, _, obs, pi, xi, init_poses, init_points = _small_scene()
     res = bundle_adjust(K, init_poses, init_points, obs, pi, xi, fixed_poses=(0, 1), linear_solver=linear_solver)
     _, cost_sp, _ = run_scipy(K, obs, pi, xi, init_poses, init_points)
-    assert res.summary["converged"], res.summary
+    assert res.summary.converged, res.summary
     assert abs(res.final_cost - cost_sp) <= 1e-6 * cost_sp
     # The reported cost is the cost of the returned values.
     r = project(K, res.pose_vectors[pi], res.points[xi]) - obs
     assert res.final_cost == pytest.approx(0.5 * np.sum(r**2), rel=1e-12)
     np.testing.assert_array_equal(res.pose_vectors[:2], init_poses[:2])
-    assert res.iterations == res.summary["iterations"] > 0
+    assert res.iterations == res.summary.iterations > 0
 
 
 def test_bundle_adjust_huber_is_a_stationary_point_of_the_robust_cost() -> None:
@@ -110,7 +110,7 @@ def test_marginal_covariance_equals_inverse_information() -> None:
     pts = [p.add_block(x, "euclidean") for x in points]
     p.add_reprojections(K, obs, [cams[i] for i in pi], [pts[j] for j in xi])
     summary = p.solve()
-    assert summary["converged"], summary
+    assert summary.converged, summary
     solved = np.array([p.values(b) for b in pts])
     want = np.linalg.inv(_fd_information(K, poses_true, solved, pi, xi, obs))
     sel = [3, 7, 0]
@@ -149,7 +149,7 @@ def test_pose_graph_with_priors_recovers_consistent_truth() -> None:
             p.add_relative_pose(ids[a], ids[b], np.linalg.inv(truth[a]) @ truth[b], cov)
     p.add_prior(ids[0], truth[0], cov * 0.01)
     s = p.solve()
-    assert s["converged"] and s["final_cost"] < 1e-16, s
+    assert s.converged and s.final_cost < 1e-16, s
     for b, T in zip(ids, truth, strict=True):
         np.testing.assert_allclose(p.pose(b), T, atol=1e-9)
     cov0 = p.marginal_covariance([ids[0]])
@@ -172,7 +172,7 @@ def test_point_to_conic_recovers_the_wafer_pose() -> None:
         uv = (K @ pc)[:2].T / pc[2][:, None]
         p.add_point_to_conic(K, radius, uv, c, obj)
     s = p.solve()
-    assert s["final_cost"] < 1e-20, s
+    assert s.final_cost < 1e-20, s
     # The rim is symmetric about the wafer normal: compare the normal and the centre.
     got = p.pose(obj)
     np.testing.assert_allclose(got[:3, 2], T_wo[:3, 2], atol=1e-7)

@@ -59,7 +59,7 @@ def test_exact_segments_give_exact_pose() -> None:
     assert sorted(det.support[:, 0]) == list(range(n))
     assert det.rms < 1e-6
     assert np.allclose(det.centre_image, _apply(H, centre[None])[0], atol=1e-6)
-    assert det.vote_map.ndim == 2 and det.vote_map.max() > 0
+    assert det.vote_map.data.shape == (det.vote_map.rows, det.vote_map.cols) and det.vote_map.data.max() > 0
 
 
 def test_segment_detector_finds_rendered_edges() -> None:

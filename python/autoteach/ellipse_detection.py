@@ -171,6 +171,10 @@ class WaferGeometry:
             camera pose; default image up.
         semi_major_range: Accepted semi-major axes ``(lo, hi)`` (pixels), from the rough camera
             pose; ``None`` for any.
+        focal_length: Focal length (pixels) of the intrinsics, if known. Where a wafer's edge
+            face is narrower than the edge operator's reach (2 px) its rims are placed about the
+            band's centre line, and the focal length predicts how much the far rim's semi-minor
+            axis exceeds the near one's; ``None`` keeps the edges' own semi-minor axes.
 
     """
 
@@ -178,6 +182,7 @@ class WaferGeometry:
     thickness: float = 0.775
     up: tuple[float, float] = (0.0, -1.0)
     semi_major_range: tuple[float, float] | None = None
+    focal_length: float | None = None
 
 
 def detect_wafer_rims(
@@ -224,6 +229,7 @@ def detect_wafer_rims(
         thickness=float(geo.thickness),
         up=(float(geo.up[0]), float(geo.up[1])),
         semi_major_range=rng,
+        focal_length=None if geo.focal_length is None else float(geo.focal_length),
         **fields,
     )
     return [WaferEdge._from_core(e) for e in rims]

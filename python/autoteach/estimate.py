@@ -48,7 +48,7 @@ import math
 import sys
 from collections.abc import Callable, Sequence
 from copy import deepcopy
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -77,6 +77,7 @@ __all__ = [
     "LinearModel",
     "MerweScaledSigmaPoints",
     "SimplexSigmaPoints",
+    "SolverSummary",
     "UnscentedKalmanFilter",
     "bundle_adjust",
     "unscented_transform",
@@ -1000,22 +1001,93 @@ def _index_array(a: ArrayLike, name: str) -> NDArray[np.int64]:
     return np.ascontiguousarray(arr, dtype=np.int64)
 
 
-@dataclass
+_CONVERGED_TERMINATIONS = frozenset(
+    {"FunctionTolerance", "GradientTolerance", "ParameterTolerance", "NoFreeParameters"}
+)
+
+
+@dataclass(frozen=True, slots=True)
+class SolverSummary:
+    """What the least-squares solver did (the fields of ``autoteach_estimate::lsq::Summary``).
+
+    Returned by :meth:`LeastSquaresProblem.solve` and held by :attr:`BundleAdjustResult.summary`.
+    """
+
+    iterations: int
+    """Iterations (trial steps)."""
+    successful_steps: int
+    """Accepted steps."""
+    initial_cost: float
+    """Cost ½ Σ ρ(‖r‖²) at the start."""
+    final_cost: float
+    """Cost at the end."""
+    termination: str
+    """Why it stopped: ``FunctionTolerance``, ``GradientTolerance``, ``ParameterTolerance``,
+    ``MaxIterations``, ``NoFreeParameters``, ``DampingLimit``, ``LinearSolverFailure`` or ``NonFinite``."""
+    message: str
+    """Human-readable reason."""
+    time_s: float
+    """Wall time of the solve (s)."""
+    linear_solver: str
+    """Linear solver used (``Dense``, ``SparseCholesky``, ``SparseSchur``, …; resolved from ``auto``)."""
+    num_parameters: int
+    """Free tangent dimension."""
+    num_residuals: int
+    """Total residual dimension."""
+    num_eliminated_blocks: int
+    """Blocks eliminated first (Schur), 0 unless the Schur solver ran."""
+    gradient_max_norm: float
+    """max |Jᵀr| at the end."""
+    time_setup_s: float
+    """Time (s) in structure analysis."""
+    time_evaluate_s: float
+    """Time (s) evaluating residuals and Jacobians."""
+    time_assemble_s: float
+    """Time (s) assembling the normal equations."""
+    time_linear_s: float
+    """Time (s) factorising and solving the normal equations."""
+    time_schur_reduce_s: float
+    """Part of :attr:`time_linear_s` spent eliminating the point blocks (Schur path)."""
+    time_schur_factor_s: float
+    """Part of :attr:`time_linear_s` spent on the reduced camera system (Schur path)."""
+
+    @property
+    def converged(self) -> bool:
+        """Whether :attr:`termination` is a convergence criterion (not a failure or a limit)."""
+        return self.termination in _CONVERGED_TERMINATIONS
+
+    @classmethod
+    def _from_core(cls, d: Any) -> SolverSummary:
+        """From the binding's summary dict (keys are the Rust field names, plus ``converged``)."""
+        return cls(**{f: d[f] for f in cls.__dataclass_fields__})
+
+
+@dataclass(frozen=True, slots=True)
 class BundleAdjustResult:
-    """Result of :func:`bundle_adjust`."""
+    """Result of :func:`bundle_adjust` (the fields of ``autoteach_estimate::lsq::BundleResult``).
+
+    ``poses`` are 4×4 like every pose of the API; the binding's N×6 form is kept as
+    :attr:`pose_vectors`.
+    """
 
     poses: F64Array
     """Optimised world-to-camera poses ``T_cw``, N×4×4 (the project's pose convention)."""
-    pose_vectors: F64Array
-    """The same poses as N×6 (rotation vector, translation), scipy's bundle-adjustment layout."""
     points: F64Array
     """Optimised world points, M×3."""
-    final_cost: float
-    """½ Σ ρ(‖r‖²) with r the pixel reprojection errors (scipy's ``cost``)."""
-    iterations: int
-    """Solver iterations (trial steps)."""
-    summary: dict[str, Any] = field(default_factory=dict)
-    """Solver summary: iterations, initial/final cost, termination, message, time_s, …"""
+    summary: SolverSummary
+    """What the solver did."""
+    pose_vectors: F64Array
+    """The same poses as N×6 (rotation vector, translation), scipy's bundle-adjustment layout."""
+
+    @property
+    def final_cost(self) -> float:
+        """½ Σ ρ(‖r‖²) with r the pixel reprojection errors (scipy's ``cost``): ``summary.final_cost``."""
+        return self.summary.final_cost
+
+    @property
+    def iterations(self) -> int:
+        """Solver iterations (trial steps): ``summary.iterations``."""
+        return self.summary.iterations
 
 
 def _pose_vectors(poses: ArrayLike) -> F64Array:
@@ -1122,11 +1194,9 @@ def bundle_adjust(
     poses_a = np.asarray(poses_a)
     return BundleAdjustResult(
         poses=_pose_matrices(poses_a),
-        pose_vectors=poses_a,
         points=points_a,
-        final_cost=float(summary["final_cost"]),
-        iterations=int(summary["iterations"]),
-        summary=dict(summary),
+        summary=SolverSummary._from_core(summary),
+        pose_vectors=poses_a,
     )
 
 
@@ -1291,9 +1361,11 @@ class LeastSquaresProblem:
         ftol: float = 1e-10,
         gtol: float = 1e-10,
         xtol: float = 1e-10,
-    ) -> dict[str, Any]:
-        """Solve (GIL released); returns the summary dict (``termination``, ``message``, costs, …)."""
-        return dict(self._inner.solve(**_solver_kwargs(method, linear_solver, max_iterations, ftol, gtol, xtol)))
+    ) -> SolverSummary:
+        """Solve (GIL released); returns what the solver did (``termination``, ``message``, costs, …)."""
+        return SolverSummary._from_core(
+            self._inner.solve(**_solver_kwargs(method, linear_solver, max_iterations, ftol, gtol, xtol))
+        )
 
     def marginal_covariance(self, blocks: Sequence[int]) -> F64Array:
         """Joint tangent covariance of ``blocks`` from (JᵀJ)⁻¹.

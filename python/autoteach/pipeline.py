@@ -516,7 +516,7 @@ def detect_frontend(
         tracker.update(edges, camera_poses[f])
     tracks = tracker.all_tracks()
     used = [t for t in tracks if t.hits >= min_track_frames]
-    centres = np.array([t.circle[0] for t in used if t.circle is not None and np.all(np.isfinite(t.circle[0]))])
+    centres = np.array([t.circle.center for t in used if t.circle is not None and np.all(np.isfinite(t.circle.center))])
     xy0 = np.median(centres[:, :2], axis=0) if len(centres) else np.zeros(2)
     slot_of: dict[int, int] = {}
     slot_cost: dict[int, float] = {}

@@ -34,8 +34,10 @@ def _assign(cost: ArrayLike, maximize: bool = False) -> tuple[NDArray[np.intp], 
 
 
 __all__ = [
+    "Circle3",
     "Edge",
     "Track",
+    "UpdateTimings",
     "WaferTracker",
     "clear_mot",
     "idf1",
@@ -75,9 +77,40 @@ class Edge:
             self.ellipse = Ellipse(*_ellipse_array(self.ellipse, 0))
 
 
+@dataclass(frozen=True, slots=True)
+class Circle3:
+    """A circle in 3D (the fields of ``autoteach_detect::track::circle::Circle3``), metres."""
+
+    center: NDArray[np.float64]
+    """Centre ``(3,)``."""
+    normal: NDArray[np.float64]
+    """Unit normal ``(3,)`` of the circle's plane."""
+    radius: float
+    """Radius."""
+
+
+@dataclass(frozen=True, slots=True)
+class UpdateTimings:
+    """Wall-clock seconds of the stages of the last :meth:`WaferTracker.update`.
+
+    The fields of ``autoteach_detect::track::UpdateTimings``.
+    """
+
+    predict: float
+    """Prediction of every track's segment (§4.2)."""
+    associate: float
+    """Association (Algorithm 5: point sets, kd-tree, kNN, E-step, cost matrix, assignment -- or the
+    greedy baseline)."""
+    manage: float
+    """Track management (Algorithm 4), including the multi-view 3D rim estimates."""
+
+
 @dataclass
 class Track:
-    """One tracked wafer.
+    """One tracked wafer (the fields of ``autoteach_detect::track::Track``, updated in place by the tracker).
+
+    ``ellipse`` and ``circle`` are what the Rust ``Track::ellipse()`` and ``Track::circle()``
+    methods return.
 
     Attributes:
         id: track identifier.
@@ -87,10 +120,11 @@ class Track:
         history: ``(frame index, edge)`` of every edge registered to the track (the caller's
             edge objects).
         predicted: the predicted ellipse of the current frame (an ``Ellipse``), if any.
-        circle: ``(centre (3,), normal (3,), radius)`` of the estimated 3D rim (world frame), if
-            estimated.
+        circle: the estimated 3D rim (world frame), a :class:`Circle3`, if estimated.
         hits, missed, first_frame, last_frame: registered frames, consecutive misses, first and
             last registered frame.
+        edges: the edges (the caller's objects) registered in the last frame the track was seen
+            (one or two rims).
 
     """
 
@@ -100,11 +134,12 @@ class Track:
     confirmed: bool = False
     history: list[tuple[int, Any]] = field(default_factory=list)
     predicted: Ellipse | None = None
-    circle: tuple[NDArray[np.float64], NDArray[np.float64], float] | None = None
+    circle: Circle3 | None = None
     hits: int = 0
     missed: int = 0
     first_frame: int = 0
     last_frame: int = 0
+    edges: list[Any] = field(default_factory=list)
 
 
 def _get(obj: Any, name: str, default: Any = None) -> Any:
@@ -215,15 +250,10 @@ class WaferTracker:
         return int(self._inner.frame)
 
     @property
-    def last_timings(self) -> dict[str, float]:
-        """Seconds spent in the stages of the last :meth:`update` (inside Rust).
-
-        ``predict`` (§4.2), ``associate`` (Algorithm 5: point sets, kd-tree, kNN, E-step, cost
-        matrix, assignment — or the greedy baseline) and ``manage`` (Algorithm 4, including the
-        multi-view 3D rim estimates).
-        """
+    def last_timings(self) -> UpdateTimings:
+        """Seconds spent in the stages of the last :meth:`update` (inside Rust), see :class:`UpdateTimings`."""
         p, a, m = self._inner.last_timings
-        return {"predict": float(p), "associate": float(a), "manage": float(m)}
+        return UpdateTimings(predict=float(p), associate=float(a), manage=float(m))
 
     def update(self, edges: Iterable[Any], camera_pose: ArrayLike | None = None) -> list[Track]:
         """Process one frame and return the live confirmed tracks.
@@ -263,7 +293,8 @@ class WaferTracker:
             t.ellipse = None if d["ellipse"] is None else Ellipse(*d["ellipse"])
             t.predicted = None if d["predicted"] is None else Ellipse(*d["predicted"])
             c = d["circle"]
-            t.circle = None if c is None else (np.array(c[0]), np.array(c[1]), float(c[2]))
+            t.circle = None if c is None else Circle3(np.array(c[0]), np.array(c[1]), float(c[2]))
+            t.edges = [e for f, e in t.history if f == t.last_frame]
         return [t for t in self._tracks.values() if t.confirmed]
 
     def tracks(self, include_tentative: bool = False) -> list[Track]:
@@ -560,7 +591,7 @@ def synthetic_detections(
                     points=pts,
                     kind=r["rim"],
                     wafer_id=int(rank),
-                    residual=fit.residual,
+                    residual=fit.residual_mean,
                     label=wafer,
                 )
                 edges.append(edge)

@@ -32,6 +32,7 @@ use autoteach_geometry::conic::Ellipse;
 use nalgebra::{Matrix5, Point2, Vector2};
 
 use crate::edges::{GrayView, Pixel};
+use crate::ellipse_detection::refine::OPERATOR_REACH;
 use crate::ellipse_detection::{EllipseDetectParams, EllipseDetection, detect_ellipses};
 use crate::wafers::{RimKind, WaferEdge};
 use crate::{DetectError, Result};
@@ -39,10 +40,17 @@ use crate::{DetectError, Result};
 /// Relative tolerance of the rim offset `s`: perspective changes it by up to the wafer's depth
 /// span over its distance, `R/Z` (0.19 for a 150 mm wafer at 0.4 m); 0.3 covers `Z ≥ 0.25 m`.
 pub const RIM_OFFSET_TOLERANCE: f64 = 0.3;
+/// Bias (pixels) a rim's fitted centre may carry beyond its covariance where the two rims are
+/// closer than the edge operator's reach ([`crate::ellipse_detection::refine::OPERATOR_REACH`]):
+/// their edges pull each other's points along the whole arc, which no point selection removes
+/// (measured 0.2–1 px on 1.5 px bands). Added to the offset tolerance so such a wafer still
+/// pairs; the neighbouring wafer's rims are `pitch/h` (10–20) offsets away.
+pub const RIM_CENTRE_BIAS: f64 = 1.0;
 /// Largest difference of the two rims' semi-axes beyond their fits' 3σ, relative to the
 /// semi-major axis `a`. The rims are one circle seen from heights `h` apart: the far rim's
-/// elevation differs by `h·cos φ/Z`, which changes `b = a·sin φ` by `a·(h/Z)·cos²φ` — a
-/// multiple of `a`, not of `b` (1.1 px at `a` = 446 px for 1 mm at 0.4 m, i.e. 2 % of a
+/// elevation differs by `h·cos φ/Z` and its distance by `h·sin φ`, which changes
+/// `b = a·sin φ` by `a·(h/Z)·(cos²φ − sin²φ)` (see [`narrow_band_rims`]) — a multiple of `a`,
+/// not of `b` (1.1 px at `a` = 446 px for 1 mm at 0.4 m, i.e. 2 % of a
 /// 53 px semi-minor axis) — and `a` by `a·h/Z` at most. 0.02 covers `Z ≥ 50 h` and the fits'
 /// bias on partial arcs.
 pub const RIM_AXIS_TOLERANCE: f64 = 0.02;
@@ -63,6 +71,10 @@ pub struct WaferGeometry {
     /// Accepted range of the semi-major axis (pixels), from the rough camera pose; `None`
     /// (default) for any.
     pub semi_major: Option<(f64, f64)>,
+    /// Focal length (pixels) of the intrinsics, if known: it predicts the difference of the two
+    /// rims' semi-minor axes where the band is too narrow to measure it (see
+    /// [`narrow_band_rims`]). `None` (default): the edges' own difference is kept.
+    pub focal_length: Option<f64>,
 }
 
 impl Default for WaferGeometry {
@@ -72,6 +84,7 @@ impl Default for WaferGeometry {
             thickness: 0.775,
             up: [0.0, -1.0],
             semi_major: None,
+            focal_length: None,
         }
     }
 }
@@ -94,6 +107,11 @@ impl WaferGeometry {
                 self.thickness,
                 "must be positive and under the radius",
             );
+        }
+        if let Some(f) = self.focal_length
+            && !(f > 0.0 && f.is_finite())
+        {
+            return bad("focal_length", f, "must be finite and positive");
         }
         let up = Vector2::new(self.up[0], self.up[1]);
         let n = up.norm();
@@ -139,6 +157,77 @@ pub fn rim_offset(e: &Ellipse, thickness_ratio: f64, up: &Vector2<f64>) -> Optio
     Some(minor * (thickness_ratio * e.a * (1.0 - q * q).sqrt()))
 }
 
+/// The two rims of a wafer whose edge face is a band narrower than the edge operator's reach
+/// ([`OPERATOR_REACH`]): its two edges pull each other's points along the whole arc (the
+/// upper edge down, the lower edge up, by up to a pixel), so their separation is not
+/// measurable, but the pull is symmetric and the band's centre line — the mean of the two edge
+/// ellipses — is not biased. The rims are that centre line moved by `∓s/2` along the rim
+/// offset `s` of [`rim_offset`] (error: its perspective tolerance times `s/2`, under 0.3 px
+/// for such bands), with the same semi-major axis and, when the focal length `f` is known,
+/// semi-minor axes `b̄ ± Δb/2` with the far rim's excess `Δb = (h/R)·(a²/f)·(1 − 2(b/a)²)`.
+/// That is `b = a·sin φ` differentiated over the rims' height difference `h` at distance `Z`:
+/// the far rim's elevation is larger by `h·cos φ/Z` (`+a·(h/Z)·cos²φ`) and it is farther by
+/// `h·sin φ`, which shrinks `a` by `a·(h/Z)·sin φ` (`−a·(h/Z)·sin²φ`), with
+/// `h/Z = (h/R)(a/f)`. The far rim is the lower one for a camera above the wafers, i.e. when
+/// the lower edge's support lies on the far side of its centre from `up`. Without `f` the
+/// edges' own semi-minor axes are kept.
+fn narrow_band_rims(
+    lower: &Candidate,
+    upper: &Candidate,
+    lower_points: &[Vector2<f64>],
+    ratio: f64,
+    up: &Vector2<f64>,
+    focal_length: Option<f64>,
+) -> Option<(Ellipse, Ellipse)> {
+    let (l, u) = (&lower.ellipse, &upper.ellipse);
+    let mean = Ellipse::new(
+        0.5 * (l.cx + u.cx),
+        0.5 * (l.cy + u.cy),
+        0.5 * (l.a + u.a),
+        0.5 * (l.b + u.b),
+        l.theta,
+    )
+    .ok()?;
+    let s = rim_offset(&mean, ratio, up)?;
+    if !(s.norm() < OPERATOR_REACH) {
+        return None;
+    }
+    let (bl, bu) = match focal_length {
+        Some(f) => {
+            let q = (mean.b / mean.a).min(1.0);
+            let db = ratio * mean.a * mean.a / f * (1.0 - 2.0 * q * q);
+            let n = lower_points.len().max(1) as f64;
+            let side: f64 = lower_points
+                .iter()
+                .map(|p| (p.x - l.cx) * up.x + (p.y - l.cy) * up.y)
+                .sum::<f64>()
+                / n;
+            // Camera above: the lower rim's visible (front) arc lies against `up`.
+            let far_is_lower = side < 0.0;
+            let sign = if far_is_lower { 1.0 } else { -1.0 };
+            (mean.b + sign * 0.5 * db, mean.b - sign * 0.5 * db)
+        }
+        None => (l.b, u.b),
+    };
+    let lo = Ellipse::new(
+        mean.cx - 0.5 * s.x,
+        mean.cy - 0.5 * s.y,
+        mean.a,
+        bl.min(mean.a),
+        mean.theta,
+    )
+    .ok()?;
+    let hi = Ellipse::new(
+        mean.cx + 0.5 * s.x,
+        mean.cy + 0.5 * s.y,
+        mean.a,
+        bu.min(mean.a),
+        mean.theta,
+    )
+    .ok()?;
+    Some((lo, hi))
+}
+
 /// Normalised misfit (≤ 1 accepted) of `lower`/`upper` as the two rims of one wafer.
 fn pair_cost(lower: &Candidate, upper: &Candidate, ratio: f64, up: &Vector2<f64>) -> Option<f64> {
     let (l, u) = (&lower.ellipse, &upper.ellipse);
@@ -153,7 +242,7 @@ fn pair_cost(lower: &Candidate, upper: &Candidate, ratio: f64, up: &Vector2<f64>
     let expected = rim_offset(&mean, ratio, up)?;
     let delta = Vector2::new(u.cx - l.cx, u.cy - l.cy);
     let sigma = (centre_var(&lower.covariance) + centre_var(&upper.covariance)).sqrt();
-    let tol = RIM_OFFSET_TOLERANCE * expected.norm() + 3.0 * sigma;
+    let tol = RIM_OFFSET_TOLERANCE * expected.norm() + 3.0 * sigma + RIM_CENTRE_BIAS;
     let err = (delta - expected).norm();
     if !(err <= tol) {
         return None;
@@ -271,15 +360,38 @@ pub fn pair_rims(dets: &[EllipseDetection], geometry: &WaferGeometry) -> Result<
     let height = |c: &Candidate| c.ellipse.cx * up.x + c.ellipse.cy * up.y;
     wafers.sort_by(|x, y| height(y.2).total_cmp(&height(x.2)));
     let mut out = Vec::with_capacity(2 * wafers.len());
-    for (id, (_, lower, upper)) in wafers.into_iter().enumerate() {
+    for (id, (kind_of_pair, lower, upper)) in wafers.into_iter().enumerate() {
+        // Edge pairs (not lines) of a band narrower than the operator's reach: the centre line.
+        let narrow = if kind_of_pair == 1 {
+            let lower_points: Vec<Vector2<f64>> = lower
+                .edges
+                .iter()
+                .flat_map(|&k| dets[k].points.iter().copied())
+                .collect();
+            narrow_band_rims(
+                lower,
+                upper,
+                &lower_points,
+                ratio,
+                &up,
+                geometry.focal_length,
+            )
+        } else {
+            None
+        };
         for (kind, c) in [(RimKind::Upper, upper), (RimKind::Lower, lower)] {
             let points = c
                 .edges
                 .iter()
                 .flat_map(|&k| dets[k].points.iter().map(|p| Point2::new(p.x, p.y)))
                 .collect();
+            let ellipse = match (narrow, kind) {
+                (Some((_, hi)), RimKind::Upper) => hi,
+                (Some((lo, _)), _) => lo,
+                (None, _) => c.ellipse,
+            };
             out.push(WaferEdge {
-                ellipse: c.ellipse,
+                ellipse,
                 points,
                 residual: c.residual,
                 covariance: c.covariance,
@@ -382,6 +494,84 @@ mod tests {
         assert!((rims[0].ellipse.cy - upper.cy).abs() < 1e-9);
         assert!((rims[0].ellipse.b - upper.b).abs() < 1e-9);
         assert!((rims[1].ellipse.cy - lower.cy).abs() < 1e-9);
+    }
+
+    /// The exact rims of a wafer (radius 75 mm, thickness `h`) seen by a pinhole camera
+    /// (`f` = 1000 px, principal point (640, 360)) from `distance` mm at `elevation` (degrees):
+    /// (upper, lower), by `project_circle_world`, independent of this module's formulas.
+    fn exact_rims(h: f64, distance: f64, elevation: f64) -> (Ellipse, Ellipse) {
+        use autoteach_geometry::conic::project_circle_world;
+        use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+        let k = Matrix3::new(1000.0, 0.0, 640.0, 0.0, 1000.0, 360.0, 0.0, 0.0, 1.0);
+        let phi = elevation.to_radians();
+        let eye = Vector3::new(0.0, -distance * phi.cos(), distance * phi.sin());
+        let z = (-eye).normalize();
+        let x = z.cross(&Vector3::z()).normalize();
+        let y = z.cross(&x);
+        let r_wc = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
+        let t_wc = Isometry3::from_parts(
+            Translation3::from(eye),
+            UnitQuaternion::from_rotation_matrix(&r_wc),
+        );
+        let t_cw = t_wc.inverse();
+        let rim = |zc: f64| {
+            project_circle_world(&k, &t_cw, &Vector3::new(0.0, 0.0, zc), &Vector3::z(), 75.0)
+                .expect("rim image")
+        };
+        (rim(0.5 * h), rim(-0.5 * h))
+    }
+
+    #[test]
+    fn narrow_band_rims_recover_the_exact_rims_from_symmetrically_pulled_edges() {
+        for (h, distance, elevation) in [(0.6, 400.0, 12.0), (0.5, 450.0, 25.0), (0.7, 380.0, 8.0)]
+        {
+            let (upper, lower) = exact_rims(h, distance, elevation);
+            let offset = Vector2::new(upper.cx - lower.cx, upper.cy - lower.cy);
+            assert!(
+                offset.norm() < OPERATOR_REACH,
+                "a narrow band: {}",
+                offset.norm()
+            );
+            // Each edge pulled 0.4 px toward the other, the semi-minor axes toward each other too.
+            let pull = offset.normalize() * 0.4;
+            let moved = |e: &Ellipse, d: Vector2<f64>, db: f64| {
+                Ellipse::new(e.cx + d.x, e.cy + d.y, e.a - 0.2, e.b + db, e.theta).expect("ellipse")
+            };
+            let lo = moved(&lower, pull, -0.3);
+            let hi = moved(&upper, -pull, 0.3);
+            let cand = |e: Ellipse| Candidate {
+                ellipse: e,
+                edges: vec![0],
+                covariance: None,
+                residual: 0.05,
+            };
+            // The lower rim's visible arc (camera above): the half away from `up`.
+            let front = lower
+                .sample(100, 0.2, std::f64::consts::PI - 0.2)
+                .expect("arc");
+            let ratio = h / 75.0;
+            let up = Vector2::new(0.0, -1.0);
+            let (l, u) = narrow_band_rims(&cand(lo), &cand(hi), &front, ratio, &up, Some(1000.0))
+                .expect("narrow band");
+            for (got, truth) in [(l, lower), (u, upper)] {
+                let dc = (got.cx - truth.cx).hypot(got.cy - truth.cy);
+                assert!(dc < 0.3, "centre {dc} at {elevation}°");
+                assert!(
+                    (got.b / truth.b - 1.0).abs() < 0.01,
+                    "b {} vs {}",
+                    got.b,
+                    truth.b
+                );
+                assert!((got.a / truth.a - 1.0).abs() < 0.01);
+            }
+            // The far (lower) rim's excess semi-minor axis is predicted within 25 %.
+            let excess = (l.b - u.b) / (lower.b - upper.b);
+            assert!((excess - 1.0).abs() < 0.25, "Δb ratio {excess}");
+            // Without the focal length the edges' own semi-minor axes stay.
+            let (l2, _) =
+                narrow_band_rims(&cand(lo), &cand(hi), &front, ratio, &up, None).expect("band");
+            assert_eq!(l2.b, lo.b);
+        }
     }
 
     #[test]

@@ -149,7 +149,7 @@ fn ellipse_detect(
 #[pyfunction]
 #[pyo3(signature = (
     image, *, radius=75.0, thickness=0.775, up=(0.0, -1.0), semi_major_range=None,
-    min_arc_points=12, min_semi_minor=2.0, max_gap=None, blur_sigma=0.0, max_nfa=1.0,
+    focal_length=None, min_arc_points=12, min_semi_minor=2.0, max_gap=None, blur_sigma=0.0, max_nfa=1.0,
     gradient_noise=None
 ))]
 #[allow(clippy::too_many_arguments)]
@@ -160,6 +160,7 @@ fn wafer_rims_detect(
     thickness: f64,
     up: (f64, f64),
     semi_major_range: Option<(f64, f64)>,
+    focal_length: Option<f64>,
     min_arc_points: usize,
     min_semi_minor: f64,
     max_gap: Option<f64>,
@@ -173,6 +174,7 @@ fn wafer_rims_detect(
             thickness,
             up: [up.0, up.1],
             semi_major: semi_major_range,
+            focal_length,
         },
         ellipses: EllipseDetectParams {
             min_arc_points,

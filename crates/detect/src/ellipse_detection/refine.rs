@@ -157,7 +157,7 @@ pub(crate) fn merge_split(
 
 /// Steps 2 and 3 for detection `i` of `all`: the support without points within `reach` of
 /// another detection's ellipse, robustly refitted. `edge_noise` floors the robust spread.
-/// `None` when nothing changes (too few points to trim, or a fit fails).
+/// `None` when nothing changes (no point left out) or a fit fails.
 pub(crate) fn trim_and_refit(
     all: &[EllipseDetection],
     boxes: &[[f64; 4]],
@@ -186,14 +186,21 @@ pub(crate) fn trim_and_refit(
         } else {
             pts.clone()
         };
-    let mut fit = refit(&base, &det.ellipse)?;
+    // The detection's own fit stands for the untrimmed support: no refit unless something
+    // is left out (most detections: one pass of distances, no fit).
+    let mut fit: Option<EllipseFit> = if base.len() == pts.len() {
+        None
+    } else {
+        Some(refit(&base, &det.ellipse)?)
+    };
     let mut support = base.clone();
     for _ in 0..ROBUST_ROUNDS {
+        let current = fit.as_ref().map_or(det.ellipse, |f| f.ellipse);
         // Inliers are chosen among all of `base` each round, so a point rejected against an
         // early, outlier-pulled fit comes back once the fit has moved.
         let d: Vec<f64> = base
             .iter()
-            .map(|p| fit.ellipse.orthogonal_distance(p))
+            .map(|p| current.orthogonal_distance(p))
             .collect();
         let mut abs: Vec<f64> = d.iter().map(|v| v.abs()).collect();
         let mid = abs.len() / 2;
@@ -205,15 +212,13 @@ pub(crate) fn trim_and_refit(
             .filter(|(_, v)| v.abs() <= REJECT_SIGMAS * spread)
             .map(|(p, _)| *p)
             .collect();
-        if inliers.len() < MIN_SUPPORT {
+        if inliers.len() < MIN_SUPPORT || inliers == support {
             break;
         }
-        if inliers == support {
-            break;
-        }
-        fit = refit(&inliers, &fit.ellipse)?;
+        fit = Some(refit(&inliers, &current)?);
         support = inliers;
     }
+    let fit = fit?;
     Some(EllipseDetection {
         ellipse: fit.ellipse,
         points: support,
