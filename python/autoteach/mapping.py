@@ -53,7 +53,7 @@ WORLDS = ("showgrounds", "keswick", "small")
 _PGM_FREE, _PGM_OCCUPIED, _PGM_UNKNOWN = 254, 0, 205
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class UpdateReport:
     """What one :meth:`Rasterizer.update` did (the quantities of Fig. 2.8)."""
 
