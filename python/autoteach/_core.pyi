@@ -1209,3 +1209,79 @@ def wafer_rims_detect(
     """Wafer rims by geometry; see :func:`autoteach.detect.detect_wafer_rims`."""
 
 # --- end ellipse detection ---
+# --- mapping (issue 32: occupancy-grid rasterization, seed 004 ch. 2) ---
+
+class Rasterizer:
+    """Table 2.1's rasterizers; see :class:`autoteach.mapping.Rasterizer`."""
+
+    def __init__(
+        self,
+        method: str = "cover_composite",
+        slice_size: int = 4,
+        resolution: float = 0.1,
+        covering: bool = True,
+        cover_distance: float = 0.75,
+        cover_angle: float = ...,
+        angle_min: float = ...,
+        angle_increment: float = ...,
+        max_range: float = 30.0,
+        log_odds_hit: float = ...,
+        log_odds_miss: float = ...,
+        prior: float = 0.0,
+        threshold: float = 0.0,
+    ) -> None: ...
+    def update(
+        self,
+        node_ids: NDArray[np.int64],
+        robot_ids: NDArray[np.int64],
+        poses: F64Array,
+        scan_rows: NDArray[np.int64],
+        scans: F64Array,
+    ) -> tuple[NDArray[np.int8], float, float, float, dict[str, _Any]]: ...
+    def memory_bytes(self) -> int: ...
+    def num_nodes(self) -> int: ...
+
+class TeamSimulator:
+    """The team simulator; see :class:`autoteach.mapping.TeamSimulator`."""
+
+    def __init__(
+        self,
+        world: str = "showgrounds",
+        robots: int | None = None,
+        graphs: int | None = None,
+        seed: int = 0,
+        transients: bool = True,
+        people: int | None = None,
+        vehicles: int | None = None,
+        max_range: float | None = None,
+    ) -> None: ...
+    def step(self) -> dict[str, _Any] | None: ...
+    def ranges(self, ids: NDArray[np.int64]) -> F64Array: ...
+    def transient_hits(self, id: int) -> F64Array: ...
+    def walls(self) -> F64Array: ...
+    def graphs(self) -> int: ...
+    def extent(self) -> tuple[float, float]: ...
+    def scan_geometry(self) -> tuple[float, float, float]: ...
+    def transient_residue(
+        self,
+        cells: NDArray[np.int8],
+        origin: tuple[float, float],
+        resolution: float,
+        ids: NDArray[np.int64],
+        poses: F64Array,
+        truth: F64Array,
+        margin: float = 0.5,
+    ) -> tuple[int, int, int]: ...
+
+def mapping_wall_gaps(
+    candidate: NDArray[np.int8],
+    candidate_origin: tuple[float, float],
+    reference: NDArray[np.int8],
+    reference_origin: tuple[float, float],
+    resolution: float,
+    walls: F64Array,
+    radius: int = 1,
+) -> tuple[int, int]:
+    """Wall samples and gaps; see :func:`autoteach.mapping.wall_gaps`."""
+
+# --- end mapping ---

@@ -17,6 +17,7 @@ mod geometry;
 mod gray;
 mod handeye;
 mod lsq;
+mod mapping;
 mod polygon;
 mod registration;
 mod sim;
@@ -40,6 +41,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     handeye::register(m)?;
     active::register(m)?;
     ellipse_detection::register(m)?;
+    mapping::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -357,6 +357,11 @@ impl Residual for PriorResidual {
                         se3_minus_jacobians(&se3_from_params(x), &se3_from_params(&self.mean));
                     DMatrix::from_column_slice(6, 6, jy.as_slice())
                 }
+                Manifold::Se2 => {
+                    let d = [d[0], d[1], d[2]];
+                    let j = super::se2::se2_right_jacobian_inv(&d);
+                    DMatrix::from_column_slice(3, 3, j.as_slice())
+                }
             };
             if let Some(j0) = jac.first_mut() {
                 *j0 = &self.sqrt_info * j;
