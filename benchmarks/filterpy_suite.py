@@ -33,6 +33,17 @@ MEMBER = "filterpy/kalman/tests/test_ukf.py"
 PYTHON_DIR = Path(__file__).resolve().parents[1] / "python"
 
 
+def _package_root() -> Path:
+    """The directory holding the ``autoteach`` this interpreter imports (an installed wheel in CI,
+    the source tree's ``python/`` in development), else the source tree's ``python/``."""
+    from importlib.util import find_spec
+
+    spec = find_spec("autoteach")
+    if spec is not None and spec.origin is not None:
+        return Path(spec.origin).resolve().parents[1]
+    return PYTHON_DIR
+
+
 def _from_sdist(workdir: Path, timeout: float) -> Path | None:
     """filterpy's test_ukf.py from the sdist of the installed version (``pip download``), or None."""
     try:
@@ -95,7 +106,9 @@ def run_suite(original: Path, workdir: Path, reference: bool = False) -> tuple[i
     target = workdir / "test_ukf.py"
     target.write_text(text if reference else swap_import(text), encoding="utf-8")
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(PYTHON_DIR), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    # The same autoteach as this process: the source tree has no compiled _core where the wheel is
+    # installed (CI), so putting python/ first there would hide the installed package.
+    env["PYTHONPATH"] = os.pathsep.join([str(_package_root()), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     env["MPLBACKEND"] = "Agg"
     cmd = [sys.executable, "-m", "pytest", str(target), "-q", "-p", "no:cacheprovider", "--rootdir", str(workdir)]
     proc = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, timeout=600)
