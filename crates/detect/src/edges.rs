@@ -1376,7 +1376,7 @@ mod tests {
         img
     }
 
-    /// The whole-image implementation of `canny` of session 4 (Sobel, magnitude, state and
+    /// The whole-image implementation of `canny` (Sobel, magnitude, state and
     /// offset images, hysteresis over all pixels): the reference of the fused pass.
     fn canny_reference<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<EdgeMap> {
         params.validate()?;

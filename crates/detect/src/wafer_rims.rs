@@ -157,6 +157,19 @@ pub fn rim_offset(e: &Ellipse, thickness_ratio: f64, up: &Vector2<f64>) -> Optio
     Some(minor * (thickness_ratio * e.a * (1.0 - q * q).sqrt()))
 }
 
+/// The parameter-wise mean of two nearly equal ellipses (the first one's orientation): the
+/// centre line of a band or line whose two edges they are.
+fn mean_ellipse(p: &Ellipse, q: &Ellipse) -> Option<Ellipse> {
+    Ellipse::new(
+        0.5 * (p.cx + q.cx),
+        0.5 * (p.cy + q.cy),
+        0.5 * (p.a + q.a),
+        0.5 * (p.b + q.b),
+        p.theta,
+    )
+    .ok()
+}
+
 /// The two rims of a wafer whose edge face is a band narrower than the edge operator's reach
 /// ([`OPERATOR_REACH`]): its two edges pull each other's points along the whole arc (the
 /// upper edge down, the lower edge up, by up to a pixel), so their separation is not
@@ -180,14 +193,7 @@ fn narrow_band_rims(
     focal_length: Option<f64>,
 ) -> Option<(Ellipse, Ellipse)> {
     let (l, u) = (&lower.ellipse, &upper.ellipse);
-    let mean = Ellipse::new(
-        0.5 * (l.cx + u.cx),
-        0.5 * (l.cy + u.cy),
-        0.5 * (l.a + u.a),
-        0.5 * (l.b + u.b),
-        l.theta,
-    )
-    .ok()?;
+    let mean = mean_ellipse(l, u)?;
     let s = rim_offset(&mean, ratio, up)?;
     if !(s.norm() < OPERATOR_REACH) {
         return None;
@@ -231,14 +237,7 @@ fn narrow_band_rims(
 /// Normalised misfit (≤ 1 accepted) of `lower`/`upper` as the two rims of one wafer.
 fn pair_cost(lower: &Candidate, upper: &Candidate, ratio: f64, up: &Vector2<f64>) -> Option<f64> {
     let (l, u) = (&lower.ellipse, &upper.ellipse);
-    let mean = Ellipse::new(
-        0.5 * (l.cx + u.cx),
-        0.5 * (l.cy + u.cy),
-        0.5 * (l.a + u.a),
-        0.5 * (l.b + u.b),
-        l.theta,
-    )
-    .ok()?;
+    let mean = mean_ellipse(l, u)?;
     let expected = rim_offset(&mean, ratio, up)?;
     let delta = Vector2::new(u.cx - l.cx, u.cy - l.cy);
     let sigma = (centre_var(&lower.covariance) + centre_var(&upper.covariance)).sqrt();
@@ -279,13 +278,7 @@ fn line_candidates(dets: &[EllipseDetection], ratio: f64, up: &Vector2<f64>) -> 
             if !(width < LINE_FRACTION * s && dc < 0.5 * LINE_FRACTION * s + 0.5) {
                 continue;
             }
-            let Ok(ellipse) = Ellipse::new(
-                0.5 * (e.cx + f.cx),
-                0.5 * (e.cy + f.cy),
-                0.5 * (e.a + f.a),
-                0.5 * (e.b + f.b),
-                e.theta,
-            ) else {
+            let Some(ellipse) = mean_ellipse(e, f) else {
                 continue;
             };
             out.push(Candidate {
