@@ -51,8 +51,10 @@ class EllipseDetectOptions:
         blur_sigma: Gaussian pre-blur (pixels); 0 for none. Helps very noisy images, hurts thin lines.
         max_nfa: Largest number of false alarms of an accepted ellipse (the a-contrario ``ε``):
             on images of pure noise fewer than ``max_nfa`` ellipses are accepted on average.
-        max_line_width: When set, two accepted edges of opposite polarity at most this far apart
-            (pixels) are one thin line, reported on its centre with ``polarity == 0``.
+        max_line_width: When set, lines up to this wide (pixels) are reported on their centre
+            lines with ``polarity == 0``: found by the image's Hessian (Steger's detector, with
+            the same arcs, assembly and a-contrario test), or as two accepted edges of opposite
+            polarity at most this far apart.
         gradient_noise: Standard deviation of a Sobel gradient component under the image's noise
             (grey levels per pixel, Sobel normalised by 1/8, ≈ 0.433 × pixel noise); ``None``
             estimates it from the image.
@@ -203,7 +205,9 @@ def detect_wafer_rims(
     Args:
         image: As :func:`detect_ellipses`.
         geometry: Wafer geometry and camera prior; default :class:`WaferGeometry`.
-        options: Ellipse-detection options (``max_line_width`` is ignored: the pairing forms lines).
+        options: Ellipse-detection options. ``max_line_width`` is ignored: rims drawn as lines up
+            to 2.8 px wide are found on their centre lines, and edge pairs narrower than the rim
+            offset are lines too, formed by the pairing.
         **overrides: Fields of :class:`EllipseDetectOptions` to change.
 
     Returns:

@@ -33,6 +33,7 @@ use nalgebra::{Matrix5, Point2, Vector2};
 
 use crate::edges::{GrayView, Pixel};
 use crate::ellipse_detection::refine::OPERATOR_REACH;
+use crate::ellipse_detection::ridges::{detect_signed_lines, ridge_scale};
 use crate::ellipse_detection::{EllipseDetectParams, EllipseDetection, detect_ellipses};
 use crate::wafers::{RimKind, WaferEdge};
 use crate::{DetectError, Result};
@@ -54,6 +55,12 @@ pub const RIM_CENTRE_BIAS: f64 = 1.0;
 /// 53 px semi-minor axis) — and `a` by `a·h/Z` at most. 0.02 covers `Z ≥ 50 h` and the fits'
 /// bias on partial arcs.
 pub const RIM_AXIS_TOLERANCE: f64 = 0.02;
+/// Widest rim drawn as a line (pixels) that [`detect_wafer_rims`] finds on its centre line
+/// ([`crate::ellipse_detection::ridges`], derivative scale 0.81 px) when the options give no
+/// `max_line_width`: the two edges of a narrower line lie within each other's
+/// [`OPERATOR_REACH`] on both sides, so the edge path cannot place them (measured on the
+/// thin-line family of `autoteach.sim.appearance`, 0.6–1.5 px lines 2–5 px apart).
+pub const RIM_LINE_WIDTH: f64 = 2.8;
 /// Lines narrower than this fraction of the rim offset `s` count as one rim drawn as a line.
 const LINE_FRACTION: f64 = 0.75;
 
@@ -130,6 +137,8 @@ impl WaferGeometry {
 /// A rim candidate: one edge, or the centre of a thin line (two edges).
 struct Candidate {
     ellipse: Ellipse,
+    /// For a line: `+1` brighter than its surroundings, `−1` darker, 0 unknown (and edges).
+    brightness: i8,
     edges: Vec<usize>,
     covariance: Option<Matrix5<f64>>,
     residual: f64,
@@ -200,17 +209,12 @@ fn narrow_band_rims(
     }
     let (bl, bu) = match focal_length {
         Some(f) => {
-            let q = (mean.b / mean.a).min(1.0);
-            let db = ratio * mean.a * mean.a / f * (1.0 - 2.0 * q * q);
-            let n = lower_points.len().max(1) as f64;
-            let side: f64 = lower_points
-                .iter()
-                .map(|p| (p.x - l.cx) * up.x + (p.y - l.cy) * up.y)
-                .sum::<f64>()
-                / n;
-            // Camera above: the lower rim's visible (front) arc lies against `up`.
-            let far_is_lower = side < 0.0;
-            let sign = if far_is_lower { 1.0 } else { -1.0 };
+            let db = far_rim_excess(&mean, ratio, f);
+            let sign = if far_is_lower(l, lower_points, up) {
+                1.0
+            } else {
+                -1.0
+            };
             (mean.b + sign * 0.5 * db, mean.b - sign * 0.5 * db)
         }
         None => (l.b, u.b),
@@ -232,6 +236,134 @@ fn narrow_band_rims(
     )
     .ok()?;
     Some((lo, hi))
+}
+
+/// Whether the lower rim is the far one (camera above the wafers): its support, the front arc,
+/// lies on the far side of its centre from `up`.
+fn far_is_lower(l: &Ellipse, lower_points: &[Vector2<f64>], up: &Vector2<f64>) -> bool {
+    let n = lower_points.len().max(1) as f64;
+    let side: f64 = lower_points
+        .iter()
+        .map(|p| (p.x - l.cx) * up.x + (p.y - l.cy) * up.y)
+        .sum::<f64>()
+        / n;
+    side < 0.0
+}
+
+/// The far rim's excess semi-minor axis `Δb = (h/R)·(a²/f)·(1 − 2(b/a)²)` of a wafer imaged as
+/// `e` (see [`narrow_band_rims`]).
+fn far_rim_excess(e: &Ellipse, ratio: f64, focal_length: f64) -> f64 {
+    let q = (e.b / e.a).min(1.0);
+    ratio * e.a * e.a / focal_length * (1.0 - 2.0 * q * q)
+}
+
+/// Signed distance (Sampson's first-order approximation) of `p` to `e` and its unit gradient
+/// direction with respect to `p`.
+fn signed_distance(e: &Ellipse, p: &Vector2<f64>) -> Option<(f64, Vector2<f64>)> {
+    let (st, ct) = e.theta.sin_cos();
+    let d = p - Vector2::new(e.cx, e.cy);
+    let (x, y) = (ct * d.x + st * d.y, -st * d.x + ct * d.y);
+    let f = (x / e.a).powi(2) + (y / e.b).powi(2) - 1.0;
+    let (gx, gy) = (2.0 * x / (e.a * e.a), 2.0 * y / (e.b * e.b));
+    let g = Vector2::new(ct * gx - st * gy, st * gx + ct * gy);
+    let n = g.norm();
+    (n > 0.0).then(|| (f / n, g / n))
+}
+
+/// The rim `shape` moved to fit `points` (its centre by Gauss–Newton on the signed distances;
+/// axes and orientation fixed): the rim of a wafer whose support is a short arc, fitted with
+/// the shape of its better-determined partner. Returns the ellipse and the mean absolute
+/// distance.
+fn translate_fit(shape: &Ellipse, points: &[Vector2<f64>]) -> Option<(Ellipse, f64)> {
+    if points.len() < 5 {
+        return None;
+    }
+    let mut e = *shape;
+    for _ in 0..20 {
+        let (mut jtj, mut jtr) = (nalgebra::Matrix2::<f64>::zeros(), Vector2::<f64>::zeros());
+        for p in points {
+            let (d, g) = signed_distance(&e, p)?;
+            // ∂d/∂c ≈ −g (the point moves by −δc relative to the ellipse).
+            jtj += g * g.transpose();
+            jtr += -g * d;
+        }
+        let step = jtj.try_inverse()? * (-jtr);
+        e = Ellipse::new(e.cx + step.x, e.cy + step.y, e.a, e.b, e.theta).ok()?;
+        if step.norm() < 1e-4 {
+            break;
+        }
+    }
+    let mean = points
+        .iter()
+        .map(|p| signed_distance(&e, p).map_or(f64::INFINITY, |(d, _)| d.abs()))
+        .sum::<f64>()
+        / points.len() as f64;
+    mean.is_finite().then_some((e, mean))
+}
+
+/// The two rims of a wafer are one circle seen from heights `h` apart: the same semi-major
+/// axis and orientation, semi-minor axes `Δb` apart ([`far_rim_excess`], when the focal length
+/// is known). Where one rim's centre is much less certain than the other's (a front arc only,
+/// as the lower rim of a wafer seen from above usually is: a short arc of a flat ellipse leaves
+/// its centre and `b` coupled), that rim is refitted with the better rim's shape, only its
+/// centre free ([`translate_fit`]). Kept when the refit's mean distance stays within twice the
+/// free fit's plus 0.1 px (a wrong partner's shape does not fit). `(lower, upper)`.
+fn shared_shape_rims(
+    dets: &[EllipseDetection],
+    lower: &Candidate,
+    upper: &Candidate,
+    ratio: f64,
+    up: &Vector2<f64>,
+    geometry: &WaferGeometry,
+) -> Option<(Ellipse, Ellipse)> {
+    let (vl, vu) = (centre_var(&lower.covariance), centre_var(&upper.covariance));
+    let lower_is_worse = vl > vu;
+    let (worse, better) = if lower_is_worse {
+        (lower, upper)
+    } else {
+        (upper, lower)
+    };
+    let (vw, vb) = if lower_is_worse { (vl, vu) } else { (vu, vl) };
+    if !(vw > 4.0 * vb) {
+        return None;
+    }
+    let points = |c: &Candidate| -> Vec<Vector2<f64>> {
+        c.edges
+            .iter()
+            .flat_map(|&k| dets[k].points.iter().copied())
+            .collect()
+    };
+    let worse_points = points(worse);
+    let b = better.ellipse;
+    let db = geometry.focal_length.map_or(0.0, |f| {
+        let far_lower = far_is_lower(&lower.ellipse, &points(lower), up);
+        let worse_is_far = far_lower == lower_is_worse;
+        if worse_is_far {
+            far_rim_excess(&b, ratio, f)
+        } else {
+            -far_rim_excess(&b, ratio, f)
+        }
+    });
+    // Start at the centre the rim offset predicts from the better rim.
+    let s = rim_offset(&b, ratio, up)?;
+    let sign = if lower_is_worse { -1.0 } else { 1.0 };
+    let start = Ellipse::new(
+        b.cx + sign * s.x,
+        b.cy + sign * s.y,
+        b.a,
+        (b.b + db).min(b.a),
+        b.theta,
+    )
+    .ok()?;
+    let (fitted, mean) = translate_fit(&start, &worse_points)?;
+    if !(mean <= 2.0 * worse.residual + 0.1) {
+        return None;
+    }
+    Some(if lower_is_worse {
+        (fitted, b)
+    } else {
+        (b, fitted)
+    })
 }
 
 /// Normalised misfit (≤ 1 accepted) of `lower`/`upper` as the two rims of one wafer.
@@ -281,8 +413,11 @@ fn line_candidates(dets: &[EllipseDetection], ratio: f64, up: &Vector2<f64>) -> 
             let Some(ellipse) = mean_ellipse(e, f) else {
                 continue;
             };
+            // The outer side of a bright line is brighter inside (polarity −1).
+            let outer = if e.a >= f.a { p.polarity } else { q.polarity };
             out.push(Candidate {
                 ellipse,
+                brightness: -outer,
                 edges: vec![i, j],
                 covariance: match (p.covariance, q.covariance) {
                     (Some(a), Some(b)) => Some((a + b) * 0.25),
@@ -295,12 +430,85 @@ fn line_candidates(dets: &[EllipseDetection], ratio: f64, up: &Vector2<f64>) -> 
     out
 }
 
+/// Whether two rim ellipses are one: centres within [`OPERATOR_REACH`]/2 and semi-axes within
+/// [`RIM_AXIS_TOLERANCE`] of the semi-major axis.
+fn same_rim(e: &Ellipse, f: &Ellipse) -> bool {
+    let tol = RIM_AXIS_TOLERANCE * e.a.max(f.a);
+    (e.cx - f.cx).hypot(e.cy - f.cy) <= 0.5 * OPERATOR_REACH
+        && (e.a - f.a).abs() <= tol
+        && (e.b - f.b).abs() <= tol
+}
+
+/// Whether the edge `d` runs along the line `e`: its points' median distance to `e` is within
+/// the edge operator's reach ([`OPERATOR_REACH`]).
+fn side_of(d: &EllipseDetection, e: &Ellipse) -> bool {
+    let mut dist: Vec<f64> = d
+        .points
+        .iter()
+        .step_by((d.points.len() / 32).max(1))
+        .map(|p| e.sampson_distance(p))
+        .collect();
+    if dist.is_empty() {
+        return false;
+    }
+    let mid = dist.len() / 2;
+    let (_, m, _) = dist.select_nth_unstable_by(mid, f64::total_cmp);
+    *m <= OPERATOR_REACH
+}
+
+/// The line candidates: the detected centre lines (polarity 0, e.g. from
+/// [`crate::ellipse_detection::ridges`]) first, then the edge-pair lines that are not one of
+/// them (the same line seen by its two sides).
+fn with_centre_lines(
+    dets: &[EllipseDetection],
+    brightness: &[i8],
+    pairs: Vec<Candidate>,
+) -> Vec<Candidate> {
+    let mut out: Vec<Candidate> = dets
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| d.polarity == 0)
+        .map(|(i, d)| Candidate {
+            ellipse: d.ellipse,
+            brightness: brightness.get(i).copied().unwrap_or(0),
+            edges: vec![i],
+            covariance: d.covariance,
+            residual: d.residual,
+        })
+        .collect();
+    let centres = out.len();
+    for c in pairs {
+        if !out[..centres]
+            .iter()
+            .any(|l| same_rim(&l.ellipse, &c.ellipse))
+        {
+            out.push(c);
+        }
+    }
+    out
+}
+
 /// Pairs the detections into wafers (see the module documentation). Returns the rims, the
 /// two of each wafer with one `wafer_id`, wafers numbered from the topmost (along `up`).
 ///
 /// # Errors
 /// [`DetectError::InvalidParameter`] for a bad geometry.
 pub fn pair_rims(dets: &[EllipseDetection], geometry: &WaferGeometry) -> Result<Vec<WaferEdge>> {
+    pair_rims_with(dets, &[], geometry)
+}
+
+/// [`pair_rims`] where `brightness[i]` is the brightness of the line detection `dets[i]`
+/// (polarity 0): `+1` brighter than its surroundings, `−1` darker, 0 (or missing) unknown. The
+/// two rims of one wafer drawn as lines have one brightness: a bright line beside a dark
+/// one is a rim beside the gap between two rims, not a wafer.
+///
+/// # Errors
+/// As [`pair_rims`].
+pub fn pair_rims_with(
+    dets: &[EllipseDetection],
+    brightness: &[i8],
+    geometry: &WaferGeometry,
+) -> Result<Vec<WaferEdge>> {
     let up = geometry.validate()?;
     let ratio = geometry.thickness / geometry.radius;
     let in_range = |e: &Ellipse| {
@@ -314,12 +522,13 @@ pub fn pair_rims(dets: &[EllipseDetection], geometry: &WaferGeometry) -> Result<
         .filter(|(_, d)| d.polarity != 0)
         .map(|(i, d)| Candidate {
             ellipse: d.ellipse,
+            brightness: 0,
             edges: vec![i],
             covariance: d.covariance,
             residual: d.residual,
         })
         .collect();
-    let lines = line_candidates(dets, ratio, &up);
+    let lines = with_centre_lines(dets, brightness, line_candidates(dets, ratio, &up));
     let mut used = vec![false; dets.len()];
     let mut wafers: Vec<(usize, &Candidate, &Candidate)> = Vec::new();
     for (kind, set) in [(0usize, &lines), (1, &edges)] {
@@ -329,7 +538,10 @@ pub fn pair_rims(dets: &[EllipseDetection], geometry: &WaferGeometry) -> Result<
                 continue;
             }
             for (j, u) in set.iter().enumerate() {
-                if i == j || l.edges.iter().any(|k| u.edges.contains(k)) {
+                if i == j
+                    || l.edges.iter().any(|k| u.edges.contains(k))
+                    || l.brightness * u.brightness < 0
+                {
                     continue;
                 }
                 if let Some(c) = pair_cost(l, u, ratio, &up) {
@@ -348,7 +560,31 @@ pub fn pair_rims(dets: &[EllipseDetection], geometry: &WaferGeometry) -> Result<
             }
             wafers.push((kind, l, u));
         }
+        if kind == 0 {
+            // The sides of a rim drawn as a line are not rims of their own.
+            for (k, d) in dets.iter().enumerate() {
+                if !used[k]
+                    && d.polarity != 0
+                    && wafers
+                        .iter()
+                        .any(|w| side_of(d, &w.1.ellipse) || side_of(d, &w.2.ellipse))
+                {
+                    used[k] = true;
+                }
+            }
+        }
     }
+    // One wafer once: a band's two edges can pair again as two lines' sides.
+    let mut distinct: Vec<(usize, &Candidate, &Candidate)> = Vec::with_capacity(wafers.len());
+    for w in wafers {
+        if !distinct
+            .iter()
+            .any(|d| same_rim(&d.1.ellipse, &w.1.ellipse) && same_rim(&d.2.ellipse, &w.2.ellipse))
+        {
+            distinct.push(w);
+        }
+    }
+    let mut wafers = distinct;
     // Topmost first: decreasing position of the upper rim's centre along `up`.
     let height = |c: &Candidate| c.ellipse.cx * up.x + c.ellipse.cy * up.y;
     wafers.sort_by(|x, y| height(y.2).total_cmp(&height(x.2)));
@@ -372,6 +608,7 @@ pub fn pair_rims(dets: &[EllipseDetection], geometry: &WaferGeometry) -> Result<
         } else {
             None
         };
+        let narrow = narrow.or_else(|| shared_shape_rims(dets, lower, upper, ratio, &up, geometry));
         for (kind, c) in [(RimKind::Upper, upper), (RimKind::Lower, lower)] {
             let points = c
                 .edges
@@ -401,8 +638,9 @@ pub fn pair_rims(dets: &[EllipseDetection], geometry: &WaferGeometry) -> Result<
 pub struct WaferRimParams {
     /// Physical geometry and camera prior.
     pub geometry: WaferGeometry,
-    /// Options of [`detect_ellipses`] (its `max_line_width` is ignored: the pairing forms lines
-    /// itself, from the rim offset).
+    /// Options of [`detect_ellipses`]. Its `max_line_width` is the widest rim drawn as a line
+    /// that is found on its centre line (default [`RIM_LINE_WIDTH`]); edge pairs narrower than
+    /// the rim offset are lines too, formed by the pairing.
     pub ellipses: EllipseDetectParams,
 }
 
@@ -420,8 +658,14 @@ pub fn detect_wafer_rims<T: Pixel>(
         max_line_width: None,
         ..params.ellipses
     };
-    let dets = detect_ellipses(image, &opts)?;
-    pair_rims(&dets, &params.geometry)
+    let mut dets = detect_ellipses(image, &opts)?;
+    let mut brightness = vec![0i8; dets.len()];
+    let width = params.ellipses.max_line_width.unwrap_or(RIM_LINE_WIDTH);
+    for (d, b) in detect_signed_lines(image, &opts, ridge_scale(width))? {
+        dets.push(d);
+        brightness.push(b);
+    }
+    pair_rims_with(&dets, &brightness, &params.geometry)
 }
 
 #[cfg(test)]
@@ -533,6 +777,7 @@ mod tests {
             let lo = moved(&lower, pull, -0.3);
             let hi = moved(&upper, -pull, 0.3);
             let cand = |e: Ellipse| Candidate {
+                brightness: 0,
                 ellipse: e,
                 edges: vec![0],
                 covariance: None,

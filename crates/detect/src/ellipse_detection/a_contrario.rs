@@ -96,11 +96,43 @@ pub fn covered_extent(ts: &[f64]) -> (f64, f64) {
     (start, TAU - gap)
 }
 
+/// The points of the arc of `ellipse` from eccentric angle `start` over `length` radians, about
+/// one pixel of arc length apart, each with its unit outward normal.
+pub(crate) fn arc_pixels(
+    ellipse: &Ellipse,
+    start: f64,
+    length: f64,
+) -> impl Iterator<Item = (Vector2<f64>, Vector2<f64>)> {
+    let (a, b) = (ellipse.a, ellipse.b);
+    let (st, ct) = ellipse.theta.sin_cos();
+    let (cx, cy) = (ellipse.cx, ellipse.cy);
+    let end = start + length;
+    let mut t = start;
+    // At most one step per pixel of arc length; bounded by the perimeter.
+    let mut steps = (2.0 * PI * a.max(b) * 2.0 + 10.0) as usize;
+    std::iter::from_fn(move || {
+        if steps == 0 || !(t <= end) {
+            return None;
+        }
+        steps -= 1;
+        let (s, c) = t.sin_cos();
+        let (lx, ly) = (a * c, b * s);
+        let p = Vector2::new(cx + ct * lx - st * ly, cy + st * lx + ct * ly);
+        // Outward normal ∝ (b cos t, a sin t) in the ellipse frame.
+        let (nx, ny) = (b * c, a * s);
+        let nn = (nx * nx + ny * ny).sqrt().max(1e-12);
+        let e = Vector2::new(ct * nx - st * ny, st * nx + ct * ny) / nn;
+        let speed = (a * a * s * s + b * b * c * c).sqrt().max(1e-3);
+        t += 1.0 / speed;
+        Some((p, e))
+    })
+}
+
 /// Counts the aligned pixels along the arc of `ellipse` from eccentric angle `start` over
-/// `length` radians, stepping about one pixel of arc length at a time; each distinct pixel
-/// (rounded position) inside the one-pixel border counts once. A pixel is aligned when its
-/// Sobel gradient has magnitude at least `rho` and lies within `±π/8` of `polarity` times the
-/// outward normal (`+1`: brighter outside, `−1`: brighter inside).
+/// `length` radians, stepping about one pixel of arc length at a time ([`arc_pixels`]); each
+/// distinct pixel (rounded position) inside the one-pixel border counts once. A pixel is aligned
+/// when its Sobel gradient has magnitude at least `rho` and lies within `±π/8` of `polarity`
+/// times the outward normal (`+1`: brighter outside, `−1`: brighter inside).
 pub fn count_alignment<T: Pixel>(
     image: &GrayView<'_, T>,
     ellipse: &Ellipse,
@@ -110,8 +142,6 @@ pub fn count_alignment<T: Pixel>(
 ) -> Alignment {
     let (w, h) = (image.width(), image.height());
     let data = image.data();
-    let (a, b) = (ellipse.a, ellipse.b);
-    let (st, ct) = ellipse.theta.sin_cos();
     let cos_tol = (PI / 8.0).cos() as f32;
     let rho2 = (rho * rho) as f32;
     let sign = f64::from(polarity.signum());
@@ -120,26 +150,8 @@ pub fn count_alignment<T: Pixel>(
         return out;
     }
     let mut last: Option<(i64, i64)> = None;
-    let mut t = start;
-    let end = start + length;
-    // At most one step per pixel of arc length; bounded by the perimeter.
-    let max_steps = (2.0 * PI * a.max(b) * 2.0 + 10.0) as usize;
-    for _ in 0..max_steps {
-        if t > end {
-            break;
-        }
-        let (s, c) = t.sin_cos();
-        let (lx, ly) = (a * c, b * s);
-        let p = Vector2::new(
-            ellipse.cx + ct * lx - st * ly,
-            ellipse.cy + st * lx + ct * ly,
-        );
-        // Outward normal ∝ (b cos t, a sin t) in the ellipse frame.
-        let (nx, ny) = (b * c, a * s);
-        let nn = (nx * nx + ny * ny).sqrt().max(1e-12);
-        let e = Vector2::new(ct * nx - st * ny, st * nx + ct * ny) * (sign / nn);
-        let speed = (a * a * s * s + b * b * c * c).sqrt().max(1e-3);
-        t += 1.0 / speed;
+    for (p, normal) in arc_pixels(ellipse, start, length) {
+        let e = normal * sign;
         let (px, py) = (p.x.round() as i64, p.y.round() as i64);
         if last == Some((px, py)) {
             continue;

@@ -107,3 +107,11 @@ pub fn pair_line_edges(dets: Vec<EllipseDetection>, max_width: f64) -> Vec<Ellip
     );
     out
 }
+
+/// Whether two line detections (polarity 0) are one line of width at most `width`: centres
+/// within `width/2` and semi-axes within `width/2` of each other.
+pub fn same_line(p: &EllipseDetection, q: &EllipseDetection, width: f64) -> bool {
+    let (e, f) = (&p.ellipse, &q.ellipse);
+    let tol = 0.5 * width;
+    (e.cx - f.cx).hypot(e.cy - f.cy) <= tol && (e.a - f.a).abs() <= tol && (e.b - f.b).abs() <= tol
+}

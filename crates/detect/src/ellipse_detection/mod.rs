@@ -20,8 +20,10 @@
 //!    false alarms (aligned gradient orientations along the arc it covers against a binomial
 //!    tail, as in LSD/ELSD) is at most `max_nfa` (default 1: under 1 false detection per image
 //!    of noise on average).
-//! 5. Optionally ([`EllipseDetectParams::max_line_width`]), the two opposite-polarity edges of a
-//!    thin line become one detection on the line's centre ([`lines`]).
+//! 5. Optionally ([`EllipseDetectParams::max_line_width`]), thin lines are found on their
+//!    centre lines by the Hessian of the image ([`ridges`], Steger's detector feeding stages 2–4
+//!    with an a-contrario test on the Hessian's orientation), and two opposite-polarity edges of
+//!    a line that was not found so become one detection on the line's centre ([`lines`]).
 //!
 //! ```
 //! use autoteach_detect::edges::GrayView;
@@ -64,6 +66,7 @@ pub mod a_contrario;
 pub mod lines;
 pub mod noise;
 pub mod refine;
+pub mod ridges;
 #[cfg(test)]
 mod tests;
 
@@ -107,8 +110,9 @@ pub struct EllipseDetectParams {
     /// Largest number of false alarms of an accepted ellipse (the `ε` of the a-contrario test).
     /// Default 1.
     pub max_nfa: f64,
-    /// When set, two validated edges of opposite polarity at most this many pixels apart are
-    /// reported as one thin line, on its centre (see [`lines`]). Default `None` (edges only).
+    /// When set, lines up to this many pixels wide are reported on their centre lines
+    /// (polarity 0): found by the Hessian ([`ridges`]), or as two validated edges of opposite
+    /// polarity at most this far apart ([`lines`]). Default `None` (edges only).
     pub max_line_width: Option<f64>,
     /// Gradient noise `σ_g` (grey levels per pixel, Sobel normalised by 1/8); `None` (default)
     /// estimates it from the image ([`noise::gradient_noise`]).
@@ -294,7 +298,18 @@ fn detect_on_pool<T: Pixel>(
         .collect();
     sort_by_score(&mut found);
     let mut found = match params.max_line_width {
-        Some(width) => lines::pair_line_edges(found, width),
+        Some(width) => {
+            let centres = ridges::detect_line_ellipses(image, params, ridges::ridge_scale(width))?;
+            // A line found on its centre and by its two sides is one line: the centre stays.
+            let mut all: Vec<EllipseDetection> = lines::pair_line_edges(found, width)
+                .into_iter()
+                .filter(|d| {
+                    d.polarity != 0 || !centres.iter().any(|c| lines::same_line(c, d, width))
+                })
+                .collect();
+            all.extend(centres);
+            all
+        }
         None => found,
     };
     sort_by_score(&mut found);
@@ -302,7 +317,7 @@ fn detect_on_pool<T: Pixel>(
 }
 
 /// Sorts by decreasing score (ties by centre, so the order is deterministic).
-fn sort_by_score(found: &mut [EllipseDetection]) {
+pub(crate) fn sort_by_score(found: &mut [EllipseDetection]) {
     found.sort_by(|p, q| {
         q.score
             .total_cmp(&p.score)
@@ -315,7 +330,10 @@ fn sort_by_score(found: &mut [EllipseDetection]) {
 /// rule where their arcs share pixels) are one detection: a detection whose points lie, on
 /// average, within the combination threshold of a higher-scored detection's ellipse of the
 /// same polarity is dropped. `found` is sorted by decreasing score.
-fn drop_duplicates(found: Vec<EllipseDetection>, threshold: f64) -> Vec<EllipseDetection> {
+pub(crate) fn drop_duplicates(
+    found: Vec<EllipseDetection>,
+    threshold: f64,
+) -> Vec<EllipseDetection> {
     let mut kept: Vec<EllipseDetection> = Vec::with_capacity(found.len());
     for d in found {
         let duplicate = kept.iter().any(|k| {

@@ -113,7 +113,11 @@ fn thin_line_is_reported_on_its_centre() {
         ..EllipseDetectParams::default()
     };
     let found = detect(&img, w, h, &params);
-    assert_eq!(found.len(), 1, "{found:?}");
+    let brief: Vec<_> = found
+        .iter()
+        .map(|d| (d.ellipse, d.points.len(), d.score, d.polarity))
+        .collect();
+    assert_eq!(found.len(), 1, "{brief:?}");
     assert_eq!(found[0].polarity, 0);
     assert_close(&found[0], &e, 0.15, 0.3);
     // Without line pairing the two edges come out, one of each polarity, either side.
@@ -253,5 +257,99 @@ fn gradient_noise_estimates_the_sobel_noise() {
         let est = gradient_noise(&GrayView::new(&img, w, h).unwrap(), 1);
         let truth = sigma * (12.0f64 / 64.0).sqrt();
         assert!((est / truth - 1.0).abs() < 0.05, "{est} vs {truth}");
+    }
+}
+
+/// Lines found on their centres ([`ridges`]): the thin-ring cases of the edge tests.
+mod lines_on_their_centre {
+    use super::super::ridges::{RidgeField, detect_line_ellipses, ridge_scale};
+    use super::*;
+
+    fn lines(img: &[u8], w: usize, h: usize, sigma: f64) -> Vec<EllipseDetection> {
+        detect_line_ellipses(
+            &GrayView::new(img, w, h).unwrap(),
+            &EllipseDetectParams::default(),
+            sigma,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn bright_and_dark_thin_rings_are_found_on_their_centre_lines() {
+        let (w, h) = (260, 190);
+        let e = Ellipse::new(130.4, 95.3, 95.0, 28.0, 0.15).unwrap();
+        for (bg, fg, width) in [(20.0, 200.0, 1.0), (210.0, 70.0, 1.4), (30.0, 140.0, 0.7)] {
+            let mut img = draw(w, h, bg, fg, &ring(e, width));
+            add_noise(&mut img, 2.0, 3);
+            let found = lines(&to_u8(&img), w, h, 0.8);
+            let brief: Vec<_> = found
+                .iter()
+                .map(|d| (d.ellipse, d.points.len(), d.score))
+                .collect();
+            assert_eq!(found.len(), 1, "width {width}: {brief:?}");
+            assert_eq!(found[0].polarity, 0);
+            assert_close(&found[0], &e, 0.15, 0.25);
+            assert!(found[0].score > 20.0);
+        }
+    }
+
+    #[test]
+    fn two_lines_three_pixels_apart_stay_apart() {
+        // The two rims of a wafer drawn as lines: one ellipse moved 3 px along its minor axis.
+        let (w, h) = (300, 160);
+        let upper = Ellipse::new(150.2, 70.6, 120.0, 30.0, 0.0).unwrap();
+        let lower = Ellipse::new(150.2, 73.6, 120.0, 30.6, 0.0).unwrap();
+        let (ru, rl) = (ring(upper, 1.0), ring(lower, 1.0));
+        let mut img = draw(w, h, 15.0, 190.0, &move |u, v| ru(u, v) || rl(u, v));
+        add_noise(&mut img, 2.0, 5);
+        let found = lines(&to_u8(&img), w, h, 0.8);
+        for truth in [upper, lower] {
+            let best = found
+                .iter()
+                .min_by(|p, q| {
+                    let d = |f: &EllipseDetection| (f.ellipse.cy - truth.cy).abs();
+                    d(p).total_cmp(&d(q))
+                })
+                .unwrap_or_else(|| panic!("{found:?}"));
+            assert_close(best, &truth, 0.3, 0.5);
+        }
+    }
+
+    #[test]
+    fn pure_noise_gives_no_line() {
+        let (w, h) = (320, 240);
+        let mut total = 0;
+        for seed in 0..6 {
+            let mut img = vec![128f32; w * h];
+            add_noise(&mut img, 6.0 + 4.0 * seed as f64, 200 + seed);
+            total += lines(&to_u8(&img), w, h, 0.8).len();
+        }
+        assert_eq!(total, 0);
+    }
+
+    #[test]
+    fn anisotropic_part_is_rayleigh_under_white_noise() {
+        // The noise model of the thresholds: on white Gaussian noise the median of
+        // q = √(((r_xx − r_yy)/2)² + r_xy²) is the Rayleigh median s_q·√(2 ln 2).
+        let (w, h) = (400, 300);
+        let mut img = vec![100f32; w * h];
+        add_noise(&mut img, 10.0, 9);
+        let view = GrayView::new(&img, w, h).unwrap();
+        let sigma_g = gradient_noise(&view, 1);
+        for sigma in [0.6, 0.8, 1.5] {
+            let field = RidgeField::new(&view, sigma, sigma_g);
+            let mut q = field.anisotropy_sample(3);
+            let mid = q.len() / 2;
+            q.select_nth_unstable_by(mid, f64::total_cmp);
+            let expected = field.noise * (2.0 * std::f64::consts::LN_2).sqrt();
+            let ratio = q[mid] / expected;
+            assert!((ratio - 1.0).abs() < 0.1, "sigma {sigma}: ratio {ratio}");
+        }
+    }
+
+    #[test]
+    fn scale_covers_the_widest_line() {
+        assert_eq!(ridge_scale(1.0), 0.6);
+        assert!((ridge_scale(4.0) - 4.0 / (2.0 * 3f64.sqrt())).abs() < 1e-12);
     }
 }
