@@ -16,6 +16,7 @@ mod geometry;
 mod handeye;
 mod lsq;
 mod polygon;
+mod radio;
 mod registration;
 mod sim;
 mod track;
@@ -37,6 +38,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
+    radio::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
