@@ -220,7 +220,9 @@ pub enum EstimateError {
 
     /// A radio link has coincident (or nearly coincident) transmitter and receiver, where the
     /// path loss `log10 ‖r − t‖` of eq. 3.1 is undefined.
-    #[error("{what}: link {index} has transmitter and receiver {distance:.3e} m apart (minimum {minimum} m)")]
+    #[error(
+        "{what}: link {index} has transmitter and receiver {distance:.3e} m apart (minimum {minimum} m)"
+    )]
     CoincidentLink {
         /// What was passed.
         what: String,

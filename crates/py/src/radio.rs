@@ -45,7 +45,10 @@ fn links_arg(tx: &Bound<'_, PyAny>, rx: &Bound<'_, PyAny>) -> PyResult<Vec<Link>
             r.len()
         )));
     }
-    Ok(t.into_iter().zip(r).map(|(tx, rx)| Link { tx, rx }).collect())
+    Ok(t.into_iter()
+        .zip(r)
+        .map(|(tx, rx)| Link { tx, rx })
+        .collect())
 }
 
 fn rss_arg(rss: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
@@ -310,7 +313,12 @@ impl PyMrt {
     }
 
     /// Appends measurements.
-    fn add(&mut self, tx: &Bound<'_, PyAny>, rx: &Bound<'_, PyAny>, rss: &Bound<'_, PyAny>) -> PyResult<()> {
+    fn add(
+        &mut self,
+        tx: &Bound<'_, PyAny>,
+        rx: &Bound<'_, PyAny>,
+        rss: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
         let links = links_arg(tx, rx)?;
         let y = rss_arg(rss)?;
         self.inner.add(&links, &y).map_err(errors::estimate)
@@ -341,7 +349,11 @@ impl PyMrt {
     fn solution<'py>(&self, py: Python<'py>) -> PyResult<(f64, f64, PyArr<'py>)> {
         let s = solution(self.inner.solution(), "MRT")?;
         let g = self.inner.grid;
-        Ok((s.l0, s.exponent, convert::to_numpy(py, s.values, &[g.rows, g.cols])?))
+        Ok((
+            s.l0,
+            s.exponent,
+            convert::to_numpy(py, s.values, &[g.rows, g.cols])?,
+        ))
     }
 
     /// The stacked least-squares system (COO rows, cols, values; rhs; unknowns).
@@ -374,7 +386,11 @@ pub struct PyMatte {
 }
 
 /// Reads a `(H, W)` class array (given as float64 by the wrapper) into a [`ClassGrid`].
-fn class_grid(classes: &Bound<'_, PyAny>, resolution: f64, origin: (f64, f64)) -> PyResult<ClassGrid> {
+fn class_grid(
+    classes: &Bound<'_, PyAny>,
+    resolution: f64,
+    origin: (f64, f64),
+) -> PyResult<ClassGrid> {
     let a = convert::finite_array(classes, "occupancy")?;
     let shape = a.shape().to_vec();
     if shape.len() != 2 {
@@ -386,7 +402,13 @@ fn class_grid(classes: &Bound<'_, PyAny>, resolution: f64, origin: (f64, f64)) -
     let vals: Vec<u8> = a
         .view()
         .iter()
-        .map(|&v| if v == v.round() && (0.0..=2.0).contains(&v) { v as u8 } else { u8::MAX })
+        .map(|&v| {
+            if v == v.round() && (0.0..=2.0).contains(&v) {
+                v as u8
+            } else {
+                u8::MAX
+            }
+        })
         .collect();
     let g = GridGeometry::new(shape[0], shape[1], resolution, [origin.0, origin.1])
         .map_err(errors::estimate)?;
@@ -433,7 +455,12 @@ impl PyMatte {
     }
 
     /// Appends measurements.
-    fn add(&mut self, tx: &Bound<'_, PyAny>, rx: &Bound<'_, PyAny>, rss: &Bound<'_, PyAny>) -> PyResult<()> {
+    fn add(
+        &mut self,
+        tx: &Bound<'_, PyAny>,
+        rx: &Bound<'_, PyAny>,
+        rss: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
         let links = links_arg(tx, rx)?;
         let y = rss_arg(rss)?;
         self.inner.add(&links, &y).map_err(errors::estimate)
@@ -464,7 +491,11 @@ impl PyMatte {
     fn solution<'py>(&self, py: Python<'py>) -> PyResult<(f64, f64, PyArr<'py>)> {
         let s = solution(self.inner.solution(), "MATTE")?;
         let g = self.inner.coarse;
-        Ok((s.l0, s.exponent, convert::to_numpy(py, s.values, &[3, g.rows, g.cols])?))
+        Ok((
+            s.l0,
+            s.exponent,
+            convert::to_numpy(py, s.values, &[3, g.rows, g.cols])?,
+        ))
     }
 
     /// The fine attenuation map `(H, W)`, dB per metre.
@@ -525,10 +556,16 @@ fn radio_simulate<'py>(
         ("lidar_range", lidar_range),
     ] {
         if !(v.is_finite() && v > 0.0) {
-            return Err(errors::invalid_input(format!("{name} must be positive, got {v}")));
+            return Err(errors::invalid_input(format!(
+                "{name} must be positive, got {v}"
+            )));
         }
     }
-    if !(0.0..=1.0).contains(&correlated_share) || !l0.is_finite() || !exponent.is_finite() || !clutter.is_finite() {
+    if !(0.0..=1.0).contains(&correlated_share)
+        || !l0.is_finite()
+        || !exponent.is_finite()
+        || !clutter.is_finite()
+    {
         return Err(errors::invalid_input(
             "correlated_share must be in [0, 1]; l0, exponent, clutter finite",
         ));
@@ -556,10 +593,15 @@ fn radio_simulate<'py>(
     d.set_item("resolution", g.resolution)?;
     d.set_item("origin", (g.origin[0], g.origin[1]))?;
     d.set_item("times", vec_out(py, m.times)?)?;
-    let flat = |f: &dyn Fn(&Link) -> [f64; 2]| m.links.iter().flat_map(|l| f(l)).collect::<Vec<f64>>();
+    let flat =
+        |f: &dyn Fn(&Link) -> [f64; 2]| m.links.iter().flat_map(|l| f(l)).collect::<Vec<f64>>();
     d.set_item("tx", convert::to_numpy(py, flat(&|l| l.tx), &[n, 2])?)?;
     d.set_item("rx", convert::to_numpy(py, flat(&|l| l.rx), &[n, 2])?)?;
-    let pairs: Vec<f64> = m.pairs.iter().flat_map(|p| [p[0] as f64, p[1] as f64]).collect();
+    let pairs: Vec<f64> = m
+        .pairs
+        .iter()
+        .flat_map(|p| [p[0] as f64, p[1] as f64])
+        .collect();
     d.set_item("pairs", convert::to_numpy(py, pairs, &[n, 2])?)?;
     d.set_item("rss", vec_out(py, m.rss)?)?;
     d.set_item("mean", vec_out(py, m.mean)?)?;
@@ -567,7 +609,10 @@ fn radio_simulate<'py>(
     d.set_item("first_seen", convert::to_numpy(py, obs.first_seen, &shape)?)?;
     let solid: Vec<f64> = obs.solid.iter().map(|&s| f64::from(u8::from(s))).collect();
     d.set_item("solid", convert::to_numpy(py, solid, &shape)?)?;
-    d.set_item("attenuation", convert::to_numpy(py, env.attenuation(&p), &shape)?)?;
+    d.set_item(
+        "attenuation",
+        convert::to_numpy(py, env.attenuation(&p), &shape)?,
+    )?;
     let mat: Vec<f64> = env.material.iter().map(|&v| f64::from(v)).collect();
     d.set_item("material", convert::to_numpy(py, mat, &shape)?)?;
     let r = traj.positions.len();

@@ -122,6 +122,7 @@ impl LinkKernel {
     /// Whether a pair can have a non-zero kernel value: both distances of one orientation
     /// below Θ (a superset of the support of both kernels).
     pub fn may_couple(d: &PairDistances, theta: f64) -> bool {
-        (d.direct[0] < theta && d.direct[1] < theta) || (d.swapped[0] < theta && d.swapped[1] < theta)
+        (d.direct[0] < theta && d.direct[1] < theta)
+            || (d.swapped[0] < theta && d.swapped[1] < theta)
     }
 }

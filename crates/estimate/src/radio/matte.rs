@@ -148,7 +148,11 @@ impl Matte {
         let mut pairs = Vec::new();
         let mut prior = Vec::with_capacity(CLASSES * n);
         for class in [FREE, STRUCTURE, UNKNOWN] {
-            pairs.extend(grid_pairs(self.coarse.rows, self.coarse.cols, class as usize * n));
+            pairs.extend(grid_pairs(
+                self.coarse.rows,
+                self.coarse.cols,
+                class as usize * n,
+            ));
             let rho = if class == FREE {
                 self.options.rho_free
             } else {

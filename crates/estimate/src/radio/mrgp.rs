@@ -116,7 +116,11 @@ impl Mrgp {
     ) -> Result<Mrgp> {
         check_params(&params)?;
         let mean = LogFit::fit(links, rss)?;
-        let residual: Vec<f64> = links.iter().zip(rss).map(|(l, y)| y - mean.mean(l)).collect();
+        let residual: Vec<f64> = links
+            .iter()
+            .zip(rss)
+            .map(|(l, y)| y - mean.mean(l))
+            .collect();
         let n = links.len();
         let hash = hash_links(links, params.theta);
         // Pattern of the lower triangle: for column j, rows i ≥ j that may couple.
@@ -127,7 +131,15 @@ impl Mrgp {
         let mut distances = Vec::new();
         col_ptr.push(0);
         for j in 0..n {
-            candidates(&links[j], links, &hash, params.theta, &mut mark, j as u32, &mut cand);
+            candidates(
+                &links[j],
+                links,
+                &hash,
+                params.theta,
+                &mut mark,
+                j as u32,
+                &mut cand,
+            );
             cand.retain(|(i, _)| *i >= j);
             cand.sort_unstable_by_key(|(i, _)| *i);
             for (i, d) in &cand {
@@ -199,15 +211,13 @@ impl Mrgp {
     /// `−½ rᵀα − ½ log|K_y| − (n/2) log 2π`.
     fn refactor(&mut self, p: KernelParams) -> Result<f64> {
         self.fill(&p, p.sigma_d * p.sigma_d);
-        self.llt
-            .factor(&self.pattern.values)
-            .map_err(|FactorError::NotPositiveDefinite(column)| {
-                EstimateError::KernelNotPositiveDefinite {
-                    kernel: self.kernel.name().into(),
-                    links: self.pattern.n,
-                    column,
-                }
-            })?;
+        self.llt.factor(&self.pattern.values).map_err(
+            |FactorError::NotPositiveDefinite(column)| EstimateError::KernelNotPositiveDefinite {
+                kernel: self.kernel.name().into(),
+                links: self.pattern.n,
+                column,
+            },
+        )?;
         let mut alpha = self.residual.clone();
         self.llt.solve_in_place(&mut alpha, 1)?;
         let n = self.pattern.n as f64;
@@ -322,7 +332,15 @@ impl Mrgp {
         let mut means = Vec::with_capacity(links.len());
         let mut kstar: Vec<Vec<(usize, f64)>> = Vec::new();
         for (qi, q) in links.iter().enumerate() {
-            candidates(q, &self.links, &self.hash, theta, &mut mark, qi as u32, &mut cand);
+            candidates(
+                q,
+                &self.links,
+                &self.hash,
+                theta,
+                &mut mark,
+                qi as u32,
+                &mut cand,
+            );
             let mut m = self.mean.mean(q);
             let mut ks = Vec::new();
             for (j, d) in &cand {

@@ -269,7 +269,10 @@ impl Builder {
         while y < y1 - 2.0 {
             let mut x = env.geometry.origin[0] + 3.0;
             while x < x1 - 2.0 {
-                let p = [x + rng.random_range(-1.0..1.0), y + rng.random_range(-1.0..1.0)];
+                let p = [
+                    x + rng.random_range(-1.0..1.0),
+                    y + rng.random_range(-1.0..1.0),
+                ];
                 if env.clear(p, 1.0) && !env.indoor[env.geometry.cell_of(p).unwrap_or(0)] {
                     nodes.push(p);
                 }
@@ -320,10 +323,22 @@ impl Environment {
         };
         match kind {
             EnvironmentKind::Office => {
-                b.building(&mut rng, [4.0, 4.0, 68.0, 44.0], CONCRETE, &[16.0, 32.0], Some(36.0));
+                b.building(
+                    &mut rng,
+                    [4.0, 4.0, 68.0, 44.0],
+                    CONCRETE,
+                    &[16.0, 32.0],
+                    Some(36.0),
+                );
             }
             EnvironmentKind::Campus => {
-                b.building(&mut rng, [10.0, 10.0, 60.0, 38.0], BRICK, &[24.0], Some(35.0));
+                b.building(
+                    &mut rng,
+                    [10.0, 10.0, 60.0, 38.0],
+                    BRICK,
+                    &[24.0],
+                    Some(35.0),
+                );
                 b.building(&mut rng, [90.0, 60.0, 140.0, 88.0], CONCRETE, &[74.0], None);
                 b.building(&mut rng, [80.0, 12.0, 110.0, 40.0], CONCRETE, &[], None);
                 b.building(&mut rng, [125.0, 15.0, 150.0, 40.0], BRICK, &[], None);
@@ -332,7 +347,13 @@ impl Environment {
                 b.wall(true, 52.0, 100.0, 150.0, 0.2, WOOD);
             }
             EnvironmentKind::Mixed => {
-                b.building(&mut rng, [5.0, 8.0, 55.0, 72.0], CONCRETE, &[24.0, 52.0], Some(30.0));
+                b.building(
+                    &mut rng,
+                    [5.0, 8.0, 55.0, 72.0],
+                    CONCRETE,
+                    &[24.0, 52.0],
+                    Some(30.0),
+                );
                 b.building(&mut rng, [75.0, 10.0, 95.0, 25.0], BRICK, &[], None);
                 b.building(&mut rng, [85.0, 50.0, 110.0, 65.0], BRICK, &[], None);
                 b.wall(false, 65.0, 30.0, 70.0, 0.2, WOOD);
@@ -358,7 +379,8 @@ impl Environment {
 
     fn segment_clear(&self, a: [f64; 2], b: [f64; 2]) -> bool {
         let mut ok = true;
-        self.geometry.traverse(a, b, |c, _| ok &= self.material[c] == AIR);
+        self.geometry
+            .traverse(a, b, |c, _| ok &= self.material[c] == AIR);
         // Keep 0.3 m from walls on both sides.
         let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
         let len = (dx * dx + dy * dy).sqrt().max(1e-9);
@@ -391,7 +413,9 @@ impl Environment {
         self.material
             .iter()
             .zip(&self.indoor)
-            .map(|(&m, &ind)| MATERIALS[m as usize].1 + if m == AIR && ind { p.clutter } else { 0.0 })
+            .map(|(&m, &ind)| {
+                MATERIALS[m as usize].1 + if m == AIR && ind { p.clutter } else { 0.0 }
+            })
             .collect()
     }
 }
@@ -417,7 +441,12 @@ pub fn explore(
     rate: f64,
     seed: u64,
 ) -> Result<Trajectories> {
-    for (name, v) in [("robots", robots as f64), ("duration", duration), ("speed", speed), ("rate", rate)] {
+    for (name, v) in [
+        ("robots", robots as f64),
+        ("duration", duration),
+        ("speed", speed),
+        ("rate", rate),
+    ] {
         if !(v.is_finite() && v > 0.0) {
             return Err(EstimateError::InvalidParameter {
                 name,
@@ -427,7 +456,9 @@ pub fn explore(
         }
     }
     if env.nodes.len() < robots + 1 {
-        return Err(EstimateError::InvalidProblem("roadmap too small for the team".into()));
+        return Err(EstimateError::InvalidProblem(
+            "roadmap too small for the team".into(),
+        ));
     }
     let mut rng = Pcg64::seed_from_u64(seed);
     let mut visits = vec![0u32; env.nodes.len()];
@@ -438,8 +469,13 @@ pub fn explore(
             break s;
         }
     };
-    let mut order: Vec<usize> = (0..env.nodes.len()).filter(|&k| !env.edges[k].is_empty()).collect();
-    let d2 = |k: usize| (env.nodes[k][0] - env.nodes[start][0]).powi(2) + (env.nodes[k][1] - env.nodes[start][1]).powi(2);
+    let mut order: Vec<usize> = (0..env.nodes.len())
+        .filter(|&k| !env.edges[k].is_empty())
+        .collect();
+    let d2 = |k: usize| {
+        (env.nodes[k][0] - env.nodes[start][0]).powi(2)
+            + (env.nodes[k][1] - env.nodes[start][1]).powi(2)
+    };
     order.sort_by(|&a, &b| d2(a).total_cmp(&d2(b)));
     struct Walker {
         from: usize,
@@ -470,7 +506,9 @@ pub fn explore(
             let mut pos;
             loop {
                 let (a, b) = (env.nodes[w.from], env.nodes[w.to]);
-                let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt().max(0.0);
+                let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2))
+                    .sqrt()
+                    .max(0.0);
                 if w.progress + travel < len {
                     w.progress += travel;
                     let f = w.progress / len;
@@ -536,7 +574,9 @@ impl Field {
                 [a / ell, c / ell]
             })
             .collect();
-        let b = (0..features).map(|_| rng.random_range(0.0..std::f64::consts::TAU)).collect();
+        let b = (0..features)
+            .map(|_| rng.random_range(0.0..std::f64::consts::TAU))
+            .collect();
         Self { w, b }
     }
 
@@ -580,8 +620,7 @@ pub fn measure(env: &Environment, traj: &Trajectories, p: &RadioParams, seed: u6
                 }
                 let mean = env.mean_rss(&link, p);
                 let e: f64 = StandardNormal.sample(&mut rng);
-                let shadow = sc * (field.at(link.tx) + field.at(link.rx)) / 2f64.sqrt()
-                    + si * e;
+                let shadow = sc * (field.at(link.tx) + field.at(link.rx)) / 2f64.sqrt() + si * e;
                 m.times.push(t);
                 m.links.push(link);
                 m.pairs.push([a, b]);

@@ -19,13 +19,15 @@ use crate::EstimateError;
 
 fn random_links(rng: &mut Pcg64, n: usize, size: f64) -> Vec<Link> {
     (0..n)
-        .map(|_| loop {
-            let l = Link {
-                tx: [rng.random_range(0.0..size), rng.random_range(0.0..size)],
-                rx: [rng.random_range(0.0..size), rng.random_range(0.0..size)],
-            };
-            if l.length() > 0.5 {
-                break l;
+        .map(|_| {
+            loop {
+                let l = Link {
+                    tx: [rng.random_range(0.0..size), rng.random_range(0.0..size)],
+                    rx: [rng.random_range(0.0..size), rng.random_range(0.0..size)],
+                };
+                if l.length() > 0.5 {
+                    break l;
+                }
             }
         })
         .collect()
@@ -47,7 +49,10 @@ fn dense_solve(rows: &TomoRows, reg: &Regularization) -> DVector<f64> {
         a[(r, c)] += v;
     }
     let b = DVector::from_vec(rhs);
-    (a.transpose() * &a).cholesky().unwrap().solve(&(a.transpose() * b))
+    (a.transpose() * &a)
+        .cholesky()
+        .unwrap()
+        .solve(&(a.transpose() * b))
 }
 
 fn small_world() -> (ClassGrid, Vec<Link>, Vec<f64>) {
@@ -130,7 +135,11 @@ fn tomographic_solves_equal_dense_solves() {
     assert!((sol.l0 - want[0]).abs() < 1e-7 * scale);
     assert!((-sol.exponent - want[1]).abs() < 1e-7 * scale);
     for (k, v) in sol.values.iter().enumerate() {
-        assert!((v - want[k + 2]).abs() < 1e-7 * scale, "cell {k}: {v} vs {}", want[k + 2]);
+        assert!(
+            (v - want[k + 2]).abs() < 1e-7 * scale,
+            "cell {k}: {v} vs {}",
+            want[k + 2]
+        );
     }
     for weights in [MatteWeights::Length, MatteWeights::Indicator] {
         let opts = MatteOptions {
@@ -178,11 +187,19 @@ fn matte_recovers_per_class_attenuation_and_beats_the_log_fit() {
     let lf = LogFit::fit(&links[..train], &rss[..train]).unwrap();
     let (lpred, _) = lf.predict(&links[train..test]).unwrap();
     let rmse = |p: &[f64]| {
-        (p.iter().zip(&rss[train..test]).map(|(a, b)| (a - b).powi(2)).sum::<f64>()
+        (p.iter()
+            .zip(&rss[train..test])
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
             / p.len() as f64)
             .sqrt()
     };
-    assert!(rmse(&pred) < 0.5 * rmse(&lpred), "{} vs {}", rmse(&pred), rmse(&lpred));
+    assert!(
+        rmse(&pred) < 0.5 * rmse(&lpred),
+        "{} vs {}",
+        rmse(&pred),
+        rmse(&lpred)
+    );
     assert!(rmse(&pred) < 3.0, "{}", rmse(&pred));
 }
 
@@ -220,7 +237,9 @@ fn indicator_weights_of_algorithm_3_1_are_biased() {
         .iter()
         .map(|l| {
             let mut att = 0.0;
-            g.traverse(l.tx, l.rx, |c, w| att += w * [0.0, 20.0, 5.0][map.classes[c] as usize]);
+            g.traverse(l.tx, l.rx, |c, w| {
+                att += w * [0.0, 20.0, 5.0][map.classes[c] as usize]
+            });
             -40.0 - 22.0 * l.log_distance() - att
         })
         .collect();
@@ -233,11 +252,19 @@ fn indicator_weights_of_algorithm_3_1_are_biased() {
         };
         let m = Matte::fit(map.clone(), &links, &rss, opts).unwrap();
         let p = m.predict(&links).unwrap();
-        (p.iter().zip(&rss).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / p.len() as f64).sqrt()
+        (p.iter()
+            .zip(&rss)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            / p.len() as f64)
+            .sqrt()
     };
     let (len, ind) = (resid(MatteWeights::Length), resid(MatteWeights::Indicator));
     assert!(len < 0.02, "length weights: {len}");
-    assert!(ind > 10.0 * len && ind > 0.1, "indicator {ind} vs length {len}");
+    assert!(
+        ind > 10.0 * len && ind > 0.1,
+        "indicator {ind} vs length {len}"
+    );
 }
 
 #[test]
@@ -273,7 +300,10 @@ fn ds4_kernel_is_not_positive_definite() {
                 .map(|(y, l)| y - 20.0 * l.log_distance())
                 .collect();
             let err = Mrgp::fit(&links, &rss, LinkKernel::Ds4, p, false).unwrap_err();
-            assert!(matches!(err, EstimateError::KernelNotPositiveDefinite { .. }), "{err}");
+            assert!(
+                matches!(err, EstimateError::KernelNotPositiveDefinite { .. }),
+                "{err}"
+            );
             assert!(Mrgp::fit(&links, &rss, LinkKernel::SwapAverage, p, false).is_ok());
         }
     }
@@ -287,7 +317,9 @@ fn mrgp_sparse_predictions_equal_dense_gp_algebra() {
     let noise = Normal::new(0.0, 3.0).unwrap();
     let rss: Vec<f64> = links
         .iter()
-        .map(|l| -40.0 - 25.0 * l.log_distance() + noise.sample(&mut rng) + (l.tx[0] / 10.0).sin() * 4.0)
+        .map(|l| {
+            -40.0 - 25.0 * l.log_distance() + noise.sample(&mut rng) + (l.tx[0] / 10.0).sin() * 4.0
+        })
         .collect();
     let p = KernelParams {
         length_scale: 4.0,
@@ -300,8 +332,11 @@ fn mrgp_sparse_predictions_equal_dense_gp_algebra() {
     let var = var.unwrap();
     // Dense GP algebra.
     let n = links.len();
-    let k = DMatrix::from_row_slice(n, n, &Mrgp::kernel_matrix(&links, LinkKernel::SwapAverage, &p))
-        + DMatrix::identity(n, n) * p.sigma_d * p.sigma_d;
+    let k = DMatrix::from_row_slice(
+        n,
+        n,
+        &Mrgp::kernel_matrix(&links, LinkKernel::SwapAverage, &p),
+    ) + DMatrix::identity(n, n) * p.sigma_d * p.sigma_d;
     let r = DVector::from_iterator(n, links.iter().zip(&rss).map(|(l, y)| y - gp.mean.mean(l)));
     let ch = k.cholesky().unwrap();
     let alpha = ch.solve(&r);
@@ -314,12 +349,17 @@ fn mrgp_sparse_predictions_equal_dense_gp_algebra() {
         let ks = DVector::from_iterator(n, (0..n).map(|j| kall[row * m + j]));
         let want_mean = gp.mean.mean(q) + ks.dot(&alpha);
         let want_var = kall[row * m + row] - ks.dot(&ch.solve(&ks));
-        assert!((mean[qi] - want_mean).abs() < 1e-8, "{} vs {want_mean}", mean[qi]);
+        assert!(
+            (mean[qi] - want_mean).abs() < 1e-8,
+            "{} vs {want_mean}",
+            mean[qi]
+        );
         assert!((var[qi] - want_var).abs() < 1e-8);
     }
     // Log marginal likelihood.
     let logdet = 2.0 * ch.l().diagonal().map(|v| v.ln()).sum();
-    let want = -0.5 * r.dot(&alpha) - 0.5 * logdet - 0.5 * n as f64 * (2.0 * std::f64::consts::PI).ln();
+    let want =
+        -0.5 * r.dot(&alpha) - 0.5 * logdet - 0.5 * n as f64 * (2.0 * std::f64::consts::PI).ln();
     assert!((gp.log_marginal_likelihood() - want).abs() < 1e-6 * want.abs());
 }
 
@@ -330,7 +370,11 @@ fn marginal_likelihood_search_finds_a_local_maximum() {
     let noise = Normal::new(0.0, 2.0).unwrap();
     let rss: Vec<f64> = links
         .iter()
-        .map(|l| -40.0 - 25.0 * l.log_distance() + noise.sample(&mut rng) + 5.0 * ((l.tx[0] + l.rx[0]) / 15.0).sin())
+        .map(|l| {
+            -40.0 - 25.0 * l.log_distance()
+                + noise.sample(&mut rng)
+                + 5.0 * ((l.tx[0] + l.rx[0]) / 15.0).sin()
+        })
         .collect();
     let start = KernelParams::default();
     let gp0 = Mrgp::fit(&links, &rss, LinkKernel::SwapAverage, start, false).unwrap();
@@ -366,12 +410,22 @@ fn bad_inputs_give_clear_errors() {
         },
     ];
     let e = LogFit::fit(&links, &[-50.0, -60.0]).unwrap_err();
-    assert!(matches!(e, EstimateError::CoincidentLink { index: 1, .. }), "{e}");
+    assert!(
+        matches!(e, EstimateError::CoincidentLink { index: 1, .. }),
+        "{e}"
+    );
     let e = LogFit::fit(&links[..1], &[f64::NAN]).unwrap_err();
     assert!(matches!(e, EstimateError::NonFiniteInput { .. }), "{e}");
     let e = LogFit::fit(&[], &[]).unwrap_err();
     assert!(matches!(e, EstimateError::EmptyInput(_)), "{e}");
-    let e = Mrgp::fit(&[], &[], LinkKernel::SwapAverage, KernelParams::default(), false).unwrap_err();
+    let e = Mrgp::fit(
+        &[],
+        &[],
+        LinkKernel::SwapAverage,
+        KernelParams::default(),
+        false,
+    )
+    .unwrap_err();
     assert!(matches!(e, EstimateError::EmptyInput(_)), "{e}");
     let (map, good, rss) = small_world();
     let outside = [Link {
@@ -381,7 +435,10 @@ fn bad_inputs_give_clear_errors() {
     let e = Matte::fit(map.clone(), &outside, &[-60.0], MatteOptions::default()).unwrap_err();
     assert!(matches!(e, EstimateError::OutsideMap { .. }), "{e}");
     let m = Matte::fit(map, &good, &rss, MatteOptions::default()).unwrap();
-    assert!(matches!(m.predict(&outside).unwrap_err(), EstimateError::OutsideMap { .. }));
+    assert!(matches!(
+        m.predict(&outside).unwrap_err(),
+        EstimateError::OutsideMap { .. }
+    ));
     let e = Mrt::new([0.0, 0.0, 30.0, 20.0], MrtOptions::default())
         .unwrap()
         .solve()
@@ -406,7 +463,11 @@ fn bad_inputs_give_clear_errors() {
 
 #[test]
 fn simulated_robots_stay_in_free_space_and_measure_every_pair() {
-    for kind in [EnvironmentKind::Office, EnvironmentKind::Campus, EnvironmentKind::Mixed] {
+    for kind in [
+        EnvironmentKind::Office,
+        EnvironmentKind::Campus,
+        EnvironmentKind::Mixed,
+    ] {
         let env = Environment::new(kind, 1);
         let traj = sim::explore(&env, 3, 30.0, 1.0, 20.0, 2).unwrap();
         assert_eq!(traj.times.len(), 600);

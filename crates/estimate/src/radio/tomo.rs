@@ -231,14 +231,15 @@ impl TomoRows {
         let n = self.n;
         let (s, bv, b) = self.assemble(reg);
         let mut llt = SparseLlt::analyse(&s)?;
-        llt.factor(&s.values).map_err(|FactorError::NotPositiveDefinite(col)| {
-            EstimateError::RankDeficient {
-                what: "tomographic normal equations (A_vᵀA_v + λ²ΓᵀΓ + φ²I)".into(),
-                directions: format!(
-                    "spatial unknown {col} (raise λ or φ, or cover the map with links)"
-                ),
-            }
-        })?;
+        llt.factor(&s.values)
+            .map_err(
+                |FactorError::NotPositiveDefinite(col)| EstimateError::RankDeficient {
+                    what: "tomographic normal equations (A_vᵀA_v + λ²ΓᵀΓ + φ²I)".into(),
+                    directions: format!(
+                        "spatial unknown {col} (raise λ or φ, or cover the map with links)"
+                    ),
+                },
+            )?;
         let mut z = Vec::with_capacity(3 * n);
         z.extend_from_slice(&b);
         z.extend_from_slice(&bv);
