@@ -195,12 +195,12 @@ fn matte_recovers_per_class_attenuation_and_beats_the_log_fit() {
             .sqrt()
     };
     assert!(
-        rmse(&pred) < 0.5 * rmse(&lpred),
+        rmse(&pred[..]) < 0.5 * rmse(&lpred[..]),
         "{} vs {}",
-        rmse(&pred),
-        rmse(&lpred)
+        rmse(&pred[..]),
+        rmse(&lpred[..])
     );
-    assert!(rmse(&pred) < 3.0, "{}", rmse(&pred));
+    assert!(rmse(&pred[..]) < 3.0, "{}", rmse(&pred[..]));
 }
 
 /// Seed slip: Algorithm 3.2 line 4 predicts `x(0) + log10 ‖p‖`, dropping the exponent.
