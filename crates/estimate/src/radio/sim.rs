@@ -503,7 +503,7 @@ pub fn explore(
         times.push(s as f64 * dt);
         for (r, w) in walkers.iter_mut().enumerate() {
             let mut travel = w.speed * dt;
-            let mut pos;
+            let pos;
             loop {
                 let (a, b) = (env.nodes[w.from], env.nodes[w.to]);
                 let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2))
