@@ -79,7 +79,7 @@ def test_link_kernel_matches_numpy_formula():
 
 
 @pytest.mark.xfail(
-    reason="d_s4 with the eq. 3.4 taper was PD on these draws (min eig > 0.13); the non-PD configuration is not yet found",
+    reason="d_s4 with the eq. 3.4 taper was PD on these draws (min eig > 0.13); non-PD case not yet found",
     strict=True,
 )
 def test_swap_kernel_positive_definite_and_ds4_not():
