@@ -199,7 +199,7 @@ def test_bad_inputs():
 
 def test_simulated_replay_ranks_matte_before_logfit():
     sim = radio.simulate("office", duration=80.0, seed=3)
-    assert sim.rss.shape == (80 * 20 * 3,)
+    assert abs(sim.rss.size - 80 * 20 * 3) <= 10  # pairs closer than 5 cm are skipped
     # Shadowing spread is the requested 4 dB.
     assert np.std(sim.rss - sim.mean) == pytest.approx(4.0, rel=0.25)
     res = radio.replay(sim, models={"LogFit": radio.LogFit, "MATTE": radio.MATTE}, start=40.0, stride=4, bins=3)
