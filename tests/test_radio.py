@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -230,7 +232,7 @@ def test_cli_radio_json(tmp_path):
         text=True,
         check=True,
         cwd=tmp_path,
-        env={**__import__("os").environ},
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(str(Path(p).resolve()) for p in sys.path if p)},
     )
     r = json.loads(out.stdout)
     models = r["results"]["office"]["models"]
