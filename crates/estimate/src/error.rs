@@ -258,4 +258,10 @@ pub enum EstimateError {
     /// An input that must not be empty is empty (e.g. a training set with no measurement).
     #[error("{0} is empty")]
     EmptyInput(String),
+
+    /// Mapping input that the rasterizer cannot use (seed 004_815695db12a6b16c.txt ch. 2): a
+    /// repeated or vanished node id, a node that changed robot, a new node without a scan,
+    /// a negative range, an empty graph.
+    #[error("invalid mapping input: {0}")]
+    InvalidMapInput(String),
 }

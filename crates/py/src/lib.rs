@@ -10,11 +10,14 @@ mod active;
 mod calib;
 pub mod convert;
 mod detect;
+mod ellipse_detection;
 pub mod errors;
 mod estimate;
 mod geometry;
+mod gray;
 mod handeye;
 mod lsq;
+mod mapping;
 mod polygon;
 mod radio;
 mod registration;
@@ -39,6 +42,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     handeye::register(m)?;
     active::register(m)?;
     radio::register(m)?;
+    ellipse_detection::register(m)?;
+    mapping::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
