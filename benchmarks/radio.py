@@ -27,12 +27,16 @@ from autoteach import radio
 
 
 class SkLinkKernel(Kernel):
-    """The swap-average link kernel (kernel.rs) in NumPy, for scikit-learn."""
+    """The swap-average link kernel (kernel.rs) in NumPy, for scikit-learn.
 
-    def __init__(self, length_scale=28.75, sigma_f=1.0, theta=20.0, gamma=3.0):
+    The taper length is ``taper_theta``: an argument named ``theta`` would shadow scikit-learn's
+    ``Kernel.theta`` property (log hyper-parameters from ``get_params()``) and recurse without end.
+    """
+
+    def __init__(self, length_scale=28.75, sigma_f=1.0, taper_theta=20.0, gamma=3.0):
         self.length_scale = length_scale
         self.sigma_f = sigma_f
-        self.theta = theta
+        self.taper_theta = taper_theta
         self.gamma = gamma
 
     def __call__(self, X, Y=None, eval_gradient=False):
@@ -42,7 +46,7 @@ class SkLinkKernel(Kernel):
             return np.sqrt(np.maximum(((a[:, None, :] - b[None, :, :]) ** 2).sum(-1), 0.0))
 
         def taper(s):
-            return np.clip(1 - s / self.theta, 0, None) ** self.gamma
+            return np.clip(1 - s / self.taper_theta, 0, None) ** self.gamma
 
         l2 = self.length_scale**2
         a, b = dist(X[:, 2:], Y[:, 2:]), dist(X[:, :2], Y[:, :2])
@@ -54,7 +58,7 @@ class SkLinkKernel(Kernel):
 
     def diag(self, X):
         d = np.linalg.norm(X[:, :2] - X[:, 2:], axis=1)
-        t = np.clip(1 - d / self.theta, 0, None) ** self.gamma
+        t = np.clip(1 - d / self.taper_theta, 0, None) ** self.gamma
         return 0.5 * self.sigma_f**2 * (1 + np.exp(-2 * d / self.length_scale**2) * t * t)
 
     def is_stationary(self):
@@ -95,7 +99,8 @@ def mrgp_vs_sklearn(n: int) -> dict:
     t_opt, gpo = timed(lambda: radio.MRGP(optimize=True, **params).fit(tx, rx, rss), repeats=1)
     lf = radio.LogFit().fit(tx, rx, rss)
     resid = rss - lf.predict(tx, rx)
-    sk = GaussianProcessRegressor(kernel=SkLinkKernel(**params), alpha=1.5**2, optimizer=None, normalize_y=False)
+    sk_kernel = SkLinkKernel(params["length_scale"], params["sigma_f"], params["theta"], params["gamma"])
+    sk = GaussianProcessRegressor(kernel=sk_kernel, alpha=1.5**2, optimizer=None, normalize_y=False)
     t_sk, _ = timed(lambda: sk.fit(np.hstack([tx, rx]), resid), repeats=1)
     sk_mean = sk.predict(np.hstack([sim.tx[test], sim.rx[test]])) + lf.predict(sim.tx[test], sim.rx[test])
     diff = float(np.abs(mean - sk_mean).max())
@@ -128,7 +133,8 @@ def solves(quick: bool) -> list[dict]:
             m = radio.MATTE(cell=cell)
         m.fit(sim.tx, sim.rx, sim.rss, occupancy=occ)
         t_ours, _ = timed(lambda m=m: m._need().solve())
-        l0, a, vals = m.solution()
+        sol = m.solution()
+        l0, a, vals = sol.l0, sol.exponent, sol.values
         ours = np.concatenate([[l0, -a], vals.ravel()])
         amat, rhs = m.stacked_system()
         normal = (amat.T @ amat).tocsc()

@@ -49,18 +49,32 @@ def _numpy_kernel(ta, ra, tb, rb, kernel, length_scale, sigma_f, theta, gamma):
 
 
 class _SkLinkKernel(sklearn_gp.kernels.Kernel):
-    """scikit-learn kernel on links ``X = [tx, rx]`` with fixed hyper-parameters."""
+    """scikit-learn kernel on links ``X = [tx, rx]`` with fixed hyper-parameters.
 
-    def __init__(self, length_scale=28.75, sigma_f=1.0, theta=20.0, gamma=3.0):
+    The taper length is ``taper_theta``, not ``theta``: ``Kernel.theta`` is scikit-learn's property
+    of the log hyper-parameters, computed from ``get_params()``, which reads every ``__init__``
+    argument back, ``theta`` included -- so a kernel argument named ``theta`` recurses without end
+    (the RecursionError this parity test once hit).
+    """
+
+    def __init__(self, length_scale=28.75, sigma_f=1.0, taper_theta=20.0, gamma=3.0):
         self.length_scale = length_scale
         self.sigma_f = sigma_f
-        self.theta = theta
+        self.taper_theta = taper_theta
         self.gamma = gamma
 
     def __call__(self, X, Y=None, eval_gradient=False):
         Y = X if Y is None else Y
         return _numpy_kernel(
-            X[:, :2], X[:, 2:], Y[:, :2], Y[:, 2:], "swap", self.length_scale, self.sigma_f, self.theta, self.gamma
+            X[:, :2],
+            X[:, 2:],
+            Y[:, :2],
+            Y[:, 2:],
+            "swap",
+            self.length_scale,
+            self.sigma_f,
+            self.taper_theta,
+            self.gamma,
         )
 
     def diag(self, X):
@@ -80,27 +94,26 @@ def test_link_kernel_matches_numpy_formula():
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-14)
 
 
-@pytest.mark.xfail(
-    reason="d_s4 with the eq. 3.4 taper was PD on these draws (min eig > 0.13); non-PD case not yet found",
-    strict=True,
-)
-def test_swap_kernel_positive_definite_and_ds4_not():
+def test_swap_kernel_positive_semidefinite_and_ds4_guard_agrees_with_eigenvalues():
+    """The seed calls the d_s4 kernel of eq. 3.3 not positive definite in general; no draw here
+    found a negative eigenvalue (``docs/design/radio.md``). The MRGP's d_s4 guard must agree with
+    NumPy's eigenvalues: it fits exactly when ``K_f + 1e-6 sigma_f^2 I`` is positive definite."""
     rng = np.random.default_rng(1)
-    lowest_ds4 = []
-    for _ in range(6):
-        tx, rx = _links(rng, 300, 40)
+    for _ in range(3):
+        tx, rx = _links(rng, 200, 40)
         k_swap = radio.link_kernel(tx, rx, tx, rx, kernel="swap")
-        k_ds4 = radio.link_kernel(tx, rx, tx, rx, kernel="ds4")
         assert np.linalg.eigvalsh(k_swap).min() > -1e-10
-        lowest_ds4.append(np.linalg.eigvalsh(k_ds4).min())
-    assert max(lowest_ds4) < -1e-3, lowest_ds4
-    rss = -40 - 22 * np.log10(np.maximum(np.linalg.norm(tx - rx, axis=1), 1.0))
-    with pytest.raises(InvalidInputError, match="not positive definite"):
-        radio.MRGP(kernel="ds4").fit(tx, rx, rss)
-    radio.MRGP(kernel="swap").fit(tx, rx, rss)
+        k_ds4 = radio.link_kernel(tx, rx, tx, rx, kernel="ds4")
+        lowest = np.linalg.eigvalsh(k_ds4).min() + 1e-6
+        rss = -40 - 22 * np.log10(np.maximum(np.linalg.norm(tx - rx, axis=1), 1.0))
+        if lowest < -1e-9:
+            with pytest.raises(InvalidInputError, match="not positive definite"):
+                radio.MRGP(kernel="ds4").fit(tx, rx, rss)
+        elif lowest > 1e-9:
+            radio.MRGP(kernel="ds4").fit(tx, rx, rss)
+        radio.MRGP(kernel="swap").fit(tx, rx, rss)
 
 
-@pytest.mark.xfail(reason="RecursionError in the custom scikit-learn kernel harness, not yet diagnosed", strict=True)
 def test_mrgp_equals_sklearn_gaussian_process():
     rng = np.random.default_rng(2)
     tx, rx = _links(rng, 500, 60)
@@ -112,8 +125,9 @@ def test_mrgp_equals_sklearn_gaussian_process():
     qt, qr = _links(rng, 100, 60)
     mean, var = gp.predict(qt, qr, return_var=True)
 
+    sk_params = {"length_scale": 4.0, "sigma_f": 3.0, "taper_theta": 20.0, "gamma": 3.0}
     sk = sklearn_gp.GaussianProcessRegressor(
-        kernel=_SkLinkKernel(**params), alpha=1.5**2, optimizer=None, normalize_y=False
+        kernel=_SkLinkKernel(**sk_params), alpha=1.5**2, optimizer=None, normalize_y=False
     )
     sk.fit(np.hstack([tx, rx]), rss - logfit.predict(tx, rx))
     sk_mean, sk_std = sk.predict(np.hstack([qt, qr]), return_std=True)
@@ -132,6 +146,9 @@ def test_logfit_equals_numpy_least_squares():
     x, *_ = np.linalg.lstsq(a, rss, rcond=None)
     assert fit.l0 == pytest.approx(x[0], abs=1e-9)
     assert fit.exponent == pytest.approx(-x[1], abs=1e-9)
+    r = rss - a @ x
+    assert fit.residual_variance == pytest.approx(r @ r / (len(d) - 2), rel=1e-9)
+    np.testing.assert_allclose(fit.normal_inverse, np.linalg.inv(a.T @ a), rtol=1e-9)
 
 
 def _small_problem(rng):
@@ -155,7 +172,8 @@ def test_direct_solve_equals_dense_and_scipy(model):
     dense = np.linalg.lstsq(a.toarray(), rhs, rcond=None)[0]
     n = (a.T @ a).tocsc()
     via_spsolve = splinalg.spsolve(n, a.T @ rhs)
-    l0, exponent, values = m.solution()
+    sol = m.solution()
+    l0, exponent, values = sol.l0, sol.exponent, sol.values
     got = np.concatenate([[l0, -exponent], values.ravel()])
     scale = np.abs(dense).max()
     np.testing.assert_allclose(got, dense, atol=1e-7 * scale)
@@ -168,7 +186,7 @@ def test_incremental_update_equals_single_fit():
     occ, tx, rx, rss = _small_problem(rng)
     one = radio.MATTE().fit(tx, rx, rss, occupancy=occ)
     inc = radio.MATTE().fit(tx[:100], rx[:100], rss[:100], occupancy=occ).update(tx[100:], rx[100:], rss[100:])
-    np.testing.assert_allclose(one.solution()[2], inc.solution()[2], atol=1e-9)
+    np.testing.assert_allclose(one.solution().values, inc.solution().values, atol=1e-9)
     q = rng.uniform([0, 0], [30, 20], (20, 2))
     np.testing.assert_allclose(one.predict(q, q[::-1]), inc.predict(q, q[::-1]), atol=1e-9)
 

@@ -54,7 +54,7 @@ TABLE_3_1 = (
 evaluation draws three distinct environments); the defaults here are evaluation 1's values."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class OccupancyMap:
     """A ternary occupancy grid: ``classes`` ``(H, W)`` of 0 free / 1 structure / 2 unknown."""
 
@@ -129,6 +129,16 @@ class LogFit:
     def exponent(self) -> float:
         """Path-loss exponent ``a`` (dB per decade)."""
         return self._fitted().exponent
+
+    @property
+    def residual_variance(self) -> float:
+        """Residual variance ``s^2`` of the fit, dB^2 (the noise of a new measurement)."""
+        return self._fitted().residual_variance
+
+    @property
+    def normal_inverse(self) -> F64Array:
+        """``(A^T A)^-1`` of the regressors ``[1, log10 d]``, ``(2, 2)``."""
+        return self._fitted().normal_inverse
 
 
 class MRGP:
@@ -220,6 +230,23 @@ def link_kernel(
     return _core.radio_link_kernel(ta, ra, tb, rb, kernel, length_scale, sigma_f, theta, gamma)
 
 
+@dataclass(frozen=True, slots=True)
+class TomoSolution:
+    """One exact solve of MRT or MATTE (``estimate::radio::TomoSolution``).
+
+    Attributes:
+        l0: power at 1 m, dBm.
+        exponent: path-loss exponent ``a`` (dB per decade).
+        values: attenuation per unknown, dB/m (MRT: ``(rows, cols)`` grid; MATTE: per class and coarse cell).
+        factor_nnz: non-zeros of the sparse Cholesky factor.
+    """
+
+    l0: float
+    exponent: float
+    values: F64Array
+    factor_nnz: int
+
+
 class _Tomographic:
     """Shared bookkeeping of MRT and MATTE (incremental ``update``, timings, peer system)."""
 
@@ -245,9 +272,11 @@ class _Tomographic:
         t, r = _links(tx, rx)
         return self._need().predict(t, r)
 
-    def solution(self) -> tuple[float, float, F64Array]:
-        """``(L0, exponent, attenuation values)`` of the last solve."""
-        return self._need().solution()
+    def solution(self) -> TomoSolution:
+        """The last solve: ``L0``, exponent, attenuation values and the factor's non-zeros."""
+        core = self._need()
+        l0, exponent, values = core.solution()
+        return TomoSolution(l0=l0, exponent=exponent, values=values, factor_nnz=core.factor_nnz)
 
     def stacked_system(self) -> tuple[Any, F64Array]:
         """The stacked least-squares system ``[A; lam Gamma; phi I] x = [y; 0; phi rho]`` (scipy COO) and rhs.
@@ -359,7 +388,7 @@ class MATTE(_Tomographic):
 MODELS: dict[str, Callable[[], Any]] = {"LogFit": LogFit, "MRGP": MRGP, "MRT": MRT, "MATTE": MATTE}
 
 
-@dataclass
+@dataclass(frozen=True, slots=True)
 class Simulation:
     """A simulated mission: measurements, the true world and what the lidar saw (see :func:`simulate`)."""
 
@@ -431,7 +460,7 @@ def simulate(
     )
 
 
-@dataclass
+@dataclass(frozen=True, slots=True)
 class ReplayResult:
     """RMSE (dB) per model and horizon bin of a :func:`replay`."""
 
@@ -563,6 +592,7 @@ __all__ = [
     "OccupancyMap",
     "ReplayResult",
     "Simulation",
+    "TomoSolution",
     "link_kernel",
     "replay",
     "simulate",

@@ -125,6 +125,12 @@ impl PyLogFit {
     fn residual_variance(&self) -> f64 {
         self.inner.residual_variance
     }
+
+    /// `(AᵀA)⁻¹` of the regressors `[1, log10 d]`, 2 × 2.
+    #[getter]
+    fn normal_inverse<'py>(&self, py: Python<'py>) -> PyResult<PyArr<'py>> {
+        convert::to_numpy(py, self.inner.normal_inverse.to_vec(), &[2, 2])
+    }
 }
 
 /// The multi-robot Gaussian process.

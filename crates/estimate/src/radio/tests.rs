@@ -279,36 +279,33 @@ fn swap_average_kernel_is_positive_definite_on_random_links() {
     }
 }
 
-/// Seed slip (eq. 3.3): the kernel of d_s4 is not positive definite; the MRGP reports it.
+/// Eq. 3.3's d_s4 kernel: the seed calls it not positive definite in general, but no draw here
+/// (nor a Nelder-Mead search over 5-link sets, `docs/design/radio.md`) found a negative
+/// eigenvalue. What is checked is the guard: the MRGP's d_s4 fit succeeds exactly when the
+/// kernel matrix (with the 10⁻⁶σ_f² jitter) is positive definite by an independent dense
+/// eigen-decomposition, and the swap-average kernel is positive semi-definite.
 #[test]
-#[ignore = "unverified: the tapered d_s4 kernel was PD on 300-link draws in the Python check"]
-fn ds4_kernel_is_not_positive_definite() {
+fn ds4_guard_agrees_with_dense_eigenvalues() {
     let mut rng = Pcg64::seed_from_u64(11);
     let p = KernelParams::default();
-    let mut negative = 0;
-    let mut lowest = f64::INFINITY;
-    for _ in 0..5 {
-        let links = random_links(&mut rng, 300, 40.0);
-        let k = Mrgp::kernel_matrix(&links, LinkKernel::Ds4, &p);
-        let min = min_eigenvalue(k, links.len());
-        lowest = lowest.min(min);
-        if min < -1e-3 {
-            negative += 1;
-            let rss = vec![-60.0; links.len()];
-            let rss: Vec<f64> = rss
-                .iter()
-                .zip(&links)
-                .map(|(y, l)| y - 20.0 * l.log_distance())
-                .collect();
-            let err = Mrgp::fit(&links, &rss, LinkKernel::Ds4, p, false).unwrap_err();
+    let jitter = 1e-6 * p.sigma_f * p.sigma_f;
+    for _ in 0..3 {
+        let links = random_links(&mut rng, 200, 40.0);
+        let swap = Mrgp::kernel_matrix(&links, LinkKernel::SwapAverage, &p);
+        assert!(min_eigenvalue(swap, links.len()) > -1e-10);
+        let min = min_eigenvalue(Mrgp::kernel_matrix(&links, LinkKernel::Ds4, &p), links.len());
+        let rss: Vec<f64> = links.iter().map(|l| -60.0 - 20.0 * l.log_distance()).collect();
+        let fit = Mrgp::fit(&links, &rss, LinkKernel::Ds4, p, false);
+        if min + jitter > 1e-9 {
+            assert!(fit.is_ok(), "lowest eigenvalue {min}");
+        } else if min + jitter < -1e-9 {
+            let err = fit.unwrap_err();
             assert!(
                 matches!(err, EstimateError::KernelNotPositiveDefinite { .. }),
                 "{err}"
             );
-            assert!(Mrgp::fit(&links, &rss, LinkKernel::SwapAverage, p, false).is_ok());
         }
     }
-    assert_eq!(negative, 5, "lowest eigenvalue {lowest}");
 }
 
 #[test]
