@@ -275,7 +275,9 @@ impl Mrgp {
                 }
             }
         }
-        self.params = best;
+        // The last trial factorised other parameters: refactor at the best ones, so the
+        // factor, `alpha` and the likelihood agree with `params`.
+        self.refactor(best)?;
         Ok(())
     }
 

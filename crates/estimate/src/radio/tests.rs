@@ -379,15 +379,24 @@ fn marginal_likelihood_search_finds_a_local_maximum() {
     let gp = Mrgp::fit(&links, &rss, LinkKernel::SwapAverage, start, true).unwrap();
     let best = gp.log_marginal_likelihood();
     assert!(best > gp0.log_marginal_likelihood() + 1.0);
-    // Noise estimate close to the simulated 2 dB.
-    assert!((gp.params.sigma_d - 2.0).abs() < 0.4, "{:?}", gp.params);
-    for k in 0..3 {
+    // The simulated noise is 2 dB, but the likelihood's maximum puts σ_d at its lower bound
+    // (0.05 dB): the rough tapered kernel (Askey's taper is linear at 0, like an exponential
+    // kernel) absorbs white noise between links that are sparse in the 4-D link space, so σ_d
+    // is not identifiable here -- why it stays fixed (Table 3.1) unless `optimize` is asked
+    // for. What is checked: the search result beats the start, and no coordinate move of ±10 %
+    // that stays inside the search box improves it.
+    let bounds = [(0.5, 200.0), (0.05, 50.0), (0.05, 50.0)];
+    for (k, &(lo, hi)) in bounds.iter().enumerate() {
         for f in [0.9, 1.1] {
             let mut p = gp.params;
-            match k {
-                0 => p.length_scale *= f,
-                1 => p.sigma_f *= f,
-                _ => p.sigma_d *= f,
+            let v = match k {
+                0 => &mut p.length_scale,
+                1 => &mut p.sigma_f,
+                _ => &mut p.sigma_d,
+            };
+            *v *= f;
+            if *v < lo || *v > hi {
+                continue;
             }
             let other = Mrgp::fit(&links, &rss, LinkKernel::SwapAverage, p, false).unwrap();
             assert!(other.log_marginal_likelihood() < best + 0.05, "{k} {f}");
