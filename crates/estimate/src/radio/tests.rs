@@ -293,8 +293,14 @@ fn ds4_guard_agrees_with_dense_eigenvalues() {
         let links = random_links(&mut rng, 200, 40.0);
         let swap = Mrgp::kernel_matrix(&links, LinkKernel::SwapAverage, &p);
         assert!(min_eigenvalue(swap, links.len()) > -1e-10);
-        let min = min_eigenvalue(Mrgp::kernel_matrix(&links, LinkKernel::Ds4, &p), links.len());
-        let rss: Vec<f64> = links.iter().map(|l| -60.0 - 20.0 * l.log_distance()).collect();
+        let min = min_eigenvalue(
+            Mrgp::kernel_matrix(&links, LinkKernel::Ds4, &p),
+            links.len(),
+        );
+        let rss: Vec<f64> = links
+            .iter()
+            .map(|l| -60.0 - 20.0 * l.log_distance())
+            .collect();
         let fit = Mrgp::fit(&links, &rss, LinkKernel::Ds4, p, false);
         if min + jitter > 1e-9 {
             assert!(fit.is_ok(), "lowest eigenvalue {min}");
