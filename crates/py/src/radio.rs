@@ -599,8 +599,7 @@ fn radio_simulate<'py>(
     d.set_item("resolution", g.resolution)?;
     d.set_item("origin", (g.origin[0], g.origin[1]))?;
     d.set_item("times", vec_out(py, m.times)?)?;
-    let flat =
-        |f: &dyn Fn(&Link) -> [f64; 2]| m.links.iter().flat_map(|l| f(l)).collect::<Vec<f64>>();
+    let flat = |f: &dyn Fn(&Link) -> [f64; 2]| m.links.iter().flat_map(f).collect::<Vec<f64>>();
     d.set_item("tx", convert::to_numpy(py, flat(&|l| l.tx), &[n, 2])?)?;
     d.set_item("rx", convert::to_numpy(py, flat(&|l| l.rx), &[n, 2])?)?;
     let pairs: Vec<f64> = m

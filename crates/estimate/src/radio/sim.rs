@@ -594,7 +594,7 @@ impl Field {
 /// Every pair's RSS at every sample of `traj` (20 Hz in §3.3.1). Pairs closer than 0.05 m
 /// are skipped (robots never overlap; the guard keeps links valid).
 pub fn measure(env: &Environment, traj: &Trajectories, p: &RadioParams, seed: u64) -> Measurements {
-    let mut rng = Pcg64::seed_from_u64(seed ^ 0x5EED_0F_5AD0);
+    let mut rng = Pcg64::seed_from_u64(seed ^ 0x005E_ED0F_5AD0);
     let field = Field::new(p.correlation_length, 256, &mut rng);
     let (sc, si) = (
         p.sigma * p.correlated_share.clamp(0.0, 1.0).sqrt(),

@@ -179,9 +179,10 @@ impl SparseLlt {
                 let cp = sym.col_ptr();
                 let ri = sym.row_idx();
                 for j in 0..self.n {
-                    for p in cp[j]..cp[j + 1] {
-                        if ri[p] == j {
-                            acc += self.l_values[p].ln();
+                    let col = cp[j]..cp[j + 1];
+                    for (&row, &v) in ri[col.clone()].iter().zip(&self.l_values[col]) {
+                        if row == j {
+                            acc += v.ln();
                         }
                     }
                 }

@@ -256,7 +256,9 @@ impl TomoRows {
         ];
         let r = [bp[0] - dot(b0, zb), bp[1] - dot(b1, zb)];
         let det = c[0] * c[3] - c[1] * c[2];
-        if !(det.abs() > 1e-12 * (c[0] * c[3]).abs().max(f64::MIN_POSITIVE)) {
+        // Also rejects a NaN determinant (no ordering).
+        let threshold = 1e-12 * (c[0] * c[3]).abs().max(f64::MIN_POSITIVE);
+        if det.abs().partial_cmp(&threshold) != Some(std::cmp::Ordering::Greater) {
             return Err(EstimateError::RankDeficient {
                 what: "path-loss Schur complement of the tomographic normal equations".into(),
                 directions: "L0 and the path-loss exponent a (links of too few lengths)".into(),
