@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from autoteach import _core, active, calib, detect, estimate, geometry, polygon, registration, track
+from autoteach import _core, active, calib, detect, estimate, geometry, polygon, radio, registration, track
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CRATES = ROOT / "crates"
@@ -72,6 +72,7 @@ DATACLASSES: list[tuple[type, str, str, dict[str, str]]] = [
         "TrialResult",
         {"names": "shared by the trials", "estimated": "shared by the trials", "power": "shared by the trials"},
     ),
+    (radio.TomoSolution, "estimate/src/radio/tomo.rs", "TomoSolution", {}),
 ]
 
 # Existing class pattern (a Python class holding the compiled object): every Rust field is a
@@ -79,6 +80,7 @@ DATACLASSES: list[tuple[type, str, str, dict[str, str]]] = [
 PROPERTY_CLASSES: list[tuple[type, str, str]] = [
     (geometry.Ellipse, "geometry/src/conic.rs", "Ellipse"),
     (calib.Calibration, "estimate/src/calib/solve.rs", "Calibration"),
+    (radio.LogFit, "estimate/src/radio/logfit.rs", "LogFit"),
 ]
 
 # Compiled result classes whose getters carry the Rust field names.
@@ -298,3 +300,21 @@ def test_calibration_results() -> None:
     _check(calib.suggest_next_view(cal, samples=20), calib.Suggestion)
     choices = calib.select_model(obj, img, lens["image_size"], models=("pinhole", "brown_conrady"))
     assert all(type(c) is calib.ModelChoice for c in choices)
+
+
+def test_radio_results() -> None:
+    rng = np.random.default_rng(5)
+    classes = np.zeros((20, 30), dtype=np.uint8)
+    classes[:15, 10] = radio.STRUCTURE
+    occ = radio.OccupancyMap(classes, 1.0)
+    tx, rx = rng.uniform([0, 0], [30, 20], (200, 2)), rng.uniform([0, 0], [30, 20], (200, 2))
+    rss = -40 - 22 * np.log10(np.maximum(np.linalg.norm(tx - rx, axis=1), 1.0)) + rng.normal(0, 2, 200)
+    for model in (radio.MRT(), radio.MATTE()):
+        sol = model.fit(tx, rx, rss, occupancy=occ).solution()
+        _check(sol, radio.TomoSolution)
+        assert sol.factor_nnz > 0 and np.isfinite(sol.values).all()
+    fit = radio.LogFit().fit(tx, rx, rss)
+    assert fit.normal_inverse.shape == (2, 2) and fit.residual_variance > 0
+    sim = radio.simulate("office", robots=2, duration=30.0, seed=1)
+    _check(sim, radio.Simulation)
+    _check(radio.replay(sim, models={"LogFit": radio.LogFit}, start=10.0, bins=2), radio.ReplayResult)

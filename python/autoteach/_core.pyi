@@ -1285,3 +1285,120 @@ def mapping_wall_gaps(
     """Wall samples and gaps; see :func:`autoteach.mapping.wall_gaps`."""
 
 # --- end mapping ---
+
+# --- radio (issue 33) ---
+
+class RadioLogFit:
+    """Log-distance fit of eq. 3.1; see :class:`autoteach.radio.LogFit`."""
+
+    @staticmethod
+    def fit(tx: F64Array, rx: F64Array, rss: F64Array) -> RadioLogFit: ...
+    def predict(self, tx: F64Array, rx: F64Array) -> tuple[F64Array, F64Array]: ...
+    @property
+    def l0(self) -> float: ...
+    @property
+    def exponent(self) -> float: ...
+    @property
+    def residual_variance(self) -> float: ...
+    @property
+    def normal_inverse(self) -> F64Array: ...
+
+class RadioMrgp:
+    """Multi-robot Gaussian process; see :class:`autoteach.radio.MRGP`."""
+
+    @staticmethod
+    def fit(
+        tx: F64Array,
+        rx: F64Array,
+        rss: F64Array,
+        kernel: str = "swap",
+        length_scale: float = 28.75,
+        sigma_f: float = 1.0,
+        sigma_d: float = 1.5,
+        theta: float = 20.0,
+        gamma: float = 3.0,
+        optimize: bool = False,
+    ) -> RadioMrgp: ...
+    def update(self, tx: F64Array, rx: F64Array, rss: F64Array) -> None: ...
+    def predict(self, tx: F64Array, rx: F64Array, variance: bool = False) -> tuple[F64Array, F64Array | None]: ...
+    @property
+    def params(self) -> dict[str, float]: ...
+    @property
+    def log_marginal_likelihood(self) -> float: ...
+    @property
+    def mean_params(self) -> tuple[float, float]: ...
+    @property
+    def nnz(self) -> tuple[int, int]: ...
+    def __len__(self) -> int: ...
+
+def radio_link_kernel(
+    tx_a: F64Array,
+    rx_a: F64Array,
+    tx_b: F64Array,
+    rx_b: F64Array,
+    kernel: str = "swap",
+    length_scale: float = 28.75,
+    sigma_f: float = 1.0,
+    theta: float = 20.0,
+    gamma: float = 3.0,
+) -> F64Array: ...
+
+class RadioMrt:
+    """Multi-robot tomography; see :class:`autoteach.radio.MRT`."""
+
+    def __init__(self, bounds: tuple[float, float, float, float], cell: float = 3.0, lam: float = 0.1375) -> None: ...
+    def add(self, tx: F64Array, rx: F64Array, rss: F64Array) -> None: ...
+    def solve(self) -> float: ...
+    def predict(self, tx: F64Array, rx: F64Array) -> F64Array: ...
+    def solution(self) -> tuple[float, float, F64Array]: ...
+    def stacked(self) -> tuple[list[int], list[int], list[float], list[float], int]: ...
+    @property
+    def factor_nnz(self) -> int: ...
+    @property
+    def shape(self) -> tuple[int, int]: ...
+    def __len__(self) -> int: ...
+
+class RadioMatte:
+    """MATTE (Algorithms 3.1-3.2); see :class:`autoteach.radio.MATTE`."""
+
+    def __init__(
+        self,
+        occupancy: F64Array,
+        resolution: float,
+        origin: tuple[float, float] = (0.0, 0.0),
+        cell: float = 4.0,
+        lam: float = 2.0,
+        phi: float = 0.2,
+        rho_free: float = -0.1,
+        rho_structure: float = -0.3,
+        weights: str = "length",
+    ) -> None: ...
+    def add(self, tx: F64Array, rx: F64Array, rss: F64Array) -> None: ...
+    def solve(self) -> float: ...
+    def predict(self, tx: F64Array, rx: F64Array) -> F64Array: ...
+    def solution(self) -> tuple[float, float, F64Array]: ...
+    def attenuation_map(self) -> F64Array: ...
+    def stacked(self) -> tuple[list[int], list[int], list[float], list[float], int]: ...
+    @property
+    def factor_nnz(self) -> int: ...
+    @property
+    def shape(self) -> tuple[int, int]: ...
+    def __len__(self) -> int: ...
+
+def radio_simulate(
+    environment: str,
+    robots: int = 3,
+    duration: float = 240.0,
+    speed: float = 1.0,
+    rate: float = 20.0,
+    seed: int = 0,
+    l0: float = -40.0,
+    exponent: float = 22.0,
+    sigma: float = 4.0,
+    correlated_share: float = 0.5,
+    correlation_length: float = 6.0,
+    clutter: float = 0.4,
+    lidar_range: float = 20.0,
+) -> dict[str, _Any]: ...
+
+# --- end radio ---

@@ -26,6 +26,7 @@ pub mod error;
 pub mod handeye;
 pub mod lsq;
 pub mod mapping;
+pub mod radio;
 pub mod ukf;
 
 pub use error::EstimateError;

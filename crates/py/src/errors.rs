@@ -145,6 +145,12 @@ pub fn estimate(err: autoteach_estimate::EstimateError) -> PyErr {
         | E::NonFiniteResidual { .. }
         | E::LinearSolver(_)
         | E::NoConvergence { .. } => new_err("ConvergenceError", err.to_string()),
+        // Radio models (issue 33): a kernel that is not positive definite on the data, a
+        // link with coincident ends or outside the map, an empty training set.
+        E::KernelNotPositiveDefinite { .. }
+        | E::CoincidentLink { .. }
+        | E::OutsideMap { .. }
+        | E::EmptyInput(_) => invalid_input(err.to_string()),
         // `EstimateError` is `#[non_exhaustive]`: variants added later default to a numerical
         // failure until they get their own arm.
         _ => new_err("ConvergenceError", err.to_string()),

@@ -19,6 +19,7 @@ mod handeye;
 mod lsq;
 mod mapping;
 mod polygon;
+mod radio;
 mod registration;
 mod sim;
 mod track;
@@ -40,6 +41,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
+    radio::register(m)?;
     ellipse_detection::register(m)?;
     mapping::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

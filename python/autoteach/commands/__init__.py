@@ -10,3 +10,4 @@ from __future__ import annotations
 MODULES = ("autoteach.commands.run", "autoteach.commands.calibrate", "autoteach.commands.active")
 MODULES += ("autoteach.commands.scenes",)
 MODULES += ("autoteach.commands.map",)
+MODULES += ("autoteach.commands.radio",)
