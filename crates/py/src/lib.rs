@@ -17,6 +17,7 @@ mod handeye;
 mod lsq;
 mod polygon;
 mod registration;
+mod segment;
 mod sim;
 mod track;
 mod wafers;
@@ -37,6 +38,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
+    segment::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
