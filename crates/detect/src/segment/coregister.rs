@@ -138,32 +138,30 @@ pub fn colorize(
     }
     let r = params.splat_radius;
     let mut zbuf = vec![f64::INFINITY; w * h];
-    for i in 0..n {
-        if status[i] != PointStatus::Colored {
+    for ((st, &(u, v)), &d) in status.iter().zip(&pix).zip(&depth) {
+        if *st != PointStatus::Colored {
             continue;
         }
-        let (u, v) = pix[i];
         for y in v.saturating_sub(r)..=(v + r).min(h - 1) {
             let row = &mut zbuf[y * w..(y + 1) * w];
             for z in &mut row[u.saturating_sub(r)..=(u + r).min(w - 1)] {
-                if depth[i] < *z {
-                    *z = depth[i];
+                if d < *z {
+                    *z = d;
                 }
             }
         }
     }
     let mut colors = vec![[0u8; 3]; n];
-    for i in 0..n {
-        if status[i] != PointStatus::Colored {
+    for (((st, &(u, v)), &d), col) in status.iter_mut().zip(&pix).zip(&depth).zip(&mut colors) {
+        if *st != PointStatus::Colored {
             continue;
         }
-        let (u, v) = pix[i];
-        if depth[i] > zbuf[v * w + u] + params.depth_tolerance {
-            status[i] = PointStatus::Occluded;
+        if d > zbuf[v * w + u] + params.depth_tolerance {
+            *st = PointStatus::Occluded;
             continue;
         }
         let k = (v * w + u) * 3;
-        colors[i] = [image.data[k], image.data[k + 1], image.data[k + 2]];
+        *col = [image.data[k], image.data[k + 1], image.data[k + 2]];
     }
     Ok(Colorized { colors, status })
 }

@@ -134,7 +134,7 @@ fn check_normals(given: &[[f64; 3]], points: &[[f64; 3]]) -> Result<Vec<[f64; 3]
             });
         }
         let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        if !(len > 1e-12) {
+        if len.is_nan() || len <= 1e-12 {
             return Err(DetectError::InvalidParameter {
                 what: "normal length",
                 value: len,

@@ -24,7 +24,7 @@ pub fn smallest_eigenvector(c: [f64; 6]) -> Option<[f64; 3]> {
         .max(a01.abs())
         .max(a02.abs())
         .max(a12.abs());
-    if !(scale > 0.0) || !scale.is_finite() {
+    if !(scale.is_finite() && scale > 0.0) {
         return None;
     }
     // Eigenvalues of A = q I + p B (Smith 1961).
@@ -73,7 +73,7 @@ pub fn smallest_eigenvector(c: [f64; 6]) -> Option<[f64; 3]> {
         .copied()
         .max_by(|a, b| n2(a).total_cmp(&n2(b)))?;
     let len = n2(&best).sqrt();
-    if !(len > 0.0) {
+    if len.is_nan() || len <= 0.0 {
         return None;
     }
     Some([best[0] / len, best[1] / len, best[2] / len])

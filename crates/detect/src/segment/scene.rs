@@ -139,15 +139,15 @@ fn hit_cuboid(
     let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
     let mut axis = 0usize;
     let mut sign = 0.0;
-    for k in 0..3 {
+    for (k, &hk) in half.iter().enumerate() {
         if dl[k].abs() < 1e-15 {
-            if ol[k].abs() > half[k] {
+            if ol[k].abs() > hk {
                 return None;
             }
             continue;
         }
         let inv = 1.0 / dl[k];
-        let (a, b) = ((-half[k] - ol[k]) * inv, (half[k] - ol[k]) * inv);
+        let (a, b) = ((-hk - ol[k]) * inv, (hk - ol[k]) * inv);
         let (near, far) = if a < b { (a, b) } else { (b, a) };
         if near > t0 {
             t0 = near;
