@@ -25,6 +25,7 @@ pub mod calib;
 pub mod error;
 pub mod handeye;
 pub mod lsq;
+pub mod mapping;
 pub mod ukf;
 
 pub use error::EstimateError;

@@ -10,11 +10,14 @@ mod active;
 mod calib;
 pub mod convert;
 mod detect;
+mod ellipse_detection;
 pub mod errors;
 mod estimate;
 mod geometry;
+mod gray;
 mod handeye;
 mod lsq;
+mod mapping;
 mod polygon;
 mod registration;
 mod segment;
@@ -38,6 +41,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
+    ellipse_detection::register(m)?;
+    mapping::register(m)?;
     segment::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
