@@ -104,7 +104,7 @@ def test_extrinsics_within_three_sigma_of_truth(hallway):
         pix = hallway.camera.project(cam_pts) + rng.normal(0.0, 0.5, (30, 2))
         start = truth @ geometry.se3_exp(np.r_[rng.normal(0, 0.03, 3), rng.normal(0, 0.05, 3)])
         fit = segment.calibrate_extrinsics(hallway.camera, pts, pix, start, sigma=0.5)
-        delta = geometry.se3_minus(truth, fit.T_cam_lidar)
+        delta = geometry.se3_minus(truth, fit.t_cam_lidar)
         assert fit.converged
         assert np.all(np.abs(delta) < 3 * fit.std)
         assert delta @ np.linalg.solve(fit.covariance, delta) < 20.06  # chi2(6) 99.73 %

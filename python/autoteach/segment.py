@@ -121,7 +121,7 @@ def _points(points: ArrayLike, name: str = "points") -> F64Array:
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class CloudSegmentation:
     """The result of :func:`segment_cloud`."""
 
@@ -130,6 +130,8 @@ class CloudSegmentation:
     numbered by first point; -1 for missing (NaN) points of an organised cloud."""
     normals: F64Array
     """Unit normals used (estimated, oriented to the viewpoint, or given); zero where missing."""
+    normal_ok: NDArray[np.bool_]
+    """Whether each point has a normal (False where the neighbourhood was too small or missing)."""
     num_segments: int
     """Number of segments."""
     num_edges: int
@@ -197,7 +199,9 @@ def segment_cloud(
         criteria,
         as_f64(viewpoint, "viewpoint"),
     )
-    return CloudSegmentation(out["labels"], out["normals"], int(out["num_segments"]), int(out["num_edges"]))
+    return CloudSegmentation(
+        out["labels"], out["normals"], out["normal_ok"], int(out["num_segments"]), int(out["num_edges"])
+    )
 
 
 def segment_colored_cloud(
@@ -224,7 +228,7 @@ def segment_colored_cloud(
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Colorization:
     """The result of :func:`colorize`."""
 
@@ -284,11 +288,11 @@ def colorize(
     return Colorization(cols.reshape(*lead, 3), status.reshape(lead))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class ExtrinsicsFit:
     """The result of :func:`calibrate_extrinsics`."""
 
-    T_cam_lidar: F64Array  # noqa: N815
+    t_cam_lidar: F64Array
     """Estimated 4x4 lidar -> camera transform."""
     covariance: F64Array
     """6x6 covariance on the tangent ``[omega; rho]`` (rad, m) of the right perturbation
@@ -352,7 +356,7 @@ def calibrate_extrinsics(
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SimulatedScan:
     """A simulated organised scan with its camera image and ground truth (:func:`simulate_scan`)."""
 
@@ -539,7 +543,7 @@ _PLY_TYPES = {
 }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class PointCloud:
     """A point cloud read by :func:`read_ply`."""
 

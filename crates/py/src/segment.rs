@@ -185,6 +185,10 @@ fn segment_colored_cloud<'py>(
         "normals",
         convert::to_numpy(py, flat, &convert::batched_shape(&lead, &[3]))?,
     )?;
+    let normal_ok = Array1::from(out.normal_ok)
+        .into_shape_with_order(numpy::ndarray::IxDyn(&lead))
+        .map_err(|e| errors::internal(e.to_string()))?;
+    d.set_item("normal_ok", normal_ok.into_pyarray(py))?;
     d.set_item("num_segments", out.num_segments)?;
     d.set_item("num_edges", out.num_edges)?;
     Ok(d)
