@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from autoteach import _core, active, calib, detect, estimate, geometry, polygon, radio, registration, track
+from autoteach import _core, active, calib, detect, estimate, geometry, polygon, radio, registration, segment, track
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CRATES = ROOT / "crates"
@@ -73,6 +73,9 @@ DATACLASSES: list[tuple[type, str, str, dict[str, str]]] = [
         {"names": "shared by the trials", "estimated": "shared by the trials", "power": "shared by the trials"},
     ),
     (radio.TomoSolution, "estimate/src/radio/tomo.rs", "TomoSolution", {}),
+    (segment.CloudSegmentation, "detect/src/segment/mod.rs", "CloudSegmentation", {}),
+    (segment.Colorization, "detect/src/segment/coregister.rs", "Colorized", {}),
+    (segment.ExtrinsicsFit, "estimate/src/lidar_camera.rs", "ExtrinsicsFit", {}),
 ]
 
 # Existing class pattern (a Python class holding the compiled object): every Rust field is a
@@ -318,3 +321,14 @@ def test_radio_results() -> None:
     sim = radio.simulate("office", robots=2, duration=30.0, seed=1)
     _check(sim, radio.Simulation)
     _check(radio.replay(sim, models={"LogFit": radio.LogFit}, start=10.0, bins=2), radio.ReplayResult)
+
+
+def test_segmentation_results() -> None:
+    sim = segment.simulate_scan("ramp", render=False)
+    _check(sim, segment.SimulatedScan)
+    res = segment.segment_cloud(sim.points, sim.true_colors)
+    _check(res, segment.CloudSegmentation)
+    assert res.normal_ok.shape == res.labels.shape and res.normal_ok.any()
+    norms = np.linalg.norm(res.normals, axis=-1)
+    np.testing.assert_allclose(norms[res.normal_ok], 1.0, atol=1e-9)
+    assert np.all(norms[~res.normal_ok] == 0.0)

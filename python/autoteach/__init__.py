@@ -53,6 +53,7 @@ if TYPE_CHECKING:
         radio,
         registration,
         report,
+        segment,
         sim,
         track,
     )
@@ -74,6 +75,7 @@ SUBMODULES = (
     "radio",
     "registration",
     "report",
+    "segment",
     "sigma_points",
     "sim",
     "track",
@@ -107,6 +109,7 @@ __all__ = [
     "radio",
     "registration",
     "report",
+    "segment",
     "sigma_points",
     "sim",
     "track",

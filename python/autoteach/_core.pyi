@@ -1402,3 +1402,44 @@ def radio_simulate(
 ) -> dict[str, _Any]: ...
 
 # --- end radio ---
+# --- segment (coloured point clouds, seed 004 ch. 4) ---
+
+def segment_colored_cloud(
+    points: F64Array,
+    colors: _Any,
+    normals: F64Array | None,
+    graph: str,
+    k: int,
+    k_rgb: float,
+    k_norm: float,
+    edge_cut: float,
+    min_size: int,
+    criteria_name: str,
+    viewpoint: F64Array,
+) -> dict[str, _Any]:
+    """Segmentation (Algorithm 4.1); see :func:`autoteach.segment.segment_cloud`."""
+
+def colorize_points(
+    points: F64Array, image: _Any, camera: Camera, t_cam_lidar: F64Array, splat_radius: int, depth_tolerance: float
+) -> tuple[_Any, _Any]:
+    """Co-registration (eq. 4.1); see :func:`autoteach.segment.colorize`."""
+
+def simulate_colored_scan(
+    scene_name: str,
+    beam_step_deg: float,
+    tilt_start_deg: float,
+    tilt_end_deg: float,
+    tilt_speed_deg_s: float,
+    range_sigma: float,
+    color_sigma: float,
+    seed: int,
+    render: bool,
+) -> dict[str, _Any]:
+    """Tilting-scanner and camera simulation; see :func:`autoteach.segment.simulate_scan`."""
+
+def calibrate_lidar_camera(
+    camera: Camera, points: F64Array, pixels: F64Array, initial: F64Array, sigma: float | None = None
+) -> dict[str, _Any]:
+    """Extrinsics from correspondences (eq. 4.2); see :func:`autoteach.segment.calibrate_extrinsics`."""
+
+# --- end segment ---

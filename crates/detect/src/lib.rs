@@ -46,3 +46,4 @@ pub use error::DetectError;
 
 /// Result type of this crate.
 pub type Result<T> = std::result::Result<T, DetectError>;
+pub mod segment;

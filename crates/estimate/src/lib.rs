@@ -33,3 +33,4 @@ pub use error::EstimateError;
 
 /// Result type of this crate.
 pub type Result<T> = std::result::Result<T, EstimateError>;
+pub mod lidar_camera;

@@ -21,6 +21,7 @@ mod mapping;
 mod polygon;
 mod radio;
 mod registration;
+mod segment;
 mod sim;
 mod track;
 mod wafers;
@@ -44,6 +45,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     radio::register(m)?;
     ellipse_detection::register(m)?;
     mapping::register(m)?;
+    segment::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -11,3 +11,4 @@ MODULES = ("autoteach.commands.run", "autoteach.commands.calibrate", "autoteach.
 MODULES += ("autoteach.commands.scenes",)
 MODULES += ("autoteach.commands.map",)
 MODULES += ("autoteach.commands.radio",)
+MODULES += ("autoteach.commands.segment",)
