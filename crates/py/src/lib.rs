@@ -8,6 +8,7 @@ use pyo3::prelude::*;
 
 mod active;
 mod calib;
+mod control;
 pub mod convert;
 mod detect;
 pub mod errors;
@@ -37,6 +38,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
+    control::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
