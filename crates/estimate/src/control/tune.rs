@@ -852,3 +852,90 @@ pub fn tune(
     report.iterations = iterations;
     Ok(report)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::baseline::classical_design;
+    use crate::control::plant::{ArmMasses, Drive, Joint, demo_poses_n, joint_plant, log_grid_hz};
+    use autoteach_geometry::robot::RobotParams;
+
+    fn plants(n: usize) -> Vec<TransferFunction> {
+        let p = RobotParams::default();
+        let d = Drive::default_for(Joint::Jt2);
+        demo_poses_n(Joint::Jt2, n)
+            .iter()
+            .map(|q| {
+                joint_plant(&p, &ArmMasses::default(), &d, q, Joint::Jt2)
+                    .unwrap()
+                    .motor
+            })
+            .collect()
+    }
+
+    fn spec(max_iterations: usize) -> TuneSpec {
+        let wr = 2.0 * std::f64::consts::PI * 28.0;
+        TuneSpec {
+            grid: log_grid_hz(0.5, 500.0, 400),
+            sd_bandwidth: 40.0,
+            sd_peak: 2.0,
+            sd_low: 1e-3,
+            min_gain_margin_db: 12.0,
+            min_phase_margin_deg: 50.0,
+            min_damping: 0.1,
+            damping_max_freq: 2.0 * wr,
+            max_loop_gain: 0.5,
+            gain_band: (1.2 * wr, 3.0 * wr),
+            rolloff_freq: 3.0 * wr,
+            target: (60.0, 180.0, 360.0),
+            max_iterations,
+        }
+    }
+
+    #[test]
+    fn infeasible_margins_are_named_not_claimed() {
+        let ps = plants(2);
+        let mut sp = spec(3);
+        sp.min_phase_margin_deg = 89.0;
+        sp.min_gain_margin_db = 60.0;
+        let st = ControllerStructure::new(vec![Section::LowPass]);
+        let r = tune(&ps, &st, &sp, None).unwrap();
+        assert!(!r.success);
+        assert!(
+            r.unmet.iter().any(|u| u.contains("margin")),
+            "{:?}",
+            r.unmet
+        );
+    }
+
+    #[test]
+    fn baseline_report_agrees_with_polynomial_margins() {
+        let ps = plants(3);
+        let sp = spec(1);
+        let (_, r) = classical_design(&ps, &sp).unwrap();
+        for (p, rep) in ps.iter().zip(&r.plants) {
+            let m = analysis::margins(&p.series(&r.controller));
+            assert!(
+                (m.phase_margin_deg - rep.phase_margin_deg).abs() < 1e-4,
+                "{m:?} vs {rep:?}"
+            );
+            assert!((m.w_gain_crossover - rep.crossover).abs() < 1e-6 * rep.crossover);
+        }
+    }
+
+    #[test]
+    fn unstable_and_improper_plants_are_rejected() {
+        let sp = spec(1);
+        let st = ControllerStructure::new(vec![Section::LowPass]);
+        let unstable = TransferFunction::new(&[1.0], &[1.0, -1.0, 4.0]).unwrap();
+        assert!(matches!(
+            tune(&[unstable], &st, &sp, None),
+            Err(EstimateError::InvalidModel { .. })
+        ));
+        let improper = TransferFunction::new(&[1.0, 0.0, 0.0], &[1.0, 1.0]).unwrap();
+        assert!(matches!(
+            tune(&[improper], &st, &sp, None),
+            Err(EstimateError::InvalidModel { .. })
+        ));
+    }
+}
