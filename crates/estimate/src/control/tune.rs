@@ -916,10 +916,10 @@ mod tests {
         for (p, rep) in ps.iter().zip(&r.plants) {
             let m = analysis::margins(&p.series(&r.controller));
             assert!(
-                (m.phase_margin_deg - rep.phase_margin_deg).abs() < 1e-4,
+                (m.phase_margin_deg - rep.phase_margin_deg).abs() < 1e-2,
                 "{m:?} vs {rep:?}"
             );
-            assert!((m.w_gain_crossover - rep.crossover).abs() < 1e-6 * rep.crossover);
+            assert!((m.w_gain_crossover - rep.crossover).abs() < 1e-4 * rep.crossover);
         }
     }
 
