@@ -8,6 +8,7 @@ use pyo3::prelude::*;
 
 mod active;
 mod calib;
+#[cfg(feature = "control")]
 mod control;
 pub mod convert;
 mod detect;
@@ -38,6 +39,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
+    #[cfg(feature = "control")]
     control::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
