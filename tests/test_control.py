@@ -9,11 +9,6 @@ import pytest
 
 control = pytest.importorskip("control")
 
-from autoteach import _core  # noqa: E402
-
-if not hasattr(_core, "control_margins"):
-    pytest.skip("autoteach._core built without the `control` feature of autoteach-py", allow_module_level=True)
-
 from autoteach.control import (  # noqa: E402
     TransferFunction,
     TuneSpec,

@@ -316,11 +316,11 @@ class EllipseFit:
         """The fitted ellipse."""
 
     @property
-    def residual(self) -> float:
+    def residual_mean(self) -> float:
         """Mean absolute orthogonal distance (pixels)."""
 
     @property
-    def rms(self) -> float:
+    def residual_rms(self) -> float:
         """RMS orthogonal distance (pixels)."""
 
     @property
@@ -361,6 +361,16 @@ def merwe_sigma_points(x: F64Array, p: F64Array, alpha: float, beta: float, kapp
 
 def merwe_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[F64Array, F64Array]:
     """The weights ``(Wm, Wc)`` (each ``(2n+1,)``) of van der Merwe's scaled sigma points."""
+
+def family_sigma_points(
+    family_name: str, x: F64Array, p: F64Array, alpha: float = 1.0, beta: float = 0.0, kappa: float = 0.0
+) -> F64Array:
+    """Sigma points ``(N, n)`` of a family (``"merwe"``: alpha, beta, kappa; ``"julier"``: kappa; ``"simplex"``)."""
+
+def family_weights(
+    family_name: str, n: int, alpha: float = 1.0, beta: float = 0.0, kappa: float = 0.0
+) -> tuple[F64Array, F64Array]:
+    """The weights ``(Wm, Wc)`` of a sigma-point family."""
 
 class UkfLinearModel:
     """Built-in linear model ``x' = F x + B u``, ``z = H x`` (F (n, n), H (m, n), B (n, k) or None)."""
@@ -403,6 +413,7 @@ class UkfFilter:
         square_root: bool = False,
         augmented: bool = False,
         repair: bool = False,
+        family_name: str = "merwe",
     ) -> UkfFilter: ...
     @staticmethod
     def callbacks(
@@ -426,13 +437,29 @@ class UkfFilter:
         repair: bool = False,
         dim_w: int | None = None,
         dim_v: int | None = None,
+        family_name: str = "merwe",
+        draw: _Callable[[F64Array, F64Array], _Any] | None = None,
+        wm: F64Array | None = None,
+        wc: F64Array | None = None,
     ) -> UkfFilter:
         """A filter on Python callables, called as filterpy calls them.
 
         ``fx(x, dt, **fx_kwargs)`` (augmented: ``fx(x, dt, w, **fx_kwargs)``), ``hx(x, **hx_kwargs)``
         (augmented: ``hx(x, v, **hx_kwargs)``), ``x_mean(sigmas (2n+1, n), Wm)``, ``residual_x(a, b)``,
         ``state_add(x, dx)``, ``subtract(x, -offset)`` for the sigma points, ``sqrt(M)`` returning a matrix
-        whose rows are the sigma offsets.
+        whose rows are the sigma offsets. ``draw(x, P)`` with ``wm``, ``wc``: an external sigma-point
+        object's ``sigma_points`` (returning ``(N, n)``) and weights, used instead of ``family_name``.
+        """
+
+    def sigma_points(self, x: F64Array, p: F64Array) -> F64Array:
+        """Sigma points ``(N, n)`` of (x, P) as this filter draws them (family and hooks)."""
+
+    def rts_smoother(
+        self, xs: F64Array, ps: F64Array, qs: F64Array, dts: F64Array, us: F64Array | None = None
+    ) -> tuple[F64Array, F64Array, F64Array]:
+        """Unscented RTS smoother: ``(xs, Ps, Ks)`` from filtered ``xs`` (n, dim_x), ``Ps`` (n, dim_x, dim_x).
+
+        ``qs`` is (dim_x, dim_x) or (n, dim_x, dim_x), ``dts`` (n,). Built-in models run without the GIL.
         """
 
     def set_state(
@@ -585,11 +612,11 @@ def wafer_detect_defaults() -> dict[str, float | int | bool | str | tuple[float,
 # --- registration (cpd, global voting) ---
 class CpdRigidResult:
     @property
-    def R(self) -> NDArray[np.float64]: ...
+    def rotation(self) -> NDArray[np.float64]: ...
     @property
-    def t(self) -> NDArray[np.float64]: ...
+    def translation(self) -> NDArray[np.float64]: ...
     @property
-    def s(self) -> float: ...
+    def scale(self) -> float: ...
     @property
     def transformed(self) -> NDArray[np.float64]: ...
     @property
@@ -599,13 +626,13 @@ class CpdRigidResult:
     @property
     def converged(self) -> bool: ...
     @property
-    def P(self) -> NDArray[np.float64] | None: ...
+    def p(self) -> NDArray[np.float64] | None: ...
 
 class CpdAffineResult:
     @property
-    def B(self) -> NDArray[np.float64]: ...
+    def matrix(self) -> NDArray[np.float64]: ...
     @property
-    def t(self) -> NDArray[np.float64]: ...
+    def translation(self) -> NDArray[np.float64]: ...
     @property
     def transformed(self) -> NDArray[np.float64]: ...
     @property
@@ -615,11 +642,11 @@ class CpdAffineResult:
     @property
     def converged(self) -> bool: ...
     @property
-    def P(self) -> NDArray[np.float64] | None: ...
+    def p(self) -> NDArray[np.float64] | None: ...
 
 class CpdNonrigidResult:
     @property
-    def W(self) -> NDArray[np.float64]: ...
+    def w(self) -> NDArray[np.float64]: ...
     @property
     def transformed(self) -> NDArray[np.float64]: ...
     @property
@@ -633,27 +660,14 @@ class CpdNonrigidResult:
     @property
     def rank(self) -> int | None: ...
     @property
-    def P(self) -> NDArray[np.float64] | None: ...
+    def p(self) -> NDArray[np.float64] | None: ...
 
 class GlobalCpdHypothesis:
     @property
-    def transformed(self) -> NDArray[np.float64]: ...
+    def initial(self) -> tuple[NDArray[np.float64], NDArray[np.float64], int, int]:
+        """``(rotation, translation, votes, pair_votes)`` of the voting hypothesis."""
     @property
-    def energy(self) -> float: ...
-    @property
-    def votes(self) -> int: ...
-    @property
-    def pair_votes(self) -> int: ...
-    @property
-    def R(self) -> NDArray[np.float64]: ...
-    @property
-    def t(self) -> NDArray[np.float64]: ...
-    @property
-    def W(self) -> NDArray[np.float64]: ...
-    @property
-    def sigma2(self) -> float: ...
-    @property
-    def iterations(self) -> int: ...
+    def cpd(self) -> CpdNonrigidResult: ...
 
 def cpd_rigid(
     x: NDArray[np.float64],
@@ -1144,6 +1158,133 @@ class ActiveSystem:
     ) -> dict[str, _Any]: ...
 
 # --- end active ---
+
+# --- ellipse detection (issue 42) ---
+
+class EllipseDetection:
+    """One detected ellipse; see :class:`autoteach.detect.EllipseDetection`."""
+
+    @property
+    def ellipse(self) -> Ellipse: ...
+    @property
+    def points(self) -> NDArray[np.float64]: ...
+    @property
+    def covariance(self) -> NDArray[np.float64] | None: ...
+    @property
+    def residual(self) -> float: ...
+    @property
+    def score(self) -> float: ...
+    @property
+    def polarity(self) -> int: ...
+
+def ellipse_detect(
+    image: NDArray[np.uint8] | NDArray[np.uint16] | NDArray[np.float32] | NDArray[np.float64],
+    *,
+    min_arc_points: int = 12,
+    min_semi_minor: float = 2.0,
+    max_semi_major: float | None = None,
+    max_gap: float | None = None,
+    blur_sigma: float = 0.0,
+    max_nfa: float = 1.0,
+    max_line_width: float | None = None,
+    gradient_noise: float | None = None,
+) -> list[EllipseDetection]:
+    """Detect ellipses; see :func:`autoteach.detect.detect_ellipses`."""
+
+def wafer_rims_detect(
+    image: NDArray[np.uint8] | NDArray[np.uint16] | NDArray[np.float32] | NDArray[np.float64],
+    *,
+    radius: float = 75.0,
+    thickness: float = 0.775,
+    up: tuple[float, float] = (0.0, -1.0),
+    semi_major_range: tuple[float, float] | None = None,
+    focal_length: float | None = None,
+    min_arc_points: int = 12,
+    min_semi_minor: float = 2.0,
+    max_gap: float | None = None,
+    blur_sigma: float = 0.0,
+    max_nfa: float = 1.0,
+    gradient_noise: float | None = None,
+) -> list[WaferEdge]:
+    """Wafer rims by geometry; see :func:`autoteach.detect.detect_wafer_rims`."""
+
+# --- end ellipse detection ---
+# --- mapping (issue 32: occupancy-grid rasterization, seed 004 ch. 2) ---
+
+class Rasterizer:
+    """Table 2.1's rasterizers; see :class:`autoteach.mapping.Rasterizer`."""
+
+    def __init__(
+        self,
+        method: str = "cover_composite",
+        slice_size: int = 4,
+        resolution: float = 0.1,
+        covering: bool = True,
+        cover_distance: float = 0.75,
+        cover_angle: float = ...,
+        angle_min: float = ...,
+        angle_increment: float = ...,
+        max_range: float = 30.0,
+        log_odds_hit: float = ...,
+        log_odds_miss: float = ...,
+        prior: float = 0.0,
+        threshold: float = 0.0,
+    ) -> None: ...
+    def update(
+        self,
+        node_ids: NDArray[np.int64],
+        robot_ids: NDArray[np.int64],
+        poses: F64Array,
+        scan_rows: NDArray[np.int64],
+        scans: F64Array,
+    ) -> tuple[NDArray[np.int8], float, float, float, dict[str, _Any]]: ...
+    def memory_bytes(self) -> int: ...
+    def num_nodes(self) -> int: ...
+
+class TeamSimulator:
+    """The team simulator; see :class:`autoteach.mapping.TeamSimulator`."""
+
+    def __init__(
+        self,
+        world: str = "showgrounds",
+        robots: int | None = None,
+        graphs: int | None = None,
+        seed: int = 0,
+        transients: bool = True,
+        people: int | None = None,
+        vehicles: int | None = None,
+        max_range: float | None = None,
+    ) -> None: ...
+    def step(self) -> dict[str, _Any] | None: ...
+    def ranges(self, ids: NDArray[np.int64]) -> F64Array: ...
+    def transient_hits(self, id: int) -> F64Array: ...
+    def walls(self) -> F64Array: ...
+    def graphs(self) -> int: ...
+    def extent(self) -> tuple[float, float]: ...
+    def scan_geometry(self) -> tuple[float, float, float]: ...
+    def transient_residue(
+        self,
+        cells: NDArray[np.int8],
+        origin: tuple[float, float],
+        resolution: float,
+        ids: NDArray[np.int64],
+        poses: F64Array,
+        truth: F64Array,
+        margin: float = 0.5,
+    ) -> tuple[int, int, int]: ...
+
+def mapping_wall_gaps(
+    candidate: NDArray[np.int8],
+    candidate_origin: tuple[float, float],
+    reference: NDArray[np.int8],
+    reference_origin: tuple[float, float],
+    resolution: float,
+    walls: F64Array,
+    radius: int = 1,
+) -> tuple[int, int]:
+    """Wall samples and gaps; see :func:`autoteach.mapping.wall_gaps`."""
+
+# --- end mapping ---
 
 # --- control (issue 31) ---
 

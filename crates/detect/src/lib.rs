@@ -34,10 +34,12 @@ pub mod assignment;
 pub mod cpd;
 pub mod edges;
 pub mod ellipse;
+pub mod ellipse_detection;
 pub mod error;
 pub mod polygon;
 pub mod track;
 pub mod voting;
+pub mod wafer_rims;
 pub mod wafers;
 
 pub use error::DetectError;

@@ -201,6 +201,11 @@ pub enum EstimateError {
         /// The final convergence measure.
         residual: f64,
     },
+    /// Mapping input that the rasterizer cannot use (seed 004_815695db12a6b16c.txt ch. 2): a
+    /// repeated or vanished node id, a node that changed robot, a new node without a scan,
+    /// a negative range, an empty graph.
+    #[error("invalid mapping input: {0}")]
+    InvalidMapInput(String),
     /// A linear model (transfer function) or frequency-response data set is unusable for the
     /// requested operation: improper, unstable where stability is required, a zero
     /// denominator, unsorted or non-positive frequencies (issue 31, [`crate::control`]).

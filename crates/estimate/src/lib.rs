@@ -26,6 +26,7 @@ pub mod control;
 pub mod error;
 pub mod handeye;
 pub mod lsq;
+pub mod mapping;
 pub mod ukf;
 
 pub use error::EstimateError;

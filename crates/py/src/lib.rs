@@ -8,15 +8,17 @@ use pyo3::prelude::*;
 
 mod active;
 mod calib;
-#[cfg(feature = "control")]
 mod control;
 pub mod convert;
 mod detect;
+mod ellipse_detection;
 pub mod errors;
 mod estimate;
 mod geometry;
+mod gray;
 mod handeye;
 mod lsq;
+mod mapping;
 mod polygon;
 mod registration;
 mod sim;
@@ -39,7 +41,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
-    #[cfg(feature = "control")]
+    ellipse_detection::register(m)?;
+    mapping::register(m)?;
     control::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -7,9 +7,7 @@ sub-parsers ``sub`` (with ``parents=[common]`` for ``--json``/``--quiet``) and s
 
 from __future__ import annotations
 
-MODULES = (
-    "autoteach.commands.run",
-    "autoteach.commands.calibrate",
-    "autoteach.commands.active",
-    "autoteach.commands.tune",
-)
+MODULES = ("autoteach.commands.run", "autoteach.commands.calibrate", "autoteach.commands.active")
+MODULES += ("autoteach.commands.scenes",)
+MODULES += ("autoteach.commands.map",)
+MODULES += ("autoteach.commands.tune",)

@@ -92,11 +92,6 @@ def _jsonable(obj: Any) -> Any:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from autoteach import _core
-
-    if not hasattr(_core, "control_demo"):
-        print("autoteach tune: this build of autoteach._core lacks the `control` feature of autoteach-py")
-        return 2
     if not args.demo:
         print("autoteach tune: only --demo is available (the simulated JT2/JT4 experiment)")
         return 2
