@@ -90,7 +90,7 @@ def main() -> int:
     lower = [t < b for t, b in zip(v["tuned"]["total"], v["baseline"]["total"], strict=True)]
     print(f"Table 2.4: tuned RMS lower on every modelled axis: {all(lower)}  (demo wall time {t_demo:.1f} s)")
 
-    plants = [p["motor"] for p in joint_plants("JT2", 10)]
+    plants = [p.motor for p in joint_plants("JT2", 10)]
     wr = 2 * np.pi * 25.0
     spec = _spec(wr)
     times = []

@@ -114,7 +114,7 @@ class TransferFunction:
         return _core.control_lsim(self.num, self.den, np.atleast_1d(as_f64(u, "u")), as_float(dt, "dt"))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Margins:
     """Classical stability margins of a loop (python-control's ``margin`` values)."""
 
@@ -163,13 +163,15 @@ def closed_loop_damping(plant: TransferFunction, controller: TransferFunction | 
     return float(_core.control_closed_loop_damping(*_tf_pair(_loop(plant, controller))))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class FitResult:
-    """A fitted model and its relative weighted residual."""
+    """A fitted model and its relative weighted residual (Rust ``control::FitResult``)."""
 
     model: TransferFunction
     residual: float
+    """Relative weighted residual ``||w (H_fit - H)|| / ||w H||``."""
     reflected_poles: int
+    """Unstable poles reflected into the left half plane."""
 
 
 def fit_frequency_response(
@@ -258,9 +260,43 @@ class TuneSpec:
         return cls(**keys)
 
 
-@dataclass
+@dataclass(frozen=True, slots=True)
+class PlantReport:
+    """Analysis of one plant under a controller (Rust ``control::PlantReport``); frequencies in rad/s."""
+
+    gain_margin_db: float
+    """Gain margin (dB), python-control's ``margin`` convention."""
+    phase_margin_deg: float
+    """Phase margin (degrees), python-control's ``margin`` convention."""
+    worst_gain_margin_db: float
+    """Smallest gain margin (dB) over every phase crossover."""
+    worst_phase_margin_deg: float
+    """Smallest phase margin (degrees) over every gain crossover."""
+    crossover: float
+    """Gain-crossover frequency of the reported phase margin ("bandwidth" of Table 2.3)."""
+    bandwidth: float
+    """Closed-loop -3 dB bandwidth of ``T = L/(1+L)``."""
+    sensitivity_peak: float
+    """``max |S|``."""
+    weighted_peak: float
+    """Peak of ``|W S|`` (below 1: ``|S| < |S_d|``)."""
+    damping: float
+    """Smallest closed-loop damping below ``damping_max_freq``."""
+    damping_all: float
+    """Smallest closed-loop damping ratio of all poles."""
+    band_gain_ratio: float
+    """Largest ``|L|`` on ``gain_band`` relative to ``max_loop_gain`` (≤ 1 met)."""
+    rolloff_ratio: float
+    """Largest ``|L(jw)| / (M (w2/w)^2)`` for ``w ≥ rolloff_freq`` (≤ 1 met)."""
+
+
+@dataclass(frozen=True, slots=True)
 class TuneResult:
-    """A tuned (or evaluated) controller and its report."""
+    """A tuned (or evaluated) controller and its report (Rust ``control::TuneReport``).
+
+    ``sections`` is Python-only: Rust returns the ``ControllerStructure`` beside the report; it is what
+    ``theta`` parameterises.
+    """
 
     controller: TransferFunction
     sections: list[str]
@@ -272,7 +308,7 @@ class TuneResult:
     objective: float
     """``max_i ||W S_i||_inf``; below 1 means ``|S_i| < |S_d|`` for every plant."""
     iterations: int
-    plants: list[dict[str, float]] = field(default_factory=list)
+    plants: list[PlantReport] = field(default_factory=list)
 
     @classmethod
     def _from_core(cls, r: dict[str, Any]) -> TuneResult:
@@ -284,8 +320,22 @@ class TuneResult:
             unmet=list(r["unmet"]),
             objective=float(r["objective"]),
             iterations=int(r["iterations"]),
-            plants=list(r["plants"]),
+            plants=[PlantReport(**{k: float(v) for k, v in p.items()}) for p in r["plants"]],
         )
+
+
+@dataclass(frozen=True, slots=True)
+class JointPlant:
+    """A simulated joint plant at one pose (Rust ``control::JointPlant``)."""
+
+    motor: TransferFunction
+    """Motor torque (N m) to joint angle at the motor encoder (rad): the model the controller sees."""
+    link: TransferFunction
+    """Motor torque (N m) to link (hand-side) joint angle (rad)."""
+    link_inertia: float
+    """Link inertia about the joint axis (kg m², joint side)."""
+    pose: F64Array
+    """The pose (joint angles)."""
 
 
 def _plants_arg(plants: Sequence[TransferFunction]) -> list[tuple[F64Array, F64Array]]:
@@ -337,19 +387,17 @@ def baseline(plants: Sequence[TransferFunction], spec: TuneSpec) -> TuneResult:
     return TuneResult._from_core(_core.control_baseline(_plants_arg(plants), spec.as_dict()))
 
 
-def joint_plants(joint: str, count: int = 6) -> list[dict[str, Any]]:
+def joint_plants(joint: str, count: int = 6) -> list[JointPlant]:
     """The simulated plants of ``"JT2"`` or ``"JT4"`` at ``count`` sweep poses (``motor``/``link`` models)."""
-    out = []
-    for p in _core.control_joint_plants(str(joint), as_int(count, "count")):
-        out.append(
-            {
-                "motor": TransferFunction(*p["motor"]),
-                "link": TransferFunction(*p["link"]),
-                "link_inertia": float(p["link_inertia"]),
-                "pose": p["pose"],
-            }
+    return [
+        JointPlant(
+            motor=TransferFunction(*p["motor"]),
+            link=TransferFunction(*p["link"]),
+            link_inertia=float(p["link_inertia"]),
+            pose=p["pose"],
         )
-    return out
+        for p in _core.control_joint_plants(str(joint), as_int(count, "count"))
+    ]
 
 
 def sine_sweep(plant: TransferFunction, omega: ArrayLike, noise: float, seed: int = 0) -> NDArray[np.complex128]:
@@ -423,7 +471,9 @@ def plot_sensitivities(result: dict[str, Any], joint: str, path: str) -> None:
 
 __all__ = [
     "FitResult",
+    "JointPlant",
     "Margins",
+    "PlantReport",
     "TransferFunction",
     "TuneResult",
     "TuneSpec",

@@ -343,6 +343,32 @@ mod tests {
     use super::*;
 
     #[test]
+    fn margins_of_a_loop_whose_companion_matrix_stalled_nalgebra() {
+        // First random pair of tests/test_control.py: `margins` never returned while the
+        // companion eigen-solve ran nalgebra's uncapped QR iteration. Expected values are
+        // python-control 0.10.2's `margin` on the same loop.
+        let plant = TransferFunction::new(
+            &[128.8826523056646, 1640.9180759233398],
+            &[
+                1.0,
+                39.097958419776546,
+                222.2188188331554,
+                16.88743988861308,
+                33.33837919628236,
+            ],
+        )
+        .unwrap();
+        let pi =
+            TransferFunction::new(&[0.10126911166161184, 2.3747716075346754], &[1.0, 0.0]).unwrap();
+        let m = margins(&plant.series(&pi));
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs().max(1.0);
+        assert!(close(m.gain_margin, 0.0004258709541424586), "{m:?}");
+        assert!(close(m.phase_margin_deg, -96.42048603213671), "{m:?}");
+        assert!(close(m.w_phase_crossover, 0.38862923270316896), "{m:?}");
+        assert!(close(m.w_gain_crossover, 2.587842166844239), "{m:?}");
+    }
+
+    #[test]
     fn margins_of_integrator_with_lag_match_closed_form() {
         // L = k / (s (s+1)^2): phase crossover at ω = 1 where |L| = k/2, so GM = 2/k.
         let k = 0.5;

@@ -1,7 +1,7 @@
 //! Real polynomials in descending powers (`c[0] sⁿ + … + c[n]`, NumPy's convention), the
 //! arithmetic that transfer functions (ch. 2.5 of 000_3b1454b2b2194811.txt) are built from.
 
-use nalgebra::{Complex, DMatrix};
+use nalgebra::{Complex, DMatrix, Schur};
 
 /// Complex numbers used for frequency responses.
 pub type C64 = Complex<f64>;
@@ -122,7 +122,15 @@ pub fn roots(p: &[f64]) -> Vec<C64> {
         comp[(i, i - 1)] = 1.0;
     }
     let dq = deriv(&q);
-    for r in comp.complex_eigenvalues().iter() {
+    // nalgebra's `complex_eigenvalues` runs the QR iteration without an iteration cap and
+    // never returns on some companion matrices (regression test
+    // `roots_of_a_companion_matrix_nalgebra_does_not_converge_on`): cap it, and fall back to
+    // the Aberth–Ehrlich iteration on the scaled polynomial if the Schur form does not converge.
+    let scaled = match Schur::try_new(comp, f64::EPSILON, 200 * n) {
+        Some(schur) => schur.complex_eigenvalues().iter().copied().collect(),
+        None => aberth(&q, w0),
+    };
+    for r in scaled.iter() {
         let r = *r * w0;
         let mut z = r;
         for _ in 0..2 {
@@ -141,6 +149,54 @@ pub fn roots(p: &[f64]) -> Vec<C64> {
         out.push(z);
     }
     out
+}
+
+/// Roots of `q` divided by `w0` (the roots of `q(w0 ŝ)`) by the Aberth–Ehrlich simultaneous
+/// iteration, started on a circle of radius 1 off the real axis; used when the companion
+/// eigen-solve does not converge.
+fn aberth(q: &[f64], w0: f64) -> Vec<C64> {
+    let n = q.len() - 1;
+    // Coefficients of q(w0 ŝ) / q[0], still in descending powers.
+    let qs: Vec<f64> = q
+        .iter()
+        .enumerate()
+        .map(|(k, &c)| c / q[0] * w0.powi((n - k) as i32))
+        .collect();
+    let dqs = deriv(&qs);
+    let mut z: Vec<C64> = (0..n)
+        .map(|k| {
+            C64::from_polar(
+                1.0,
+                (2.0 * std::f64::consts::PI * k as f64 + 0.4) / n as f64,
+            )
+        })
+        .collect();
+    for _ in 0..500 {
+        let mut moved = 0.0f64;
+        for i in 0..n {
+            let ratio = eval(&qs, z[i]) / eval(&dqs, z[i]);
+            let repulsion: C64 = (0..n)
+                .filter(|&j| j != i)
+                .map(|j| C64::new(1.0, 0.0) / (z[i] - z[j]))
+                .sum();
+            let step = ratio / (C64::new(1.0, 0.0) - ratio * repulsion);
+            if step.re.is_finite() && step.im.is_finite() {
+                z[i] -= step;
+                moved = moved.max(step.norm() / z[i].norm().max(1.0));
+            }
+        }
+        if moved < 1e-15 {
+            break;
+        }
+    }
+    // Real roots come back with a rounding-level imaginary part: snap them, as the
+    // companion eigen-solve reports real eigenvalues exactly.
+    for r in z.iter_mut() {
+        if r.im.abs() <= 1e-12 * r.norm().max(1.0) {
+            r.im = 0.0;
+        }
+    }
+    z
 }
 
 #[cfg(test)]
@@ -168,5 +224,39 @@ mod tests {
         assert_eq!(add(&[1.0, 0.0, 0.0], &[3.0]), vec![1.0, 0.0, 3.0]);
         assert_eq!(deriv(&[1.0, 2.0, 3.0]), vec![2.0, 2.0]);
         assert_eq!(trim(&[0.0, 0.0, 2.0]), vec![2.0]);
+    }
+
+    #[test]
+    fn roots_of_a_companion_matrix_nalgebra_does_not_converge_on() {
+        // The phase-crossover polynomial of the first random pair of tests/test_control.py:
+        // nalgebra's uncapped QR iteration never returned on its companion matrix.
+        let num = mul(&[128.88265231, 1640.91807592], &[0.10126911, 2.37477161]);
+        let den = mul(
+            &[1.0, 39.09795842, 222.21881883, 16.88743989, 33.3383792],
+            &[1.0, 0.0],
+        );
+        for p in [num.clone(), den.clone(), mul(&num, &den)] {
+            let r = roots(&p);
+            assert_eq!(r.len(), trim(&p).len() - 1);
+            let scale: f64 = p.iter().map(|c| c.abs()).sum();
+            for z in r {
+                assert!(
+                    eval(&p, z).norm() <= 1e-8 * scale * z.norm().max(1.0).powi(p.len() as i32),
+                    "{z}"
+                );
+            }
+        }
+        let mut a = aberth(
+            &from_roots(&[
+                C64::new(-2.0, 0.0),
+                C64::new(-0.5, 3.0),
+                C64::new(-0.5, -3.0),
+            ]),
+            1.0,
+        );
+        a.sort_by(|x, y| x.im.total_cmp(&y.im));
+        assert!((a[0] - C64::new(-0.5, -3.0)).norm() < 1e-12);
+        assert!((a[1] - C64::new(-2.0, 0.0)).norm() < 1e-12);
+        assert!((a[2] - C64::new(-0.5, 3.0)).norm() < 1e-12);
     }
 }
