@@ -17,7 +17,20 @@ from typing import Any
 import numpy as np
 import pytest
 
-from autoteach import _core, active, calib, detect, estimate, geometry, polygon, radio, registration, segment, track
+from autoteach import (
+    _core,
+    active,
+    calib,
+    control,
+    detect,
+    estimate,
+    geometry,
+    polygon,
+    radio,
+    registration,
+    segment,
+    track,
+)
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CRATES = ROOT / "crates"
@@ -76,6 +89,16 @@ DATACLASSES: list[tuple[type, str, str, dict[str, str]]] = [
     (segment.CloudSegmentation, "detect/src/segment/mod.rs", "CloudSegmentation", {}),
     (segment.Colorization, "detect/src/segment/coregister.rs", "Colorized", {}),
     (segment.ExtrinsicsFit, "estimate/src/lidar_camera.rs", "ExtrinsicsFit", {}),
+    (control.Margins, "estimate/src/control/analysis.rs", "Margins", {}),
+    (control.FitResult, "estimate/src/control/fit.rs", "FitResult", {}),
+    (control.PlantReport, "estimate/src/control/tune.rs", "PlantReport", {}),
+    (
+        control.TuneResult,
+        "estimate/src/control/tune.rs",
+        "TuneReport",
+        {"sections": "Rust returns the ControllerStructure beside the report"},
+    ),
+    (control.JointPlant, "estimate/src/control/plant.rs", "JointPlant", {}),
 ]
 
 # Existing class pattern (a Python class holding the compiled object): every Rust field is a
@@ -332,3 +355,18 @@ def test_segmentation_results() -> None:
     norms = np.linalg.norm(res.normals, axis=-1)
     np.testing.assert_allclose(norms[res.normal_ok], 1.0, atol=1e-9)
     assert np.all(norms[~res.normal_ok] == 0.0)
+
+
+def test_control_results() -> None:
+    plants = control.joint_plants("JT2", 2)
+    for p in plants:
+        _check(p, control.JointPlant)
+        _check(p.motor, control.TransferFunction)
+    pid = control.TransferFunction([1.0, 2.0], [1.0, 0.0])
+    _check(control.margins(plants[0].motor, pid), control.Margins)
+    w = np.geomspace(1.0, 1e3, 60)
+    g = control.TransferFunction([1.0], [1.0, 0.4, 100.0])
+    fit = control.fit_frequency_response(w, g.frequency_response(w), 0, 2)
+    _check(fit, control.FitResult)
+    _check(fit.model, control.TransferFunction)
+    np.testing.assert_allclose(np.sort(fit.model.poles()), np.sort(g.poles()), rtol=1e-6)

@@ -264,4 +264,14 @@ pub enum EstimateError {
     /// a negative range, an empty graph.
     #[error("invalid mapping input: {0}")]
     InvalidMapInput(String),
+    /// A linear model (transfer function) or frequency-response data set is unusable for the
+    /// requested operation: improper, unstable where stability is required, a zero
+    /// denominator, unsorted or non-positive frequencies (issue 31, [`crate::control`]).
+    #[error("invalid linear model {what}: {reason}")]
+    InvalidModel {
+        /// Which model or data set.
+        what: String,
+        /// Why it is rejected, with the offending values.
+        reason: String,
+    },
 }

@@ -22,6 +22,7 @@
 
 pub mod active;
 pub mod calib;
+pub mod control;
 pub mod error;
 pub mod handeye;
 pub mod lsq;

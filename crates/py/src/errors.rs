@@ -133,6 +133,7 @@ pub fn estimate(err: autoteach_estimate::EstimateError) -> PyErr {
         | E::Model { .. } => invalid_input(err.to_string()),
         E::InvalidProblem(_) | E::TooFewPoints { .. } => invalid_input(err.to_string()),
         E::InvalidMapInput(_) => invalid_input(err.to_string()),
+        E::InvalidModel { .. } => invalid_input(err.to_string()),
         // An unconstrained direction (gauge freedom), a singular information matrix, a
         // calibration that the views cannot determine, no pose meeting the constraints.
         E::RankDeficient { .. } | E::SingularInformation { .. } | E::DegenerateCalibration(_) => {

@@ -8,6 +8,7 @@ use pyo3::prelude::*;
 
 mod active;
 mod calib;
+mod control;
 pub mod convert;
 mod detect;
 mod ellipse_detection;
@@ -46,6 +47,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     ellipse_detection::register(m)?;
     mapping::register(m)?;
     segment::register(m)?;
+    control::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
