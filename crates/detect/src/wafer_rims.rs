@@ -456,6 +456,31 @@ fn side_of(d: &EllipseDetection, e: &Ellipse) -> bool {
     *m <= OPERATOR_REACH
 }
 
+/// Whether the centre line `e` is the middle of a band wider than [`RIM_LINE_WIDTH`] whose
+/// two edges were detected: a pair of opposite-polarity edges on either side of `e` (their
+/// mean is `e` within half a pixel of centre and 2 % of the axes) more than that far apart. A
+/// wafer's edge face seen as such a band has its rims on the edges, not at its middle.
+fn band_centre(dets: &[EllipseDetection], e: &Ellipse) -> bool {
+    let near: Vec<&EllipseDetection> = dets
+        .iter()
+        .filter(|d| {
+            d.polarity != 0
+                && (d.ellipse.cx - e.cx).hypot(d.ellipse.cy - e.cy) <= RIM_LINE_WIDTH + 1.0
+                && (d.ellipse.a - e.a).abs() <= RIM_AXIS_TOLERANCE * e.a + RIM_LINE_WIDTH
+        })
+        .collect();
+    near.iter().enumerate().any(|(i, p)| {
+        near[i + 1..].iter().any(|q| {
+            p.polarity * q.polarity == -1
+                && mean_ellipse(&p.ellipse, &q.ellipse).is_some_and(|m| {
+                    (m.cx - e.cx).hypot(m.cy - e.cy) <= 0.5
+                        && (m.b - e.b).abs() <= RIM_AXIS_TOLERANCE * e.a
+                })
+                && (p.ellipse.cx - q.ellipse.cx).hypot(p.ellipse.cy - q.ellipse.cy) > RIM_LINE_WIDTH
+        })
+    })
+}
+
 /// The line candidates: the detected centre lines (polarity 0, e.g. from
 /// [`crate::ellipse_detection::ridges`]) first, then the edge-pair lines that are not one of
 /// them (the same line seen by its two sides).
@@ -467,7 +492,7 @@ fn with_centre_lines(
     let mut out: Vec<Candidate> = dets
         .iter()
         .enumerate()
-        .filter(|(_, d)| d.polarity == 0)
+        .filter(|(_, d)| d.polarity == 0 && !band_centre(dets, &d.ellipse))
         .map(|(i, d)| Candidate {
             ellipse: d.ellipse,
             brightness: brightness.get(i).copied().unwrap_or(0),
@@ -608,7 +633,13 @@ pub fn pair_rims_with(
         } else {
             None
         };
-        let narrow = narrow.or_else(|| shared_shape_rims(dets, lower, upper, ratio, &up, geometry));
+        // Rims drawn as lines: the short one takes the long one's shape (edge bands keep their
+        // own fits: a band's two edges pull each other, so neither shape is the rim's).
+        let narrow = if kind_of_pair == 0 {
+            shared_shape_rims(dets, lower, upper, ratio, &up, geometry)
+        } else {
+            narrow
+        };
         for (kind, c) in [(RimKind::Upper, upper), (RimKind::Lower, lower)] {
             let points = c
                 .edges
