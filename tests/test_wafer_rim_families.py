@@ -25,7 +25,7 @@ SEEDS = (1000, 1001, 1002)
 FLOORS = {
     "bright_face": (0.74, 0.84),
     "dark_face": (0.74, 0.84),
-    "thin_lines": (0.37, 0.46),
+    "thin_lines": (0.58, 0.82),
     "low_contrast": (0.26, 0.90),
     "lighting": (0.58, 0.76),
     "clutter": (0.37, 0.65),

@@ -1,12 +1,14 @@
 //! General ellipse detection (`detect_ellipses`) and the wafer rims built on it
 //! (`detect_wafer_rims`) on 1280×720 images: a rendered carrier image (target wafer in slot 5,
 //! disturbance wafer in slot 7, as the `wafer_detect` bench) and a synthetic image of eight
-//! ellipses of both polarities and sizes on a noisy ground (σ = 4 grey levels).
+//! ellipses of both polarities and sizes on a noisy ground (σ = 4 grey levels); the line path
+//! (`ridges::detect_line_ellipses`) on the synthetic image.
 //!
 //! Run: `RAYON_NUM_THREADS=1 cargo bench -p autoteach-detect --bench ellipse_detect --
 //! --warm-up-time 1 --measurement-time 3`.
 
 use autoteach_detect::edges::GrayView;
+use autoteach_detect::ellipse_detection::ridges::{detect_line_ellipses, ridge_scale};
 use autoteach_detect::ellipse_detection::{EllipseDetectParams, detect_ellipses};
 use autoteach_detect::wafer_rims::{WaferRimParams, detect_wafer_rims};
 use autoteach_geometry::camera::Camera;
@@ -95,6 +97,13 @@ fn bench(c: &mut Criterion) {
             b.iter(|| detect_ellipses(black_box(&view), &params).expect("detect"))
         });
     }
+    // Thin lines found on their centre lines (Hessian at the wafer rims' default scale).
+    let (data, w, h) = synthetic();
+    let view = GrayView::new(&data, w, h).expect("view");
+    let sigma = ridge_scale(autoteach_detect::wafer_rims::RIM_LINE_WIDTH);
+    c.bench_function("detect_line_ellipses_synthetic_1280x720", |b| {
+        b.iter(|| detect_line_ellipses(black_box(&view), &params, sigma).expect("lines"))
+    });
     let (data, w, h) = rendered();
     let view = GrayView::new(&data, w, h).expect("view");
     let rims = WaferRimParams::default();
