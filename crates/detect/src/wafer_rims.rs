@@ -32,7 +32,7 @@ use autoteach_geometry::conic::Ellipse;
 use nalgebra::{Matrix5, Point2, Vector2};
 
 use crate::edges::{GrayView, Pixel};
-use crate::ellipse_detection::refine::OPERATOR_REACH;
+use crate::ellipse_detection::refine::{OPERATOR_REACH, median_distance};
 use crate::ellipse_detection::ridges::{detect_signed_lines, ridge_scale};
 use crate::ellipse_detection::{EllipseDetectParams, EllipseDetection, detect_ellipses};
 use crate::wafers::{RimKind, WaferEdge};
@@ -301,6 +301,14 @@ fn translate_fit(shape: &Ellipse, points: &[Vector2<f64>]) -> Option<(Ellipse, f
     mean.is_finite().then_some((e, mean))
 }
 
+/// The support points of a candidate: its edges' points.
+fn support(dets: &[EllipseDetection], c: &Candidate) -> Vec<Vector2<f64>> {
+    c.edges
+        .iter()
+        .flat_map(|&k| dets[k].points.iter().copied())
+        .collect()
+}
+
 /// The two rims of a wafer are one circle seen from heights `h` apart: the same semi-major
 /// axis and orientation, semi-minor axes `Δb` apart ([`far_rim_excess`], when the focal length
 /// is known). Where one rim's centre is much less certain than the other's (a front arc only,
@@ -327,16 +335,10 @@ fn shared_shape_rims(
     if !(vw > 4.0 * vb) {
         return None;
     }
-    let points = |c: &Candidate| -> Vec<Vector2<f64>> {
-        c.edges
-            .iter()
-            .flat_map(|&k| dets[k].points.iter().copied())
-            .collect()
-    };
-    let worse_points = points(worse);
+    let worse_points = support(dets, worse);
     let b = better.ellipse;
     let db = geometry.focal_length.map_or(0.0, |f| {
-        let far_lower = far_is_lower(&lower.ellipse, &points(lower), up);
+        let far_lower = far_is_lower(&lower.ellipse, &support(dets, lower), up);
         let worse_is_far = far_lower == lower_is_worse;
         if worse_is_far {
             far_rim_excess(&b, ratio, f)
@@ -442,18 +444,7 @@ fn same_rim(e: &Ellipse, f: &Ellipse) -> bool {
 /// Whether the edge `d` runs along the line `e`: its points' median distance to `e` is within
 /// the edge operator's reach ([`OPERATOR_REACH`]).
 fn side_of(d: &EllipseDetection, e: &Ellipse) -> bool {
-    let mut dist: Vec<f64> = d
-        .points
-        .iter()
-        .step_by((d.points.len() / 32).max(1))
-        .map(|p| e.sampson_distance(p))
-        .collect();
-    if dist.is_empty() {
-        return false;
-    }
-    let mid = dist.len() / 2;
-    let (_, m, _) = dist.select_nth_unstable_by(mid, f64::total_cmp);
-    *m <= OPERATOR_REACH
+    median_distance(e, &d.points) <= OPERATOR_REACH
 }
 
 /// Whether the centre line `e` is the middle of a band wider than [`RIM_LINE_WIDTH`] whose
@@ -616,29 +607,19 @@ pub fn pair_rims_with(
     let mut out = Vec::with_capacity(2 * wafers.len());
     for (id, (kind_of_pair, lower, upper)) in wafers.into_iter().enumerate() {
         // Edge pairs (not lines) of a band narrower than the operator's reach: the centre line.
+        // Rims drawn as lines: the short one takes the long one's shape (edge bands keep their
+        // own fits: a band's two edges pull each other, so neither shape is the rim's).
         let narrow = if kind_of_pair == 1 {
-            let lower_points: Vec<Vector2<f64>> = lower
-                .edges
-                .iter()
-                .flat_map(|&k| dets[k].points.iter().copied())
-                .collect();
             narrow_band_rims(
                 lower,
                 upper,
-                &lower_points,
+                &support(dets, lower),
                 ratio,
                 &up,
                 geometry.focal_length,
             )
         } else {
-            None
-        };
-        // Rims drawn as lines: the short one takes the long one's shape (edge bands keep their
-        // own fits: a band's two edges pull each other, so neither shape is the rim's).
-        let narrow = if kind_of_pair == 0 {
             shared_shape_rims(dets, lower, upper, ratio, &up, geometry)
-        } else {
-            narrow
         };
         for (kind, c) in [(RimKind::Upper, upper), (RimKind::Lower, lower)] {
             let points = c

@@ -128,6 +128,43 @@ pub(crate) fn arc_pixels(
     })
 }
 
+/// The distinct pixels `(x, y)` (rounded positions, consecutive repeats skipped) of
+/// [`arc_pixels`] inside the one-pixel border of a `w × h` image, each with the outward normal.
+pub(crate) fn distinct_pixels(
+    ellipse: &Ellipse,
+    (start, length): (f64, f64),
+    w: usize,
+    h: usize,
+) -> impl Iterator<Item = (usize, usize, Vector2<f64>)> {
+    let mut last: Option<(i64, i64)> = None;
+    let usable = w >= 3 && h >= 3 && length > 0.0;
+    arc_pixels(ellipse, start, if usable { length } else { -1.0 }).filter_map(move |(p, normal)| {
+        let (px, py) = (p.x.round() as i64, p.y.round() as i64);
+        if last == Some((px, py)) {
+            return None;
+        }
+        last = Some((px, py));
+        (px >= 1 && py >= 1 && px < w as i64 - 1 && py < h as i64 - 1).then_some((
+            px as usize,
+            py as usize,
+            normal,
+        ))
+    })
+}
+
+/// `−log₁₀ NFA` of the ellipse `e` over the angular extent its `points` cover, with `count`
+/// giving the alignment counts over an extent; `None` when the extent covers no pixels.
+pub(crate) fn score_support(
+    e: &Ellipse,
+    points: &[Vector2<f64>],
+    log_nt: f64,
+    count: impl FnOnce((f64, f64)) -> Alignment,
+) -> Option<f64> {
+    let ts: Vec<f64> = points.iter().map(|p| e.parameter_of(p)).collect();
+    let al = count(covered_extent(&ts));
+    (al.n > 0).then(|| score(al.n, al.k, ALIGNMENT_PROBABILITY, log_nt))
+}
+
 /// Counts the aligned pixels along the arc of `ellipse` from eccentric angle `start` over
 /// `length` radians, stepping about one pixel of arc length at a time ([`arc_pixels`]); each
 /// distinct pixel (rounded position) inside the one-pixel border counts once. A pixel is aligned
@@ -136,7 +173,7 @@ pub(crate) fn arc_pixels(
 pub fn count_alignment<T: Pixel>(
     image: &GrayView<'_, T>,
     ellipse: &Ellipse,
-    (start, length): (f64, f64),
+    extent: (f64, f64),
     polarity: i8,
     rho: f64,
 ) -> Alignment {
@@ -146,22 +183,10 @@ pub fn count_alignment<T: Pixel>(
     let rho2 = (rho * rho) as f32;
     let sign = f64::from(polarity.signum());
     let mut out = Alignment { n: 0, k: 0 };
-    if w < 3 || h < 3 || !(length > 0.0) {
-        return out;
-    }
-    let mut last: Option<(i64, i64)> = None;
-    for (p, normal) in arc_pixels(ellipse, start, length) {
+    for (px, py, normal) in distinct_pixels(ellipse, extent, w, h) {
         let e = normal * sign;
-        let (px, py) = (p.x.round() as i64, p.y.round() as i64);
-        if last == Some((px, py)) {
-            continue;
-        }
-        last = Some((px, py));
-        if px < 1 || py < 1 || px >= w as i64 - 1 || py >= h as i64 - 1 {
-            continue;
-        }
         out.n += 1;
-        let (gx, gy) = sobel_at(data, w, px as usize, py as usize);
+        let (gx, gy) = sobel_at(data, w, px, py);
         let m2 = gx * gx + gy * gy;
         if m2 < rho2 || m2 == 0.0 {
             continue;

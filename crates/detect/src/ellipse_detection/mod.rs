@@ -318,12 +318,15 @@ fn detect_on_pool<T: Pixel>(
 
 /// Sorts by decreasing score (ties by centre, so the order is deterministic).
 pub(crate) fn sort_by_score(found: &mut [EllipseDetection]) {
-    found.sort_by(|p, q| {
-        q.score
-            .total_cmp(&p.score)
-            .then(p.ellipse.cx.total_cmp(&q.ellipse.cx))
-            .then(p.ellipse.cy.total_cmp(&q.ellipse.cy))
-    });
+    found.sort_by(by_score);
+}
+
+/// The order of [`sort_by_score`].
+pub(crate) fn by_score(p: &EllipseDetection, q: &EllipseDetection) -> std::cmp::Ordering {
+    q.score
+        .total_cmp(&p.score)
+        .then(p.ellipse.cx.total_cmp(&q.ellipse.cx))
+        .then(p.ellipse.cy.total_cmp(&q.ellipse.cy))
 }
 
 /// Two segments of one ellipse that Algorithm 2 left apart (their union failed the overlap
@@ -410,10 +413,9 @@ fn score_of<T: Pixel>(
     log_nt: f64,
     rho: f64,
 ) -> Option<f64> {
-    let ts: Vec<f64> = points.iter().map(|p| e.parameter_of(p)).collect();
-    let extent = a_contrario::covered_extent(&ts);
-    let al = a_contrario::count_alignment(image, e, extent, polarity, rho);
-    (al.n > 0).then(|| a_contrario::score(al.n, al.k, a_contrario::ALIGNMENT_PROBABILITY, log_nt))
+    a_contrario::score_support(e, points, log_nt, |extent| {
+        a_contrario::count_alignment(image, e, extent, polarity, rho)
+    })
 }
 
 /// The a-contrario test of one segment: its detection with the score, or `None` when the

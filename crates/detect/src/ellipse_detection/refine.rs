@@ -87,6 +87,21 @@ fn union(a: &[Vector2<f64>], b: &[Vector2<f64>]) -> Vec<Vector2<f64>> {
     all
 }
 
+/// Median Sampson distance of (about 32 of) `pts` to `e`; infinite for no points.
+pub(crate) fn median_distance(e: &Ellipse, pts: &[Vector2<f64>]) -> f64 {
+    let mut d: Vec<f64> = pts
+        .iter()
+        .step_by((pts.len() / 32).max(1))
+        .map(|p| e.sampson_distance(p))
+        .collect();
+    let mid = d.len() / 2;
+    if d.is_empty() {
+        return f64::INFINITY;
+    }
+    d.select_nth_unstable_by(mid, f64::total_cmp);
+    d[mid]
+}
+
 /// Step 1: merges detections of one polarity whose joint support fits one ellipse with a mean
 /// residual at most `threshold`. `found` is sorted by decreasing score; a merged detection
 /// takes the place of the higher-scored one. Returns the detections and whether each was
@@ -109,16 +124,7 @@ pub(crate) fn merge_split(
                 }
                 let (ei, ej) = (found[i].ellipse, found[j].ellipse);
                 // Cheap gate: the two ellipses must be close where the other's points are.
-                let gate = |e: &Ellipse, pts: &[Vector2<f64>]| {
-                    let mut d: Vec<f64> = pts
-                        .iter()
-                        .step_by((pts.len() / 32).max(1))
-                        .map(|p| e.sampson_distance(p))
-                        .collect();
-                    let mid = d.len() / 2;
-                    d.select_nth_unstable_by(mid, f64::total_cmp);
-                    d.get(mid).copied().unwrap_or(f64::INFINITY)
-                };
+                let gate = median_distance;
                 if found[j].points.is_empty()
                     || found[i].points.is_empty()
                     || !(gate(&ei, &found[j].points).min(gate(&ej, &found[i].points))

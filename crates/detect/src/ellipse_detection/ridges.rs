@@ -322,29 +322,17 @@ impl RidgeField {
     pub fn count_alignment(
         &self,
         ellipse: &Ellipse,
-        (start, length): (f64, f64),
+        extent: (f64, f64),
         sign: f32,
         rho: f64,
     ) -> Alignment {
-        let (w, h) = (self.width, self.height);
         let cos_tol = (PI / 8.0).cos() as f32;
         let mut out = Alignment { n: 0, k: 0 };
-        if w < 3 || h < 3 || !(length > 0.0) {
-            return out;
-        }
-        let mut last: Option<(i64, i64)> = None;
-        for (p, normal) in a_contrario::arc_pixels(ellipse, start, length) {
-            let (px, py) = (p.x.round() as i64, p.y.round() as i64);
-            if last == Some((px, py)) {
-                continue;
-            }
-            last = Some((px, py));
-            if px < 1 || py < 1 || px >= w as i64 - 1 || py >= h as i64 - 1 {
-                continue;
-            }
+        for (px, py, normal) in
+            a_contrario::distinct_pixels(ellipse, extent, self.width, self.height)
+        {
             out.n += 1;
-            let k = py as usize * w + px as usize;
-            if let Some((n, _, _)) = self.normal(k, sign, rho as f32) {
+            if let Some((n, _, _)) = self.normal(py * self.width + px, sign, rho as f32) {
                 let dot = n.x * normal.x as f32 + n.y * normal.y as f32;
                 if dot.abs() >= cos_tol {
                     out.k += 1;
@@ -363,11 +351,9 @@ impl RidgeField {
         log_nt: f64,
         rho: f64,
     ) -> Option<f64> {
-        let ts: Vec<f64> = points.iter().map(|p| e.parameter_of(p)).collect();
-        let extent = a_contrario::covered_extent(&ts);
-        let al = self.count_alignment(e, extent, sign, rho);
-        (al.n > 0)
-            .then(|| a_contrario::score(al.n, al.k, a_contrario::ALIGNMENT_PROBABILITY, log_nt))
+        a_contrario::score_support(e, points, log_nt, |extent| {
+            self.count_alignment(e, extent, sign, rho)
+        })
     }
 }
 
@@ -538,11 +524,6 @@ pub fn detect_signed_lines<T: Pixel>(
             (d.ellipse.b >= params.min_semi_minor).then_some((d, brightness))
         }));
     }
-    found.sort_by(|p, q| {
-        q.0.score
-            .total_cmp(&p.0.score)
-            .then(p.0.ellipse.cx.total_cmp(&q.0.ellipse.cx))
-            .then(p.0.ellipse.cy.total_cmp(&q.0.ellipse.cy))
-    });
+    found.sort_by(|p, q| super::by_score(&p.0, &q.0));
     Ok(found)
 }
