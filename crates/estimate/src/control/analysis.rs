@@ -193,6 +193,89 @@ fn bisect(f: &dyn Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
     (a * b).sqrt()
 }
 
+/// The analysis grid of a loop: `grid` (increasing, rad/s) extended, at its own density in
+/// points per decade, down to two decades below the smallest and up to two decades above the
+/// largest nonzero pole or zero magnitude in `features`, and then by whole decades while the
+/// loop's asymptote still has to cross `|L| = 1` there.
+///
+/// Why: a crossover outside the user's grid is still a crossover. Beyond two decades from every
+/// finite feature `L(jω) ≈ K (jω)^(−n)` is monotone in magnitude with constant phase, so at most
+/// one more gain crossover lies out there, and it exists exactly when `|L|` at the grid's end
+/// and the asymptote (`∞` for `n > 0`, `0` for `n < 0`) lie on opposite sides of 1. Without
+/// this a loop whose crossover lies below the grid was reported with phase margin `∞`.
+pub fn loop_grid(
+    grid: &[f64],
+    features: impl IntoIterator<Item = f64>,
+    l: &dyn Fn(f64) -> C64,
+) -> Vec<f64> {
+    let (Some(&first), Some(&last)) = (grid.first(), grid.last()) else {
+        return Vec::new();
+    };
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for m in features {
+        if m > 0.0 && m.is_finite() {
+            lo = lo.min(m);
+            hi = hi.max(m);
+        }
+    }
+    let per_decade = if grid.len() > 1 && last > first {
+        ((grid.len() - 1) as f64 / (last / first).log10()).clamp(5.0, 200.0)
+    } else {
+        20.0
+    };
+    let span = |a: f64, b: f64| -> Vec<f64> {
+        // Log-spaced points strictly between `a` and `b` (a < b) at `per_decade`.
+        let n = ((b / a).log10() * per_decade).ceil() as usize;
+        (1..n)
+            .map(|i| a * (b / a).powf(i as f64 / n as f64))
+            .collect()
+    };
+    let mut below = Vec::new();
+    let mut bottom = first;
+    if lo.is_finite() && lo / 100.0 < first {
+        bottom = lo / 100.0;
+        below.push(bottom);
+        below.extend(span(bottom, first));
+    }
+    let mut above = Vec::new();
+    let mut top = last;
+    if hi > 0.0 && hi * 100.0 > last {
+        top = hi * 100.0;
+        above.extend(span(last, top));
+        above.push(top);
+    }
+    // The asymptotic regions: extend by decades while |L| keeps approaching 1 monotonically
+    // (at most 30 decades: |L| changes by ≥ 20 dB per decade there).
+    let slope = |a: f64, b: f64| l(b).norm().ln() - l(a).norm().ln();
+    let mut ext_lo = Vec::new();
+    let falling_to_zero = slope(bottom / 10.0, bottom) < 0.0; // |L| grows as ω → 0
+    for _ in 0..30 {
+        let m = l(bottom).norm();
+        if !(m.is_finite() && m < 1.0 && falling_to_zero) {
+            break;
+        }
+        bottom /= 10.0;
+        ext_lo.push(bottom);
+    }
+    let mut ext_hi = Vec::new();
+    let falling_to_inf = slope(top, top * 10.0) < 0.0;
+    for _ in 0..30 {
+        let m = l(top).norm();
+        if !(m.is_finite() && m > 1.0 && falling_to_inf) {
+            break;
+        }
+        top *= 10.0;
+        ext_hi.push(top);
+    }
+    ext_lo.reverse();
+    let mut out = ext_lo;
+    out.extend(below);
+    out.extend_from_slice(grid);
+    out.extend(above);
+    out.extend(ext_hi);
+    out
+}
+
 /// Crossovers of the loop `l(ω)` on `grid`, see [`Crossovers`].
 pub fn crossovers(l: &dyn Fn(f64) -> C64, grid: &[f64]) -> Crossovers {
     let vals: Vec<C64> = grid.iter().map(|&w| l(w)).collect();
@@ -381,6 +464,29 @@ mod tests {
         assert!((wc * (1.0 + wc * wc) - k).abs() < 1e-10);
         let pm = 180.0 - 90.0 - 2.0 * wc.atan().to_degrees();
         assert!((m.phase_margin_deg - pm).abs() < 1e-9);
+    }
+
+    #[test]
+    fn crossover_below_the_grid_is_found_by_the_loop_grid() {
+        // L = k / (s (s/100 + 1)) crosses 1 at ω ≈ k = 0.005 rad/s, far below the grid [1, 1e3];
+        // closed form: ω √(1 + (ω/100)²) = k, PM = 90° − atan(ω/100).
+        let k = 0.005;
+        let l = TransferFunction::new(&[k], &[0.01, 1.0, 0.0]).unwrap();
+        let grid: Vec<f64> = (0..=60).map(|i| 10f64.powf(i as f64 / 20.0)).collect();
+        let f = |w: f64| l.freq_resp(w);
+        assert!(crossovers(&f, &grid).gain.is_empty());
+        let ext = loop_grid(&grid, l.poles().iter().map(|p| p.norm()), &f);
+        assert!(ext.windows(2).all(|w| w[0] < w[1]));
+        let cr = crossovers(&f, &ext);
+        assert_eq!(cr.gain.len(), 1, "{cr:?}");
+        let (wc, pm) = cr.gain[0];
+        assert!(
+            (wc * (1.0 + (wc / 100.0).powi(2)).sqrt() - k).abs() < 1e-12,
+            "{wc}"
+        );
+        assert!((pm - (90.0 - (wc / 100.0).atan().to_degrees())).abs() < 1e-9);
+        let m = margins(&l);
+        assert!((m.w_gain_crossover - wc).abs() < 1e-9 * wc);
     }
 
     #[test]

@@ -8,12 +8,31 @@
 //!    a tenth of the crossover, the textbook lead/lag placement for a double integrator), and
 //!    `K` set so that `|L(jω_c)| = 1` on the plant of largest gain at `ω_c`;
 //! 3. low-pass `ω_f² / (s² + 1.4 ω_f s + ω_f²)` at `ω_f = 5 ω_c`;
-//! 4. while any plant misses a margin, damping or frequency-bound constraint of the spec, lower
-//!    `ω_c` by 10 % (at most 60 times).
+//! 4. while any plant misses a margin or frequency-bound constraint of the spec, or the loop is
+//!    unstable, lower `ω_c` by 10 % (at most 60 times).
+//!
+//! Detuning does not chase the damping constraint: as the loop gain falls, the closed-loop poles
+//! move to the plant's own poles, so no crossover raises the damping of a resonance above the
+//! plant's own (ζ = 0.078 for the simulated JT2's 177 rad/s mode, 0.060 for JT4's). A rule that
+//! detuned for it never stopped and pushed the crossover below the analysis grid. The baseline's
+//! damping is reported, and named among its unmet constraints when it is below the spec.
 
 use super::structure::{ControllerStructure, Section};
 use super::tf::TransferFunction;
-use super::tune::{TuneReport, TuneSpec, evaluate, resonances};
+use super::tune::{TuneReport, TuneSpec, evaluate, first_resonance};
+
+/// The checks an engineer detunes for (rule step 4): stability, both margins at every crossover,
+/// and the open-loop gain bounds, on every plant.
+fn classical_checks_hold(report: &TuneReport, spec: &TuneSpec) -> bool {
+    let tol = 1e-6;
+    report.plants.iter().all(|r| {
+        r.damping_all > 0.0
+            && r.worst_gain_margin_db >= spec.min_gain_margin_db * (1.0 - tol)
+            && r.worst_phase_margin_deg >= spec.min_phase_margin_deg * (1.0 - tol)
+            && r.band_gain_ratio <= 1.0 + tol
+            && r.rolloff_ratio <= 1.0 + tol
+    })
+}
 use crate::Result;
 
 /// Parameters of the rule at crossover `wc`.
@@ -46,14 +65,11 @@ pub fn classical_design(
     spec: &TuneSpec,
 ) -> Result<(ControllerStructure, TuneReport)> {
     let st = ControllerStructure::new(vec![Section::LowPass]);
-    let wr = resonances(plants, &spec.grid, 1)
-        .first()
-        .copied()
-        .unwrap_or(spec.target.0 * 3.0);
+    let wr = first_resonance(plants, &spec.grid).unwrap_or(spec.target.0 * 3.0);
     let mut wc = wr / 3.0;
     let mut report = evaluate(plants, &st, &rule(&st, plants, wc), spec)?;
     for _ in 0..60 {
-        if report.success {
+        if classical_checks_hold(&report, spec) {
             break;
         }
         wc *= 0.9;

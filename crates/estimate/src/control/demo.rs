@@ -15,7 +15,7 @@ use super::plant::{
 use super::poly::C64;
 use super::structure::{ControllerStructure, Section};
 use super::tf::TransferFunction;
-use super::tune::{TuneReport, TuneSpec, evaluate, resonances, tune};
+use super::tune::{TuneReport, TuneSpec, evaluate, first_resonance, tune};
 use crate::Result;
 
 /// Everything about one joint.
@@ -94,10 +94,7 @@ pub fn run_joint(joint: Joint, noise: f64, seed: u64, sections: Vec<Section>) ->
     let fitted: Vec<TransferFunction> = fits.iter().map(|f| f.model.clone()).collect();
     let truth: Vec<TransferFunction> = plants.iter().map(|p| p.motor.clone()).collect();
     let grid = log_grid_hz(0.5, 500.0, 400);
-    let wr = resonances(&fitted, &grid, 1)
-        .first()
-        .copied()
-        .unwrap_or(grid[grid.len() / 2]);
+    let wr = first_resonance(&fitted, &grid).unwrap_or(grid[grid.len() / 2]);
     // The baseline's rule does not depend on the spec's objective; its constraints are the same.
     let pre = demo_spec(grid.clone(), wr, wr / 6.0);
     let (bst, b_fit) = classical_design(&fitted, &pre)?;
@@ -106,6 +103,12 @@ pub fn run_joint(joint: Joint, noise: f64, seed: u64, sections: Vec<Section>) ->
         .iter()
         .map(|r| r.crossover)
         .fold(f64::INFINITY, f64::min);
+    if !wc0.is_finite() {
+        return Err(crate::EstimateError::InvalidModel {
+            what: format!("{joint:?} baseline"),
+            reason: "the classical design has no gain crossover on any plant".into(),
+        });
+    }
     let spec = demo_spec(grid, wr, wc0);
     let baseline_report = evaluate(&truth, &bst, &b_fit.theta, &spec)?;
     let st = ControllerStructure::new(sections);

@@ -72,10 +72,22 @@ pub fn link_response(
     r: &[f64],
     dt: f64,
 ) -> Result<[Vec<f64>; 3]> {
-    // P_m and P_l over a common denominator.
-    let den_p = poly::mul(motor.den(), link.den());
-    let num_m = poly::mul(motor.num(), link.den());
-    let num_l = poly::mul(link.num(), motor.den());
+    // P_m and P_l over a common denominator: the plants' own when they share it (the two-mass
+    // model's do, integrator included; multiplying the two would put a spurious closed-loop pole
+    // at every shared root, the origin among them), else the product.
+    let (den_p, num_m, num_l) = if motor.den() == link.den() {
+        (
+            motor.den().to_vec(),
+            motor.num().to_vec(),
+            link.num().to_vec(),
+        )
+    } else {
+        (
+            poly::mul(motor.den(), link.den()),
+            poly::mul(motor.num(), link.den()),
+            poly::mul(link.num(), motor.den()),
+        )
+    };
     let char_poly = poly::add(
         &poly::mul(controller.den(), &den_p),
         &poly::mul(controller.num(), &num_m),
@@ -150,6 +162,26 @@ mod tests {
         for k in 1..4000 {
             assert!(((x[k + 1] - x[k - 1]) / (2.0 * dt) - v[k]).abs() < 1e-5);
             assert!(((v[k + 1] - v[k - 1]) / (2.0 * dt) - a[k]).abs() < 1e-3);
+        }
+    }
+
+    #[test]
+    fn shared_integrator_closes_to_the_second_order_step() {
+        // P_m = P_l = 1/(s (s+1)) share their denominator (integrator included), C = 4:
+        // T = 4/(s² + s + 4), ω_n = 2, ζ = 0.25; a unit step is exact under ZOH at the samples.
+        let p = TransferFunction::new(&[1.0], &[1.0, 1.0, 0.0]).unwrap();
+        let c = TransferFunction::new(&[4.0], &[1.0]).unwrap();
+        let dt = 1e-3;
+        let r = vec![1.0; 5000];
+        let [y, _, _] = link_response(&p, &p, &c, &r, dt).unwrap();
+        let (wn, z) = (2.0f64, 0.25f64);
+        let wd = wn * (1.0 - z * z).sqrt();
+        for (k, yk) in y.iter().enumerate().step_by(97) {
+            let t = k as f64 * dt;
+            let e = 1.0
+                - (-z * wn * t).exp()
+                    * ((wd * t).cos() + z / (1.0 - z * z).sqrt() * (wd * t).sin());
+            assert!((yk - e).abs() < 1e-9, "t = {t}: {yk} vs {e}");
         }
     }
 

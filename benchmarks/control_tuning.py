@@ -1,6 +1,6 @@
 """Joint controller tuning (issue 31): Tables 2.3/2.4 on simulation, tuning time beside python-control's mixsyn.
 
-Run: ``RAYON_NUM_THREADS=1 PYTHONPATH=python /work/venv/bin/python benchmarks/control.py``.
+Run: ``RAYON_NUM_THREADS=1 PYTHONPATH=python /work/venv/bin/python benchmarks/control_tuning.py``.
 
 1. Table 2.3 / 2.4: ``autoteach.control.demo`` (JT2 and JT4, six poses each, 1 % sweep noise, fitted models)
    compares the classical baseline (2nd-order low-pass + PID by a rigid-body rule, detuned to the margins)
