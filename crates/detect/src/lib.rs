@@ -35,8 +35,10 @@ pub mod cpd;
 pub mod edges;
 pub mod ellipse;
 pub mod error;
+pub mod fusion;
 pub mod polygon;
 pub mod track;
+pub mod uncertainty;
 pub mod voting;
 pub mod wafers;
 
