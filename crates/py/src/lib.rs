@@ -12,7 +12,6 @@ pub mod convert;
 mod detect;
 pub mod errors;
 mod estimate;
-mod fusion;
 mod geometry;
 mod handeye;
 mod lsq;
@@ -20,7 +19,6 @@ mod polygon;
 mod registration;
 mod sim;
 mod track;
-mod uncertainty;
 mod wafers;
 
 /// The compiled module `autoteach._core`.
@@ -39,8 +37,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
-    uncertainty::register(m)?;
-    fusion::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -30,6 +30,9 @@
 //! # Ok::<(), autoteach_detect::DetectError>(())
 //! ```
 
+// Small fixed-size linear algebra indexes several arrays at once; ranges read clearest.
+#![allow(clippy::needless_range_loop)]
+
 pub mod label;
 pub mod noise;
 #[cfg(test)]
