@@ -7,9 +7,4 @@ sub-parsers ``sub`` (with ``parents=[common]`` for ``--json``/``--quiet``) and s
 
 from __future__ import annotations
 
-MODULES = (
-    "autoteach.commands.run",
-    "autoteach.commands.calibrate",
-    "autoteach.commands.active",
-    "autoteach.commands.uncertainty",
-)
+MODULES = ("autoteach.commands.run", "autoteach.commands.calibrate", "autoteach.commands.active")
