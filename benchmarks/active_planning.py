@@ -38,7 +38,7 @@ def numpy_gain(state: active.ActiveState, q: np.ndarray) -> float:
 def fresh_state() -> active.ActiveState:
     """The nominal state after one noise-free measurement at the reduced planner's first pose."""
     state = active.ActiveState()
-    q0 = active.plan_next_pose(state).joints
+    q0 = active.plan_next_pose(state).best.joints
     state.update(q0, state.project(q0))
     return state
 
@@ -61,10 +61,11 @@ def main() -> None:
     state = fresh_state()
     rows = []
     t, plan = timed(lambda: active.plan_next_pose(state), args.repeats)
-    rows.append(("autoteach reduced search", t, plan.score, numpy_gain(state, plan.joints), plan.evaluated))
+    rows.append(("autoteach reduced search", t, plan.best.score, numpy_gain(state, plan.best.joints), plan.evaluated))
     for n in (2000, 20000):
         t, plan = timed(lambda n=n: active.plan_next_pose(state, method="sampling", samples=n, seed=1), args.repeats)
-        rows.append((f"autoteach sampling {n}", t, plan.score, numpy_gain(state, plan.joints), plan.evaluated))
+        gain = numpy_gain(state, plan.best.joints)
+        rows.append((f"autoteach sampling {n}", t, plan.best.score, gain, plan.evaluated))
 
     evals = 0
 
@@ -73,7 +74,7 @@ def main() -> None:
         evals += 1
         q = np.array([x[0], x[1], x[2], x[2], x[3]])
         try:
-            return -active.plan_next_pose(state, candidates=q[None, :]).score
+            return -active.plan_next_pose(state, candidates=q[None, :]).best.score
         except UnreachablePoseError:
             return 0.0
 
@@ -92,13 +93,13 @@ def main() -> None:
 
     print(f"\nclosed loop, {args.trials} trials x 12 steps (seed 0): final error std [mm] / planning time")
     runs = {mode: active.run_trials(args.trials, 0, mode) for mode in ("reduced", "sampling", "baseline")}
-    names = runs["reduced"]["estimated"]
+    names = runs["reduced"].estimated
     idx = [active.PARAM_NAMES.index(n) for n in names]
     print(f"{'quantity':<16}" + "".join(f"{m:>12}" for m in runs))
     for n, i in zip(names, idx, strict=True):
-        print(f"{n:<16}" + "".join(f"{np.std(r['errors'][:, -1, i]):>12.4f}" for r in runs.values()))
+        print(f"{n:<16}" + "".join(f"{np.std(r.errors[:, -1, i]):>12.4f}" for r in runs.values()))
     for mode, r in runs.items():
-        ms = r["plan_times"].ravel() * 1e3
+        ms = r.plan_times.ravel() * 1e3
         print(f"planning time {mode:<9}: median {np.median(ms):.2f} ms, max {np.max(ms):.2f} ms")
 
 

@@ -170,8 +170,8 @@ def main() -> None:
     t_at = statistics.median(times)
     s = res.summary
     print(
-        f"autoteach: median {t_at * 1e3:.1f} ms over {args.repeat} runs (solver {s['time_s'] * 1e3:.1f} ms), "
-        f"cost {res.final_cost:.10f}, {s['iterations']} iterations, {s['linear_solver']}, {s['termination']}"
+        f"autoteach: median {t_at * 1e3:.1f} ms over {args.repeat} runs (solver {s.time_s * 1e3:.1f} ms), "
+        f"cost {res.final_cost:.10f}, {s.iterations} iterations, {s.linear_solver}, {s.termination}"
     )
     if not args.no_scipy:
         runs = [run_scipy(K, obs, pose_idx, point_idx, init_poses, init_points) for _ in range(args.scipy_repeat)]

@@ -106,7 +106,7 @@ def main() -> None:
             except AutoteachError:
                 hyps = []
             times[name].append(time.perf_counter() - t0)
-            ok = bool(hyps) and rms(hyps[0].transformed, truth) < 0.02 * SIZE
+            ok = bool(hyps) and rms(hyps[0].cpd.transformed, truth) < 0.02 * SIZE
             # Global-CPD ignores the initial pose: the same outcome counts for both cases.
             success[("rot90", name)] += ok
             success[("shift", name)] += ok

@@ -62,10 +62,10 @@ def main() -> None:
     )
     for n in (args.base, 10 * args.base, 100 * args.base):
         s = build(n).solve()
-        per = s["time_s"] / n / max(s["iterations"], 1) * 1e6
+        per = s.time_s / n / max(s.iterations, 1) * 1e6
         print(
-            f"{n:>8} {s['num_parameters']:>9} {s['num_residuals']:>9} {s['iterations']:>5} "
-            f"{s['linear_solver']:>15} {s['time_s']:>8.3f} {per:>12.2f}  ({s['termination']})"
+            f"{n:>8} {s.num_parameters:>9} {s.num_residuals:>9} {s.iterations:>5} "
+            f"{s.linear_solver:>15} {s.time_s:>8.3f} {per:>12.2f}  ({s.termination})"
         )
 
 

@@ -49,8 +49,8 @@ def evaluate(session: Any, detections: list[list[Any]], **params: Any) -> dict[s
         t0 = time.perf_counter()
         tracker.update(edges, session.camera_poses[f])
         times.append(time.perf_counter() - t0)
-        for k, v in tracker.last_timings.items():
-            stages[k].append(v)
+        for k in stages:
+            stages[k].append(getattr(tracker.last_timings, k))
     tracks = tracker.all_tracks()
     frames = sequence_frames(detections, tracks)
     slots = session.wafer_slots

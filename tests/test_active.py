@@ -46,20 +46,20 @@ def test_indices_match_numpy_svd(power: float) -> None:
         got = active.observability_indices(m, power=power)
         want = _numpy_indices(m, power)
         for k, v in want.items():
-            assert got[k] == pytest.approx(v, rel=1e-9), k
-        assert got["log_det"] == pytest.approx(np.linalg.slogdet(m)[1], rel=1e-10)
-        assert got["power"] == power
+            assert getattr(got, k.lower()) == pytest.approx(v, rel=1e-9), k
+        assert got.log_det == pytest.approx(np.linalg.slogdet(m)[1], rel=1e-10)
+        assert got.power == power
 
 
 def test_indices_closed_form_and_singular_limits() -> None:
     o = active.observability_indices(np.diag([16.0, 4.0, 1.0]), power=2.0)
-    assert o["O1"] == pytest.approx(4.0)
-    assert (o["O2"], o["O3"], o["O4"]) == pytest.approx((1 / 16, 1.0, 1 / 16))
-    assert o["O5"] == pytest.approx(1 / (1 / 16 + 1 / 4 + 1))
-    assert o["O6"] == pytest.approx(1 / (1 / 256 + 1 / 16 + 1))
+    assert o.o1 == pytest.approx(4.0)
+    assert (o.o2, o.o3, o.o4) == pytest.approx((1 / 16, 1.0, 1 / 16))
+    assert o.o5 == pytest.approx(1 / (1 / 16 + 1 / 4 + 1))
+    assert o.o6 == pytest.approx(1 / (1 / 256 + 1 / 16 + 1))
     z = active.observability_indices(np.diag([3.0, 0.0]))
-    assert z["O1"] == z["O3"] == z["O5"] == z["O6"] == 0.0
-    assert z["log_det"] == -math.inf
+    assert z.o1 == z.o3 == z.o5 == z.o6 == 0.0
+    assert z.log_det == -math.inf
 
 
 def test_fisher_information_is_eq_6_6() -> None:
@@ -87,10 +87,10 @@ def test_d_optimal_quadratic_design_and_equivalence_theorem() -> None:
     f = _poly(xs, 2)
     d = active.d_optimal_design(f, tol=1e-7)
     # Kiefer–Wolfowitz: max_x f(x)ᵀ M⁻¹ f(x) = p = 3 at the optimum.
-    assert d["max_variance"] == pytest.approx(3.0, rel=1e-6)
+    assert d.max_variance == pytest.approx(3.0, rel=1e-6)
     support = np.isclose(np.abs(xs), 1.0) | np.isclose(xs, 0.0)
-    np.testing.assert_allclose(d["weights"][support], 1 / 3, atol=1e-3)
-    assert np.all(d["weights"][~support] < 1e-3)
+    np.testing.assert_allclose(d.weights[support], 1 / 3, atol=1e-3)
+    assert np.all(d.weights[~support] < 1e-3)
     # The exact optimum satisfies φ ≥ 0 everywhere and φ = 0 on its support (Theorem 6.2.1).
     exact = np.where(support, 1 / 3, 0.0)
     phi = active.directional_derivatives(f, exact)
@@ -108,8 +108,8 @@ def test_d_optimal_cubic_design_closed_form() -> None:
     xs = np.unique(np.concatenate([np.linspace(-1, 1, 21), [-r, r]]))
     d = active.d_optimal_design(_poly(xs, 3), tol=1e-7)
     for x0 in (-1.0, -r, r, 1.0):
-        assert d["weights"][np.argmin(np.abs(xs - x0))] == pytest.approx(0.25, abs=2e-3)
-    assert d["max_variance"] == pytest.approx(4.0, rel=1e-6)
+        assert d.weights[np.argmin(np.abs(xs - x0))] == pytest.approx(0.25, abs=2e-3)
+    assert d.max_variance == pytest.approx(4.0, rel=1e-6)
 
 
 def test_detmax_matches_brute_force() -> None:
@@ -122,8 +122,8 @@ def test_detmax_matches_brute_force() -> None:
             np.linalg.slogdet(prior + sum(f[i].T @ f[i] for i in sel))[1]
             for sel in itertools.combinations(range(10), 3)
         )
-        assert r["log_det"] == pytest.approx(best, rel=1e-9)
-        assert len(r["selected"]) == 3
+        assert r.log_det == pytest.approx(best, rel=1e-9)
+        assert len(r.selected) == 3
 
 
 def test_design_bad_inputs() -> None:
@@ -149,7 +149,7 @@ def test_design_bad_inputs() -> None:
 def _start() -> tuple[active.ActiveState, np.ndarray]:
     state = active.ActiveState()
     plan = active.plan_next_pose(state)
-    return state, plan.joints
+    return state, plan.best.joints
 
 
 def test_update_follows_the_information_recursion() -> None:
@@ -158,7 +158,7 @@ def test_update_follows_the_information_recursion() -> None:
     px = state.project(q)
     rng = np.random.default_rng(SEED + 3)
     summary = state.update(q, px + rng.normal(0.0, 0.5, px.shape))
-    assert summary["used"] == 4
+    assert summary.used == 4
     c = state.jacobian(q)  # at the updated estimate
     sigma = 0.5  # the default pixel noise
     np.testing.assert_allclose(state.information, info0 + c.T @ c / sigma**2, rtol=1e-9, atol=1e-6)
@@ -167,28 +167,28 @@ def test_update_follows_the_information_recursion() -> None:
     # Undetected corners (NaN rows) are skipped.
     px2 = state.project(q)
     px2[:2] = np.nan
-    assert state.update(q, px2)["used"] == 2
+    assert state.update(q, px2).used == 2
 
 
 def test_planned_pose_is_feasible_and_its_gain_is_the_log_det_ratio() -> None:
     state, _ = _start()
     plan = active.plan_next_pose(state, criterion="D")
-    px = state.project(plan.joints)
+    px = state.project(plan.best.joints)
     assert np.all(np.isfinite(px))
     assert np.all(px >= 20.0) and np.all(px[:, 0] <= 1279 - 20.0) and np.all(px[:, 1] <= 959 - 20.0)
     size = max(np.ptp(px[:, 0]), np.ptp(px[:, 1]))
     assert 300.0 <= size <= 2000.0
-    f = state.jacobian(plan.joints) / 0.5
+    f = state.jacobian(plan.best.joints) / 0.5
     p = state.covariance
     want = np.linalg.slogdet(np.eye(f.shape[0]) + f @ p @ f.T)[1]
-    assert plan.score == pytest.approx(want, rel=1e-8)
+    assert plan.best.score == pytest.approx(want, rel=1e-8)
     assert plan.evaluated > 100
 
 
 def test_candidate_selection_picks_the_best_feasible_candidate() -> None:
     state, _ = _start()
-    reduced = active.plan_next_pose(state).joints
-    sampled = active.plan_next_pose(state, method="sampling", samples=300, seed=3).joints
+    reduced = active.plan_next_pose(state).best.joints
+    sampled = active.plan_next_pose(state, method="sampling", samples=300, seed=3).best.joints
     far = reduced.copy()
     far[4] = 5.0  # lift out of range: infeasible
     cands = np.stack([sampled, reduced, far])
@@ -198,12 +198,12 @@ def test_candidate_selection_picks_the_best_feasible_candidate() -> None:
     for q in (sampled, reduced):
         f = state.jacobian(q) / 0.5
         scores.append(np.linalg.slogdet(np.eye(f.shape[0]) + f @ p @ f.T)[1])
-    np.testing.assert_allclose(plan.joints, cands[int(np.argmax(scores))])
-    assert plan.rejections["lift"] + plan.rejections["visibility"] == 1
+    np.testing.assert_allclose(plan.best.joints, cands[int(np.argmax(scores))])
+    assert plan.rejections.lift + plan.rejections.visibility == 1
     # A and E criteria score the same candidates differently but still pick a feasible one.
     for crit in ("A", "E"):
         other = active.plan_next_pose(state, candidates=cands, criterion=crit)
-        assert any(np.array_equal(other.joints, c) for c in cands[:2])
+        assert any(np.array_equal(other.best.joints, c) for c in cands[:2])
 
 
 def test_planner_bad_inputs_name_the_binding_constraint() -> None:
@@ -238,10 +238,10 @@ def test_planner_bad_inputs_name_the_binding_constraint() -> None:
 def test_closed_loop_is_deterministic() -> None:
     a = active.run_trials(2, seed=5, mode="reduced", steps=4)
     b = active.run_trials(2, seed=5, mode="reduced", steps=4)
-    np.testing.assert_array_equal(a["errors"], b["errors"])
+    np.testing.assert_array_equal(a.errors, b.errors)
     c = active.run_trials(2, seed=5, mode="baseline", steps=4)
     # Same truth and start pose: identical first step.
-    np.testing.assert_array_equal(a["errors"][:, 0], c["errors"][:, 0])
+    np.testing.assert_array_equal(a.errors[:, 0], c.errors[:, 0])
     with pytest.raises(InvalidInputError):
         active.run_trials(1, mode="nope")
 

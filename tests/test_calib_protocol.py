@@ -185,7 +185,7 @@ def test_grid_margin_reaches_the_corners_and_is_validated():
     assert at in {(0.0, 0.0), (w - 1.0, 0.0), (0.0, h - 1.0), (w - 1.0, h - 1.0)}  # worst at a corner
     inner, at_inner = cal.compute_max_ere(grid_margin=0.1)
     assert inner < ere and 0.1 * (w - 1) - 1e-9 <= at_inner[0] <= 0.9 * (w - 1) + 1e-9
-    assert cal.max_ere_stats(grid_margin=0.1)["max_ere"] == pytest.approx(inner, rel=1e-12)
+    assert cal.max_ere_stats(grid_margin=0.1).value == pytest.approx(inner, rel=1e-12)
     s = suggest_next_view(cal, target=make_target(), samples=30, grid_margin=0.1)
     assert math.isfinite(s.expected_max_ere)
     for bad in (-0.1, 0.5, math.nan):

@@ -46,6 +46,20 @@ def test_demo_prints_json(tmp_path, capsys):
     assert json.loads((tmp_path / "session_seed3.json").read_text())["frames"] == 2
 
 
+def test_demo_no_log_writes_no_log_and_a_kept_log_reads_back_bit_exactly(tmp_path, capsys):
+    kept, skipped = tmp_path / "kept", tmp_path / "skipped"
+    args = ["demo", "--frames", "2", "--seed", "4", "--no-autoteach", "-q"]
+    assert main([*args, "--out", str(skipped), "--no-log"]) == 0
+    assert "log:" not in capsys.readouterr().out
+    assert not list(skipped.glob("*.mcap"))
+    assert main([*args, "--out", str(kept), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    again, direct = read_log(summary["log"]), simulate_session(seed=4, frames=2)
+    for name in ("images", "joints_encoder", "joints_true", "timestamps", "camera_poses", "wafer_poses"):
+        a, b = getattr(again, name), getattr(direct, name)
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), name
+
+
 def test_demo_prints_a_table(tmp_path, capsys):
     assert main(["demo", "--frames", "1", "--out", str(tmp_path), "--quiet"]) == 0
     text = capsys.readouterr().out
@@ -106,3 +120,29 @@ def test_module_entry_point(tmp_path):
     assert "autoteach: error: cannot read log" in proc.stderr and "Traceback" not in proc.stderr
     proc = subprocess.run([sys.executable, "-m", "autoteach", "--version"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and proc.stdout.startswith("autoteach ")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["simulate", "--frames", "99999999999999999999", "--out", "x.mcap"],
+        ["calibrate", "--simulate", "--seed", "-1"],
+        ["active", "--trials", "0"],
+    ],
+)
+def test_bad_arguments_give_one_line_and_status_2(argv, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "error:" in err
+    assert not any(len(token) > 40 for token in err.split())  # no 300-digit numbers echoed
+
+
+def test_a_file_that_is_not_npz_is_a_one_line_error(capsys, tmp_path):
+    bad = tmp_path / "views.npz"
+    bad.write_text("not an archive")
+    assert main(["calibrate", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a readable .npz" in err

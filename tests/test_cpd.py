@@ -32,12 +32,12 @@ def test_rigid_recovers_known_similarity(dim: int) -> None:
     t = rng.normal(size=dim)
     x = 0.8 * y @ r.T + t
     fit = cpd_rigid(x[rng.permutation(80)], y, tolerance=1e-10, max_iterations=300)
-    np.testing.assert_allclose(fit.R, r, atol=1e-7)
-    np.testing.assert_allclose(fit.t, t, atol=1e-7)
-    assert fit.s == pytest.approx(0.8, abs=1e-7)
+    np.testing.assert_allclose(fit.rotation, r, atol=1e-7)
+    np.testing.assert_allclose(fit.translation, t, atol=1e-7)
+    assert fit.scale == pytest.approx(0.8, abs=1e-7)
     np.testing.assert_allclose(fit.transformed, x, atol=1e-7)
-    assert fit.P is None
-    np.testing.assert_allclose(np.linalg.det(fit.R), 1.0)
+    assert fit.p is None
+    np.testing.assert_allclose(np.linalg.det(fit.rotation), 1.0)
 
 
 def test_rigid_without_scale_keeps_unit_scale() -> None:
@@ -45,8 +45,8 @@ def test_rigid_without_scale_keeps_unit_scale() -> None:
     y = rng.uniform(-1, 1, (60, 2))
     x = y @ rot2(-0.7).T + [0.3, 0.1]
     fit = cpd_rigid(x, y, scale=False, tolerance=1e-10)
-    assert fit.s == 1.0
-    np.testing.assert_allclose(fit.R, rot2(-0.7), atol=1e-7)
+    assert fit.scale == 1.0
+    np.testing.assert_allclose(fit.rotation, rot2(-0.7), atol=1e-7)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -57,8 +57,8 @@ def test_affine_recovers_known_map(dim: int) -> None:
     t = rng.normal(size=dim)
     x = y @ b.T + t
     fit = cpd_affine(x, y, tolerance=1e-12, max_iterations=500)
-    np.testing.assert_allclose(fit.B, b, atol=1e-6)
-    np.testing.assert_allclose(fit.t, t, atol=1e-6)
+    np.testing.assert_allclose(fit.matrix, b, atol=1e-6)
+    np.testing.assert_allclose(fit.translation, t, atol=1e-6)
 
 
 def _pair(n: int, m: int, dim: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -78,11 +78,11 @@ def test_rigid_matches_pycpd(dim: int) -> None:
         ty, (s, r, t) = ref.register()
         assert ours.iterations == ref.iteration
         np.testing.assert_allclose(ours.transformed, ty, atol=1e-9)
-        np.testing.assert_allclose(ours.R, r.T, atol=1e-9)  # pycpd stores Rᵀ (TY = s·Y·R + t)
-        np.testing.assert_allclose(ours.t, np.ravel(t), atol=1e-9)
-        assert ours.s == pytest.approx(s, abs=1e-10)
+        np.testing.assert_allclose(ours.rotation, r.T, atol=1e-9)  # pycpd stores Rᵀ (TY = s·Y·R + t)
+        np.testing.assert_allclose(ours.translation, np.ravel(t), atol=1e-9)
+        assert ours.scale == pytest.approx(s, abs=1e-10)
         assert ours.sigma2 == pytest.approx(ref.sigma2, rel=1e-8)
-        np.testing.assert_allclose(ours.P, ref.P, atol=1e-10)
+        np.testing.assert_allclose(ours.p, ref.P, atol=1e-10)
 
 
 def test_affine_matches_pycpd() -> None:
@@ -94,7 +94,7 @@ def test_affine_matches_pycpd() -> None:
     ty, (b, t) = ref.register()
     assert ours.iterations == ref.iteration == 40
     np.testing.assert_allclose(ours.transformed, ty, atol=1e-9)
-    np.testing.assert_allclose(ours.B, b.T, atol=1e-9)
+    np.testing.assert_allclose(ours.matrix, b.T, atol=1e-9)
     assert ours.sigma2 == pytest.approx(ref.sigma2, rel=1e-8)
 
 
@@ -108,9 +108,9 @@ def test_nonrigid_matches_pycpd(dim: int) -> None:
     ty, (g, w) = ref.register()
     assert ours.iterations == ref.iteration
     np.testing.assert_allclose(ours.transformed, ty, atol=1e-8)
-    np.testing.assert_allclose(ours.W, w, atol=1e-6 * np.abs(w).max())
+    np.testing.assert_allclose(ours.w, w, atol=1e-6 * np.abs(w).max())
     assert ours.sigma2 == pytest.approx(ref.sigma2, rel=1e-7)
-    np.testing.assert_allclose(ours.P, ref.P, atol=1e-9)
+    np.testing.assert_allclose(ours.p, ref.P, atol=1e-9)
     assert ours.energy == pytest.approx(float(np.sum(w * (g @ w))), rel=1e-8)
     assert ours.rank is None
 
@@ -134,8 +134,8 @@ def test_truncated_e_step_agrees_with_dense() -> None:
     x = y @ rot2(0.05).T + 0.3 + rng.normal(0, 0.05, y.shape)
     dense = cpd_rigid(x, y, e_step="dense", tolerance=1e-8)
     trunc = cpd_rigid(x, y, e_step="truncated", tolerance=1e-8)
-    np.testing.assert_allclose(trunc.R, dense.R, atol=1e-7)
-    np.testing.assert_allclose(trunc.t, dense.t, atol=1e-6)
+    np.testing.assert_allclose(trunc.rotation, dense.rotation, atol=1e-7)
+    np.testing.assert_allclose(trunc.translation, dense.translation, atol=1e-6)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -170,9 +170,9 @@ def test_outlier_weight_resists_clutter() -> None:
 def test_posterior_matrix_on_request() -> None:
     x, y = _pair(50, 40, 2, 10)
     fit = cpd_rigid(x, y, w=0.1, return_P=True)
-    assert fit.P.shape == (40, 50)
-    assert np.all(fit.P >= 0)
-    assert np.all(fit.P.sum(axis=0) <= 1.0 + 1e-12)
+    assert fit.p.shape == (40, 50)
+    assert np.all(fit.p >= 0)
+    assert np.all(fit.p.sum(axis=0) <= 1.0 + 1e-12)
 
 
 def test_bad_input_raises_clear_errors() -> None:

@@ -113,7 +113,7 @@ def test_full_noiseless_ellipse_matches_opencv() -> None:
         fit = detect.fit_ellipse(pts.astype(np.float64), method=method)
         np.testing.assert_allclose(fit.ellipse.as_array(), ref, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(fit.ellipse.as_array(), truth.as_array(), rtol=1e-6, atol=1e-6)
-        assert fit.residual < 1e-4 and fit.rms < 1e-4  # float32 rounding of the points
+        assert fit.residual_mean < 1e-4 and fit.residual_rms < 1e-4  # float32 rounding of the points
     # OpenCV's direct (Fitzgibbon) fit is the same estimator as ours.
     ref_direct = _opencv_params(cv2.fitEllipseDirect(pts))
     fit = detect.fit_ellipse(pts.astype(np.float64), method="direct")
@@ -187,9 +187,9 @@ def test_fit_result_fields_and_covariance() -> None:
     assert isinstance(fit.ellipse, Ellipse)
     assert fit.converged and fit.iterations >= 1
     d = fit.ellipse.distance(pts)
-    assert fit.residual == pytest.approx(np.mean(np.abs(d)), rel=1e-9)
-    assert fit.rms == pytest.approx(np.sqrt(np.mean(d**2)), rel=1e-9)
-    assert 0.3 < fit.rms < 0.7  # 0.5 px noise
+    assert fit.residual_mean == pytest.approx(np.mean(np.abs(d)), rel=1e-9)
+    assert fit.residual_rms == pytest.approx(np.sqrt(np.mean(d**2)), rel=1e-9)
+    assert 0.3 < fit.residual_rms < 0.7  # 0.5 px noise
     cov = fit.covariance
     assert cov is not None and cov.shape == (5, 5)
     np.testing.assert_allclose(cov, cov.T, rtol=1e-9, atol=1e-15)
@@ -197,7 +197,7 @@ def test_fit_result_fields_and_covariance() -> None:
     direct = detect.fit_ellipse(pts, method="direct")
     assert direct.iterations == 0 and direct.converged
     # The geometric fit minimises the orthogonal distances the direct fit only approximates.
-    assert fit.rms <= direct.rms
+    assert fit.residual_rms <= direct.residual_rms
     # Exactly five points: interpolated, no covariance.
     five = Ellipse(10.0, 20.0, 8.0, 3.0, 0.2).sample(5, 0.0, 4.0)
     fit5 = detect.fit_ellipse(five)

@@ -697,6 +697,32 @@ class TestEllipse:
             g.Ellipse.from_conic(np.zeros((3, 3)))
         with pytest.raises(InvalidInputError, match="C must have shape"):
             g.Ellipse.from_conic(np.eye(2))
+        # Regression: an asymmetric matrix silently gave the unit circle of its symmetric part.
+        with pytest.raises(InvalidInputError, match="symmetric"):
+            g.Ellipse.from_conic([[1.0, 5.0, 0.0], [-5.0, 1.0, 0.0], [0.0, 0.0, -1.0]])
+
+    def test_sample_of_more_points_than_memory_is_an_error(self):
+        # Regression: 2**62 points hit a capacity-overflow panic (InternalError).
+        with pytest.raises(InvalidInputError, match="too many sample points"):
+            g.Ellipse(0, 0, 2, 1, 0).sample(2**62)
+
+    def test_huge_rotations_are_refused_or_finite(self):
+        # Regression: R·1e200 overflowed RᵀR to NaN, passed the orthonormality check and hung.
+        R = g.so3_exp([0.3, 0.2, 0.1]) * 1e200
+        for call in (g.so3_log, g.matrix_to_quat, g.matrix_to_euler_zyx):
+            with pytest.raises(InvalidInputError, match="not a rotation"):
+                call(R)
+        T = np.eye(4)
+        T[:3, :3] = R
+        with pytest.raises(InvalidInputError, match="not a rigid transform"):
+            g.se3_log(T)
+        # exp of a huge rotation vector is the exact rotation by that angle, not NaN.
+        np.testing.assert_allclose(
+            g.so3_exp([1e200, 0.0, 0.0]),
+            [[1, 0, 0], [0, np.cos(1e200), -np.sin(1e200)], [0, np.sin(1e200), np.cos(1e200)]],
+            atol=1e-12,
+        )
+        assert np.all(np.isfinite(g.se3_exp([3e200, 1e200, 2e200, 1.0, 2.0, 3.0])))
 
     def test_sample_needs_two_points(self):
         with pytest.raises(InvalidInputError, match="n must be at least 2"):

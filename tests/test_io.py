@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -248,6 +249,24 @@ def test_write_rejects_bad_arguments(sim_session, tmp_path):
         write_log({"images": []}, tmp_path / "a.mcap")
     assert not (tmp_path / "a.mcap").exists()
     assert not (tmp_path / "a.mcap.part").exists()
+
+
+def test_write_refuses_a_target_that_is_not_a_regular_file(sim_session, tmp_path):
+    """Regression: the temporary file was renamed over whatever the target was (a device, as root)."""
+    import os
+
+    fifo = tmp_path / "pipe.mcap"
+    os.mkfifo(fifo)
+    folder = tmp_path / "folder.mcap"
+    folder.mkdir()
+    for target in (fifo, folder, Path("/dev/null")):
+        with pytest.raises(InvalidInputError, match="not a regular file"):
+            write_log(sim_session, target)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode) and folder.is_dir() and stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    blocked = tmp_path / "b.mcap"
+    os.mkfifo(tmp_path / "b.mcap.part")
+    with pytest.raises(InvalidInputError, match="temporary file"):
+        write_log(sim_session, blocked)
 
 
 # --- damaged and foreign files -----------------------------------------------------------------

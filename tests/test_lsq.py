@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from autoteach import geometry
 from autoteach.errors import ConvergenceError, DegenerateGeometryError, InvalidInputError
 from autoteach.estimate import LeastSquaresProblem, bundle_adjust
 
@@ -40,13 +41,13 @@ def test_bundle_adjust_reaches_scipys_cost(linear_solver: str) -> None:
     K, poses_true, _, obs, pi, xi, init_poses, init_points = _small_scene()
     res = bundle_adjust(K, init_poses, init_points, obs, pi, xi, fixed_poses=(0, 1), linear_solver=linear_solver)
     _, cost_sp, _ = run_scipy(K, obs, pi, xi, init_poses, init_points)
-    assert res.summary["converged"], res.summary
+    assert res.summary.converged, res.summary
     assert abs(res.final_cost - cost_sp) <= 1e-6 * cost_sp
     # The reported cost is the cost of the returned values.
-    r = project(K, res.poses[pi], res.points[xi]) - obs
+    r = project(K, res.pose_vectors[pi], res.points[xi]) - obs
     assert res.final_cost == pytest.approx(0.5 * np.sum(r**2), rel=1e-12)
-    np.testing.assert_array_equal(res.poses[:2], init_poses[:2])
-    assert res.iterations == res.summary["iterations"] > 0
+    np.testing.assert_array_equal(res.pose_vectors[:2], init_poses[:2])
+    assert res.iterations == res.summary.iterations > 0
 
 
 def test_bundle_adjust_huber_is_a_stationary_point_of_the_robust_cost() -> None:
@@ -57,7 +58,7 @@ def test_bundle_adjust_huber_is_a_stationary_point_of_the_robust_cost() -> None:
     plain = bundle_adjust(K, init_poses, init_points, obs, pi, xi, fixed_poses=(0, 1))
 
     def cost(pts: np.ndarray) -> float:
-        r = project(K, res.poses[pi], pts[xi]) - obs
+        r = project(K, res.pose_vectors[pi], pts[xi]) - obs
         s = np.sum(r**2, axis=1)
         return 0.5 * float(np.sum(np.where(s <= 4.0, s, 2 * 2.0 * np.sqrt(s) - 4.0)))
 
@@ -77,8 +78,8 @@ def test_bundle_adjust_huber_is_a_stationary_point_of_the_robust_cost() -> None:
     g_end, g_start = grad(res.points).max(), grad(init_points).max()
     assert g_end < 1e-6 * g_start, (g_end, g_start)
     # The robust loss resists the outliers better than plain least squares.
-    err_h = np.abs(res.poses[2:, 3:] - poses_true[2:, 3:]).mean()
-    err_l = np.abs(plain.poses[2:, 3:] - poses_true[2:, 3:]).mean()
+    err_h = np.abs(res.pose_vectors[2:, 3:] - poses_true[2:, 3:]).mean()
+    err_l = np.abs(plain.pose_vectors[2:, 3:] - poses_true[2:, 3:]).mean()
     assert err_h < err_l, (err_h, err_l)
 
 
@@ -109,7 +110,7 @@ def test_marginal_covariance_equals_inverse_information() -> None:
     pts = [p.add_block(x, "euclidean") for x in points]
     p.add_reprojections(K, obs, [cams[i] for i in pi], [pts[j] for j in xi])
     summary = p.solve()
-    assert summary["converged"], summary
+    assert summary.converged, summary
     solved = np.array([p.values(b) for b in pts])
     want = np.linalg.inv(_fd_information(K, poses_true, solved, pi, xi, obs))
     sel = [3, 7, 0]
@@ -148,7 +149,7 @@ def test_pose_graph_with_priors_recovers_consistent_truth() -> None:
             p.add_relative_pose(ids[a], ids[b], np.linalg.inv(truth[a]) @ truth[b], cov)
     p.add_prior(ids[0], truth[0], cov * 0.01)
     s = p.solve()
-    assert s["converged"] and s["final_cost"] < 1e-16, s
+    assert s.converged and s.final_cost < 1e-16, s
     for b, T in zip(ids, truth, strict=True):
         np.testing.assert_allclose(p.pose(b), T, atol=1e-9)
     cov0 = p.marginal_covariance([ids[0]])
@@ -171,7 +172,7 @@ def test_point_to_conic_recovers_the_wafer_pose() -> None:
         uv = (K @ pc)[:2].T / pc[2][:, None]
         p.add_point_to_conic(K, radius, uv, c, obj)
     s = p.solve()
-    assert s["final_cost"] < 1e-20, s
+    assert s.final_cost < 1e-20, s
     # The rim is symmetric about the wafer normal: compare the normal and the centre.
     got = p.pose(obj)
     np.testing.assert_allclose(got[:3, 2], T_wo[:3, 2], atol=1e-7)
@@ -208,6 +209,50 @@ def test_bad_inputs_raise_invalid_input() -> None:
         p.add_prior(b, [0.0, 0.0], [[1.0, 2.0], [2.0, 1.0]])
     with pytest.raises(InvalidInputError, match="shape"):
         p.add_prior(b, [0.0, 0.0], np.eye(3))
+
+
+def test_bundle_adjust_takes_and_returns_4x4_poses() -> None:
+    """Poses as N×4×4 matrices give the N×6 solve's result; ``poses`` are 4×4, ``pose_vectors`` N×6."""
+    K, _, _, obs, pi, xi, init_poses, init_points = _small_scene()
+    ref = bundle_adjust(K, init_poses, init_points, obs, pi, xi, fixed_poses=(0, 1))
+    mats = np.zeros((len(init_poses), 4, 4))
+    mats[:, :3, :3] = geometry.so3_exp(np.asarray(init_poses)[:, :3])
+    mats[:, :3, 3] = np.asarray(init_poses)[:, 3:]
+    mats[:, 3, 3] = 1.0
+    got = bundle_adjust(K, mats, init_points, obs, pi, xi, fixed_poses=(0, 1))
+    np.testing.assert_allclose(got.pose_vectors, ref.pose_vectors, atol=1e-9)
+    assert ref.poses.shape == (len(init_poses), 4, 4)
+    np.testing.assert_allclose(ref.poses[:, :3, :3], geometry.so3_exp(ref.pose_vectors[:, :3]), atol=1e-15)
+    np.testing.assert_array_equal(ref.poses[:, :3, 3], ref.pose_vectors[:, 3:])
+    bad = mats.copy()
+    bad[0, 3, 0] = 1.0
+    with pytest.raises(InvalidInputError, match="last row"):
+        bundle_adjust(K, bad, init_points, obs, pi, xi)
+
+
+@pytest.mark.parametrize("dtype", [complex, object, bool, "datetime64[s]", str])
+def test_bundle_adjust_refuses_arrays_that_are_not_real_numbers(dtype) -> None:
+    """Regression: complex K was cast to its real part and solved silently."""
+    K, _, _, obs, pi, xi, init_poses, init_points = _small_scene()
+    if dtype is complex:
+        bad = np.asarray(K) + 5j
+    elif dtype == "datetime64[s]":
+        bad = np.zeros((3, 3), dtype=dtype)
+    else:
+        bad = np.asarray(K).astype(dtype)
+    with pytest.raises(InvalidInputError, match="K must be"):
+        bundle_adjust(bad, init_poses, init_points, obs, pi, xi)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [({"max_iterations": -1}, "max_iterations must be a non-negative"), ({"ftol": -1.0}, "ftol must be")],
+)
+def test_negative_solver_settings_are_named(kwargs, match) -> None:
+    """Regression: max_iterations=-1 raised a bare OverflowError from the binding."""
+    K, _, _, obs, pi, xi, init_poses, init_points = _small_scene()
+    with pytest.raises(InvalidInputError, match=match):
+        bundle_adjust(K, init_poses, init_points, obs, pi, xi, **kwargs)
 
 
 def test_index_arrays_of_any_integer_type_give_the_same_result() -> None:

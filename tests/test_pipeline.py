@@ -171,3 +171,22 @@ def test_free_camera_mode_feeds_the_visual_odometry_into_the_factor_graph():
     assert all(r.within_3sigma.values()), r.within_3sigma
     with pytest.raises(InvalidInputError, match="odometry must be finite increments"):
         autoteach(s, seed=3, use_ukf=False, camera_mode="free", odometry=exact[:-1])
+
+
+def test_short_log_says_that_its_tracks_were_too_short():
+    """Regression: a 3-frame log said "no wafer edge was detected" though every frame had rims."""
+    import autoteach
+    from autoteach.sim import simulate_session
+
+    with pytest.raises(autoteach.InvalidInputError, match="no track lasted min_track_frames = 5"):
+        autoteach.autoteach(simulate_session(seed=1, frames=3), frontend="detect")
+
+
+def test_black_images_are_named_black():
+    import autoteach
+    from autoteach.sim import simulate_session
+
+    session = simulate_session(seed=1, frames=2)
+    session.images[:] = 0
+    with pytest.raises(autoteach.InvalidInputError, match="images are black"):
+        autoteach.autoteach(session, frontend="detect")

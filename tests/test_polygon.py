@@ -59,7 +59,7 @@ def test_exact_segments_give_exact_pose() -> None:
     assert sorted(det.support[:, 0]) == list(range(n))
     assert det.rms < 1e-6
     assert np.allclose(det.centre_image, _apply(H, centre[None])[0], atol=1e-6)
-    assert det.vote_map.ndim == 2 and det.vote_map.max() > 0
+    assert det.vote_map.data.shape == (det.vote_map.rows, det.vote_map.cols) and det.vote_map.data.max() > 0
 
 
 def test_segment_detector_finds_rendered_edges() -> None:
@@ -116,3 +116,11 @@ def test_bad_input() -> None:
         detect_polygon(segs, CROSS_TEMPLATE, scene.homography)
     with pytest.raises(DegenerateGeometryError, match="no segment matched"):
         detect_polygon(np.array([[0.0, 0.0, 1.0, 300.0]]), CROSS_TEMPLATE, scene.homography)
+
+
+@pytest.mark.parametrize("scale", [1e15, 1e18, 1e300])
+def test_huge_templates_are_refused_not_hung(scale) -> None:
+    """Regression: at ×1e18 the Hough size product overflowed past its guard and the call hung."""
+    scene = simulate_opening(seed=1)
+    with pytest.raises(InvalidInputError, match="2·10⁸ cells"):
+        detect_polygon(scene.image, CROSS_TEMPLATE * scale, scene.homography)

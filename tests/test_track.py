@@ -89,7 +89,7 @@ def test_accepts_dicts_edges_and_objects() -> None:
         assert t.visible and len(t.history) == 4
         cys = [e["ellipse"][1] if isinstance(e, dict) else e.ellipse.cy for _, e in t.history if _ == 0]
         assert t.ellipse is not None
-        assert t.ellipse[1] - min(cys) == pytest.approx(4.0)
+        assert t.ellipse.cy - min(cys) == pytest.approx(4.0)
 
 
 def test_bad_input_raises_and_keeps_state() -> None:

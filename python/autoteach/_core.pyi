@@ -316,11 +316,11 @@ class EllipseFit:
         """The fitted ellipse."""
 
     @property
-    def residual(self) -> float:
+    def residual_mean(self) -> float:
         """Mean absolute orthogonal distance (pixels)."""
 
     @property
-    def rms(self) -> float:
+    def residual_rms(self) -> float:
         """RMS orthogonal distance (pixels)."""
 
     @property
@@ -361,6 +361,16 @@ def merwe_sigma_points(x: F64Array, p: F64Array, alpha: float, beta: float, kapp
 
 def merwe_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[F64Array, F64Array]:
     """The weights ``(Wm, Wc)`` (each ``(2n+1,)``) of van der Merwe's scaled sigma points."""
+
+def family_sigma_points(
+    family_name: str, x: F64Array, p: F64Array, alpha: float = 1.0, beta: float = 0.0, kappa: float = 0.0
+) -> F64Array:
+    """Sigma points ``(N, n)`` of a family (``"merwe"``: alpha, beta, kappa; ``"julier"``: kappa; ``"simplex"``)."""
+
+def family_weights(
+    family_name: str, n: int, alpha: float = 1.0, beta: float = 0.0, kappa: float = 0.0
+) -> tuple[F64Array, F64Array]:
+    """The weights ``(Wm, Wc)`` of a sigma-point family."""
 
 class UkfLinearModel:
     """Built-in linear model ``x' = F x + B u``, ``z = H x`` (F (n, n), H (m, n), B (n, k) or None)."""
@@ -403,6 +413,7 @@ class UkfFilter:
         square_root: bool = False,
         augmented: bool = False,
         repair: bool = False,
+        family_name: str = "merwe",
     ) -> UkfFilter: ...
     @staticmethod
     def callbacks(
@@ -426,13 +437,29 @@ class UkfFilter:
         repair: bool = False,
         dim_w: int | None = None,
         dim_v: int | None = None,
+        family_name: str = "merwe",
+        draw: _Callable[[F64Array, F64Array], _Any] | None = None,
+        wm: F64Array | None = None,
+        wc: F64Array | None = None,
     ) -> UkfFilter:
         """A filter on Python callables, called as filterpy calls them.
 
         ``fx(x, dt, **fx_kwargs)`` (augmented: ``fx(x, dt, w, **fx_kwargs)``), ``hx(x, **hx_kwargs)``
         (augmented: ``hx(x, v, **hx_kwargs)``), ``x_mean(sigmas (2n+1, n), Wm)``, ``residual_x(a, b)``,
         ``state_add(x, dx)``, ``subtract(x, -offset)`` for the sigma points, ``sqrt(M)`` returning a matrix
-        whose rows are the sigma offsets.
+        whose rows are the sigma offsets. ``draw(x, P)`` with ``wm``, ``wc``: an external sigma-point
+        object's ``sigma_points`` (returning ``(N, n)``) and weights, used instead of ``family_name``.
+        """
+
+    def sigma_points(self, x: F64Array, p: F64Array) -> F64Array:
+        """Sigma points ``(N, n)`` of (x, P) as this filter draws them (family and hooks)."""
+
+    def rts_smoother(
+        self, xs: F64Array, ps: F64Array, qs: F64Array, dts: F64Array, us: F64Array | None = None
+    ) -> tuple[F64Array, F64Array, F64Array]:
+        """Unscented RTS smoother: ``(xs, Ps, Ks)`` from filtered ``xs`` (n, dim_x), ``Ps`` (n, dim_x, dim_x).
+
+        ``qs`` is (dim_x, dim_x) or (n, dim_x, dim_x), ``dts`` (n,). Built-in models run without the GIL.
         """
 
     def set_state(
@@ -585,11 +612,11 @@ def wafer_detect_defaults() -> dict[str, float | int | bool | str | tuple[float,
 # --- registration (cpd, global voting) ---
 class CpdRigidResult:
     @property
-    def R(self) -> NDArray[np.float64]: ...
+    def rotation(self) -> NDArray[np.float64]: ...
     @property
-    def t(self) -> NDArray[np.float64]: ...
+    def translation(self) -> NDArray[np.float64]: ...
     @property
-    def s(self) -> float: ...
+    def scale(self) -> float: ...
     @property
     def transformed(self) -> NDArray[np.float64]: ...
     @property
@@ -599,13 +626,13 @@ class CpdRigidResult:
     @property
     def converged(self) -> bool: ...
     @property
-    def P(self) -> NDArray[np.float64] | None: ...
+    def p(self) -> NDArray[np.float64] | None: ...
 
 class CpdAffineResult:
     @property
-    def B(self) -> NDArray[np.float64]: ...
+    def matrix(self) -> NDArray[np.float64]: ...
     @property
-    def t(self) -> NDArray[np.float64]: ...
+    def translation(self) -> NDArray[np.float64]: ...
     @property
     def transformed(self) -> NDArray[np.float64]: ...
     @property
@@ -615,11 +642,11 @@ class CpdAffineResult:
     @property
     def converged(self) -> bool: ...
     @property
-    def P(self) -> NDArray[np.float64] | None: ...
+    def p(self) -> NDArray[np.float64] | None: ...
 
 class CpdNonrigidResult:
     @property
-    def W(self) -> NDArray[np.float64]: ...
+    def w(self) -> NDArray[np.float64]: ...
     @property
     def transformed(self) -> NDArray[np.float64]: ...
     @property
@@ -633,27 +660,14 @@ class CpdNonrigidResult:
     @property
     def rank(self) -> int | None: ...
     @property
-    def P(self) -> NDArray[np.float64] | None: ...
+    def p(self) -> NDArray[np.float64] | None: ...
 
 class GlobalCpdHypothesis:
     @property
-    def transformed(self) -> NDArray[np.float64]: ...
+    def initial(self) -> tuple[NDArray[np.float64], NDArray[np.float64], int, int]:
+        """``(rotation, translation, votes, pair_votes)`` of the voting hypothesis."""
     @property
-    def energy(self) -> float: ...
-    @property
-    def votes(self) -> int: ...
-    @property
-    def pair_votes(self) -> int: ...
-    @property
-    def R(self) -> NDArray[np.float64]: ...
-    @property
-    def t(self) -> NDArray[np.float64]: ...
-    @property
-    def W(self) -> NDArray[np.float64]: ...
-    @property
-    def sigma2(self) -> float: ...
-    @property
-    def iterations(self) -> int: ...
+    def cpd(self) -> CpdNonrigidResult: ...
 
 def cpd_rigid(
     x: NDArray[np.float64],
@@ -1144,6 +1158,340 @@ class ActiveSystem:
     ) -> dict[str, _Any]: ...
 
 # --- end active ---
+
+# --- ellipse detection (issue 42) ---
+
+class EllipseDetection:
+    """One detected ellipse; see :class:`autoteach.detect.EllipseDetection`."""
+
+    @property
+    def ellipse(self) -> Ellipse: ...
+    @property
+    def points(self) -> NDArray[np.float64]: ...
+    @property
+    def covariance(self) -> NDArray[np.float64] | None: ...
+    @property
+    def residual(self) -> float: ...
+    @property
+    def score(self) -> float: ...
+    @property
+    def polarity(self) -> int: ...
+
+def ellipse_detect(
+    image: NDArray[np.uint8] | NDArray[np.uint16] | NDArray[np.float32] | NDArray[np.float64],
+    *,
+    min_arc_points: int = 12,
+    min_semi_minor: float = 2.0,
+    max_semi_major: float | None = None,
+    max_gap: float | None = None,
+    blur_sigma: float = 0.0,
+    max_nfa: float = 1.0,
+    max_line_width: float | None = None,
+    gradient_noise: float | None = None,
+) -> list[EllipseDetection]:
+    """Detect ellipses; see :func:`autoteach.detect.detect_ellipses`."""
+
+def wafer_rims_detect(
+    image: NDArray[np.uint8] | NDArray[np.uint16] | NDArray[np.float32] | NDArray[np.float64],
+    *,
+    radius: float = 75.0,
+    thickness: float = 0.775,
+    up: tuple[float, float] = (0.0, -1.0),
+    semi_major_range: tuple[float, float] | None = None,
+    focal_length: float | None = None,
+    min_arc_points: int = 12,
+    min_semi_minor: float = 2.0,
+    max_gap: float | None = None,
+    blur_sigma: float = 0.0,
+    max_nfa: float = 1.0,
+    gradient_noise: float | None = None,
+) -> list[WaferEdge]:
+    """Wafer rims by geometry; see :func:`autoteach.detect.detect_wafer_rims`."""
+
+# --- end ellipse detection ---
+# --- mapping (issue 32: occupancy-grid rasterization, seed 004 ch. 2) ---
+
+class Rasterizer:
+    """Table 2.1's rasterizers; see :class:`autoteach.mapping.Rasterizer`."""
+
+    def __init__(
+        self,
+        method: str = "cover_composite",
+        slice_size: int = 4,
+        resolution: float = 0.1,
+        covering: bool = True,
+        cover_distance: float = 0.75,
+        cover_angle: float = ...,
+        angle_min: float = ...,
+        angle_increment: float = ...,
+        max_range: float = 30.0,
+        log_odds_hit: float = ...,
+        log_odds_miss: float = ...,
+        prior: float = 0.0,
+        threshold: float = 0.0,
+    ) -> None: ...
+    def update(
+        self,
+        node_ids: NDArray[np.int64],
+        robot_ids: NDArray[np.int64],
+        poses: F64Array,
+        scan_rows: NDArray[np.int64],
+        scans: F64Array,
+    ) -> tuple[NDArray[np.int8], float, float, float, dict[str, _Any]]: ...
+    def memory_bytes(self) -> int: ...
+    def num_nodes(self) -> int: ...
+
+class TeamSimulator:
+    """The team simulator; see :class:`autoteach.mapping.TeamSimulator`."""
+
+    def __init__(
+        self,
+        world: str = "showgrounds",
+        robots: int | None = None,
+        graphs: int | None = None,
+        seed: int = 0,
+        transients: bool = True,
+        people: int | None = None,
+        vehicles: int | None = None,
+        max_range: float | None = None,
+    ) -> None: ...
+    def step(self) -> dict[str, _Any] | None: ...
+    def ranges(self, ids: NDArray[np.int64]) -> F64Array: ...
+    def transient_hits(self, id: int) -> F64Array: ...
+    def walls(self) -> F64Array: ...
+    def graphs(self) -> int: ...
+    def extent(self) -> tuple[float, float]: ...
+    def scan_geometry(self) -> tuple[float, float, float]: ...
+    def transient_residue(
+        self,
+        cells: NDArray[np.int8],
+        origin: tuple[float, float],
+        resolution: float,
+        ids: NDArray[np.int64],
+        poses: F64Array,
+        truth: F64Array,
+        margin: float = 0.5,
+    ) -> tuple[int, int, int]: ...
+
+def mapping_wall_gaps(
+    candidate: NDArray[np.int8],
+    candidate_origin: tuple[float, float],
+    reference: NDArray[np.int8],
+    reference_origin: tuple[float, float],
+    resolution: float,
+    walls: F64Array,
+    radius: int = 1,
+) -> tuple[int, int]:
+    """Wall samples and gaps; see :func:`autoteach.mapping.wall_gaps`."""
+
+# --- end mapping ---
+
+# --- radio (issue 33) ---
+
+class RadioLogFit:
+    """Log-distance fit of eq. 3.1; see :class:`autoteach.radio.LogFit`."""
+
+    @staticmethod
+    def fit(tx: F64Array, rx: F64Array, rss: F64Array) -> RadioLogFit: ...
+    def predict(self, tx: F64Array, rx: F64Array) -> tuple[F64Array, F64Array]: ...
+    @property
+    def l0(self) -> float: ...
+    @property
+    def exponent(self) -> float: ...
+    @property
+    def residual_variance(self) -> float: ...
+    @property
+    def normal_inverse(self) -> F64Array: ...
+
+class RadioMrgp:
+    """Multi-robot Gaussian process; see :class:`autoteach.radio.MRGP`."""
+
+    @staticmethod
+    def fit(
+        tx: F64Array,
+        rx: F64Array,
+        rss: F64Array,
+        kernel: str = "swap",
+        length_scale: float = 28.75,
+        sigma_f: float = 1.0,
+        sigma_d: float = 1.5,
+        theta: float = 20.0,
+        gamma: float = 3.0,
+        optimize: bool = False,
+    ) -> RadioMrgp: ...
+    def update(self, tx: F64Array, rx: F64Array, rss: F64Array) -> None: ...
+    def predict(self, tx: F64Array, rx: F64Array, variance: bool = False) -> tuple[F64Array, F64Array | None]: ...
+    @property
+    def params(self) -> dict[str, float]: ...
+    @property
+    def log_marginal_likelihood(self) -> float: ...
+    @property
+    def mean_params(self) -> tuple[float, float]: ...
+    @property
+    def nnz(self) -> tuple[int, int]: ...
+    def __len__(self) -> int: ...
+
+def radio_link_kernel(
+    tx_a: F64Array,
+    rx_a: F64Array,
+    tx_b: F64Array,
+    rx_b: F64Array,
+    kernel: str = "swap",
+    length_scale: float = 28.75,
+    sigma_f: float = 1.0,
+    theta: float = 20.0,
+    gamma: float = 3.0,
+) -> F64Array: ...
+
+class RadioMrt:
+    """Multi-robot tomography; see :class:`autoteach.radio.MRT`."""
+
+    def __init__(self, bounds: tuple[float, float, float, float], cell: float = 3.0, lam: float = 0.1375) -> None: ...
+    def add(self, tx: F64Array, rx: F64Array, rss: F64Array) -> None: ...
+    def solve(self) -> float: ...
+    def predict(self, tx: F64Array, rx: F64Array) -> F64Array: ...
+    def solution(self) -> tuple[float, float, F64Array]: ...
+    def stacked(self) -> tuple[list[int], list[int], list[float], list[float], int]: ...
+    @property
+    def factor_nnz(self) -> int: ...
+    @property
+    def shape(self) -> tuple[int, int]: ...
+    def __len__(self) -> int: ...
+
+class RadioMatte:
+    """MATTE (Algorithms 3.1-3.2); see :class:`autoteach.radio.MATTE`."""
+
+    def __init__(
+        self,
+        occupancy: F64Array,
+        resolution: float,
+        origin: tuple[float, float] = (0.0, 0.0),
+        cell: float = 4.0,
+        lam: float = 2.0,
+        phi: float = 0.2,
+        rho_free: float = -0.1,
+        rho_structure: float = -0.3,
+        weights: str = "length",
+    ) -> None: ...
+    def add(self, tx: F64Array, rx: F64Array, rss: F64Array) -> None: ...
+    def solve(self) -> float: ...
+    def predict(self, tx: F64Array, rx: F64Array) -> F64Array: ...
+    def solution(self) -> tuple[float, float, F64Array]: ...
+    def attenuation_map(self) -> F64Array: ...
+    def stacked(self) -> tuple[list[int], list[int], list[float], list[float], int]: ...
+    @property
+    def factor_nnz(self) -> int: ...
+    @property
+    def shape(self) -> tuple[int, int]: ...
+    def __len__(self) -> int: ...
+
+def radio_simulate(
+    environment: str,
+    robots: int = 3,
+    duration: float = 240.0,
+    speed: float = 1.0,
+    rate: float = 20.0,
+    seed: int = 0,
+    l0: float = -40.0,
+    exponent: float = 22.0,
+    sigma: float = 4.0,
+    correlated_share: float = 0.5,
+    correlation_length: float = 6.0,
+    clutter: float = 0.4,
+    lidar_range: float = 20.0,
+) -> dict[str, _Any]: ...
+
+# --- end radio ---
+# --- segment (coloured point clouds, seed 004 ch. 4) ---
+
+def segment_colored_cloud(
+    points: F64Array,
+    colors: _Any,
+    normals: F64Array | None,
+    graph: str,
+    k: int,
+    k_rgb: float,
+    k_norm: float,
+    edge_cut: float,
+    min_size: int,
+    criteria_name: str,
+    viewpoint: F64Array,
+) -> dict[str, _Any]:
+    """Segmentation (Algorithm 4.1); see :func:`autoteach.segment.segment_cloud`."""
+
+def colorize_points(
+    points: F64Array, image: _Any, camera: Camera, t_cam_lidar: F64Array, splat_radius: int, depth_tolerance: float
+) -> tuple[_Any, _Any]:
+    """Co-registration (eq. 4.1); see :func:`autoteach.segment.colorize`."""
+
+def simulate_colored_scan(
+    scene_name: str,
+    beam_step_deg: float,
+    tilt_start_deg: float,
+    tilt_end_deg: float,
+    tilt_speed_deg_s: float,
+    range_sigma: float,
+    color_sigma: float,
+    seed: int,
+    render: bool,
+) -> dict[str, _Any]:
+    """Tilting-scanner and camera simulation; see :func:`autoteach.segment.simulate_scan`."""
+
+def calibrate_lidar_camera(
+    camera: Camera, points: F64Array, pixels: F64Array, initial: F64Array, sigma: float | None = None
+) -> dict[str, _Any]:
+    """Extrinsics from correspondences (eq. 4.2); see :func:`autoteach.segment.calibrate_extrinsics`."""
+
+# --- end segment ---
+# --- control (issue 31) ---
+
+def control_tf_normalize(num: F64Array, den: F64Array) -> tuple[F64Array, F64Array]: ...
+def control_roots(p: F64Array) -> tuple[F64Array, F64Array]: ...
+def control_freq_resp(num: F64Array, den: F64Array, w: F64Array) -> tuple[F64Array, F64Array]: ...
+def control_series(n1: F64Array, d1: F64Array, n2: F64Array, d2: F64Array) -> tuple[F64Array, F64Array]: ...
+def control_parallel(n1: F64Array, d1: F64Array, n2: F64Array, d2: F64Array) -> tuple[F64Array, F64Array]: ...
+def control_feedback(n1: F64Array, d1: F64Array, n2: F64Array, d2: F64Array) -> tuple[F64Array, F64Array]: ...
+def control_margins(num: F64Array, den: F64Array) -> tuple[float, float, float, float]: ...
+def control_bandwidth(num: F64Array, den: F64Array, dbdrop: float = -3.0) -> float: ...
+def control_sensitivity_peak(num: F64Array, den: F64Array) -> tuple[float, float]: ...
+def control_closed_loop_damping(num: F64Array, den: F64Array) -> float: ...
+def control_lsim(num: F64Array, den: F64Array, u: F64Array, dt: float) -> F64Array: ...
+def control_fit(
+    omega: F64Array,
+    h_re: F64Array,
+    h_im: F64Array,
+    num_order: int,
+    den_order: int,
+    *,
+    integrators: int = 0,
+    weights: F64Array | None = None,
+    enforce_stable: bool = True,
+) -> tuple[F64Array, F64Array, float, int]: ...
+def control_joint_plants(joint: str, count: int = 6) -> list[dict[str, _Any]]: ...
+def control_sine_sweep(
+    num: F64Array, den: F64Array, omega: F64Array, noise: float, seed: int = 0
+) -> tuple[F64Array, F64Array]: ...
+def control_tune(
+    plants: list[tuple[F64Array, F64Array]],
+    sections: list[str],
+    spec: dict[str, _Any],
+    theta0: F64Array | None = None,
+) -> dict[str, _Any]: ...
+def control_evaluate(
+    plants: list[tuple[F64Array, F64Array]], sections: list[str], theta: F64Array, spec: dict[str, _Any]
+) -> dict[str, _Any]: ...
+def control_baseline(plants: list[tuple[F64Array, F64Array]], spec: dict[str, _Any]) -> dict[str, _Any]: ...
+def control_demo(
+    noise: float = 0.01,
+    seed: int = 0,
+    sections: list[str] | None = None,
+    move_jt2: float = 1.0,
+    move_jt4: float = -1.5,
+    duration: float = 0.8,
+    settle: float = 0.4,
+) -> dict[str, _Any]: ...
+
+# --- end control ---
 
 # --- uncertainty (boxes, JIoU, label posterior) ---
 

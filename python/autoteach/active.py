@@ -24,7 +24,7 @@ Example:
     >>> import numpy as np
     >>> from autoteach.active import observability_indices
     >>> o = observability_indices(np.diag([16.0, 4.0, 1.0]), power=2.0)
-    >>> round(o["O1"], 6), o["O2"], o["O3"]
+    >>> round(o.o1, 6), o.o2, o.o3
     (4.0, 0.0625, 1.0)
 
 """
@@ -44,7 +44,15 @@ from autoteach.errors import InvalidInputError
 
 __all__ = [
     "ActiveState",
+    "ApproximateDesign",
+    "DetmaxResult",
+    "HandEyeParams",
+    "ObservabilityIndices",
+    "Plan",
     "PlannedPose",
+    "Rejections",
+    "TrialRuns",
+    "UpdateSummary",
     "compare",
     "d_optimal_design",
     "detmax",
@@ -75,6 +83,95 @@ def _matrices(value: Any, name: str) -> list[F64Array]:
     return out
 
 
+@dataclass(frozen=True, slots=True)
+class ObservabilityIndices:
+    """Observability indices of Table 6.2.
+
+    The fields of ``autoteach_estimate::active::design::ObservabilityIndices``; ``σ_1 ≥ … ≥ σ_m``
+    are the singular values of the information matrix.
+    """
+
+    o1: float
+    """O1 (D-optimality): ``(Π σ)^{1/m}``, the geometric mean."""
+    o2: float
+    """O2 (inverse condition number): ``σ_m/σ_1``."""
+    o3: float
+    """O3 (E-optimality): ``σ_m``."""
+    o4: float
+    """O4 (noise amplification index): ``σ_m²/σ_1``."""
+    o5: float
+    """O5: ``1/Σ σ⁻¹``."""
+    o6: float
+    """O6: ``1/Σ σ^{-P}`` with the power ``P`` below."""
+    power: float
+    """The power ``P`` of O6."""
+    log_det: float
+    """``log det M = Σ log σ`` (``-inf`` for a singular matrix)."""
+
+    @classmethod
+    def _from_core(cls, d: Mapping[str, float]) -> ObservabilityIndices:
+        """From the binding's dict (keys ``O1``-``O6``, ``power``, ``log_det``)."""
+        return cls(*(float(d[k]) for k in ("O1", "O2", "O3", "O4", "O5", "O6", "power", "log_det")))
+
+
+@dataclass(frozen=True, slots=True)
+class ApproximateDesign:
+    """An approximate design on a finite candidate set.
+
+    The fields of ``autoteach_estimate::active::design::ApproximateDesign``.
+    """
+
+    weights: F64Array
+    """Weight ``ω_i`` of each candidate (sum 1), eq. (6.1)."""
+    variance: F64Array
+    """``d(x_i, ξ) = tr(M⁻¹ F_iᵀF_i)`` of every candidate (the standardised variance)."""
+    max_variance: float
+    """``max_i d(x_i, ξ)``; ``= p`` at the D-optimum (General Equivalence Theorem)."""
+    log_det: float
+    """``log det M(ξ)``."""
+    iterations: int
+    """Multiplicative iterations run."""
+
+
+@dataclass(frozen=True, slots=True)
+class DetmaxResult:
+    """The result of :func:`detmax` (the fields of ``autoteach_estimate::active::design::DetmaxResult``)."""
+
+    selected: list[int]
+    """Indices of the selected candidates (sorted)."""
+    log_det: float
+    """``log det(M0 + Σ_selected F_iᵀF_i)``."""
+    excursions: int
+    """Accepted excursions and exchanges."""
+
+
+@dataclass(frozen=True, slots=True)
+class UpdateSummary:
+    """Summary of one :meth:`ActiveState.update`.
+
+    The fields of ``autoteach_estimate::active::model::UpdateSummary``.
+    """
+
+    used: int
+    """Corners used (detected and projectable under the estimate)."""
+    iterations: int
+    """Gauss-Newton iterations of the iterated update."""
+    rms_px: float
+    """RMS pixel residual after the update."""
+
+
+@dataclass(frozen=True, slots=True)
+class HandEyeParams:
+    """Hand-eye parameter values (the fields of ``autoteach_estimate::active::model::HandEyeParams``)."""
+
+    opening: F64Array
+    """Pose of the chamber opening in the world, ``T_wo`` (4×4)."""
+    camera_translation: F64Array
+    """Camera mount translation ``t_e2c`` in the blade-2 frame (3,), metres."""
+    joint_offsets: F64Array
+    """Joint zero offsets (5,) (encoder = true + offset)."""
+
+
 def fisher_information(
     jacobians: Sequence[ArrayLike] | ArrayLike, sigmas: ArrayLike, weights: ArrayLike | None = None
 ) -> F64Array:
@@ -89,7 +186,7 @@ def fisher_information(
     return _core.active_fisher_information(js, np.ascontiguousarray(s), np.ascontiguousarray(w))
 
 
-def observability_indices(information: ArrayLike, power: float = 2.0) -> dict[str, float]:
+def observability_indices(information: ArrayLike, power: float = 2.0) -> ObservabilityIndices:
     """Observability indices O1-O6 of Table 6.2 of a symmetric PSD information matrix.
 
     With the singular values ``σ_1 ≥ … ≥ σ_m``: ``O1 = (Π σ)^{1/m}``, ``O2 = σ_m/σ_1``,
@@ -97,19 +194,29 @@ def observability_indices(information: ArrayLike, power: float = 2.0) -> dict[st
     Computed in the log domain (robust for ill-conditioned matrices); a singular matrix gives
     zeros and ``log_det = -inf``.
     """
-    return dict(_core.active_observability_indices(as_f64(information, "information"), float(power)))
+    return ObservabilityIndices._from_core(
+        _core.active_observability_indices(as_f64(information, "information"), float(power))
+    )
 
 
 def d_optimal_design(
     candidates: Sequence[ArrayLike] | ArrayLike, tol: float = 1e-6, max_iterations: int = 100_000
-) -> dict[str, Any]:
+) -> ApproximateDesign:
     """Approximate D-optimal design weights on a finite candidate set (multiplicative algorithm).
 
     ``candidates[i]`` is the whitened Jacobian ``F_i`` (``(d_i, p)``, or a regressor ``(p,)``).
-    Returns ``weights``, ``variance`` (``d_i = tr(M⁻¹ F_iᵀF_i)``), ``max_variance`` (``= p`` at the
-    optimum, the General Equivalence Theorem), ``log_det`` and ``iterations``.
+    Returns the :class:`ApproximateDesign`: ``weights``, ``variance`` (``d_i = tr(M⁻¹ F_iᵀF_i)``),
+    ``max_variance`` (``= p`` at the optimum, the General Equivalence Theorem), ``log_det`` and
+    ``iterations``.
     """
-    return dict(_core.active_d_optimal_design(_matrices(candidates, "candidates"), float(tol), int(max_iterations)))
+    d = _core.active_d_optimal_design(_matrices(candidates, "candidates"), float(tol), int(max_iterations))
+    return ApproximateDesign(
+        weights=np.asarray(d["weights"]),
+        variance=np.asarray(d["variance"]),
+        max_variance=float(d["max_variance"]),
+        log_det=float(d["log_det"]),
+        iterations=int(d["iterations"]),
+    )
 
 
 def directional_derivatives(candidates: Sequence[ArrayLike] | ArrayLike, weights: ArrayLike) -> F64Array:
@@ -125,22 +232,23 @@ def detmax(
     max_excursion: int = 3,
     allow_repeats: bool = False,
     seed: int = 0,
-) -> dict[str, Any]:
+) -> DetmaxResult:
     """Select ``n`` candidates maximising ``log det(M0 + Σ F_iᵀF_i)`` with DETMAX (eq. (6.10)).
 
-    Returns ``selected`` (sorted indices), ``log_det`` and ``excursions``.
+    Returns the :class:`DetmaxResult`: ``selected`` (sorted indices), ``log_det`` and ``excursions``.
     """
     p = None if prior is None else as_f64(prior, "prior")
-    return dict(
-        _core.active_detmax(
-            _matrices(candidates, "candidates"), int(n), p, int(max_excursion), bool(allow_repeats), int(seed)
-        )
+    d = _core.active_detmax(
+        _matrices(candidates, "candidates"), int(n), p, int(max_excursion), bool(allow_repeats), int(seed)
+    )
+    return DetmaxResult(
+        selected=[int(i) for i in d["selected"]], log_det=float(d["log_det"]), excursions=int(d["excursions"])
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class PlannedPose:
-    """A planned measurement pose."""
+    """A planned measurement pose (the fields of ``autoteach_estimate::active::planner::PlannedPose``)."""
 
     joints: F64Array
     """Encoder readings ``(θ1, θ2, θ3, θ4, h)`` to command."""
@@ -148,10 +256,39 @@ class PlannedPose:
     """``T_wc`` (4×4) under the estimated model."""
     score: float
     """Criterion value (D: the log-determinant gain of eq. (6.22))."""
+
+
+@dataclass(frozen=True, slots=True)
+class Rejections:
+    """Candidate rejections per constraint (the fields of ``autoteach_estimate::active::planner::Rejections``)."""
+
+    unreachable: int
+    """Poses the robot cannot reach."""
+    lift: int
+    """Lift out of range."""
+    visibility: int
+    """Visibility (6.17)."""
+    size: int
+    """Image size (6.18)."""
+    view_angle: int
+    """View angle (6.19)."""
+    collision: int
+    """Collision (6.20); counted only for candidates good enough to need the check."""
+    sole: tuple[int, int, int, int, int, int]
+    """Per constraint, in the order visibility, size, view angle, collision, unreachable, lift: the
+    candidates that violated only that constraint (the constraints that bind)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """The result of :func:`plan_next_pose` (the fields of ``autoteach_estimate::active::planner::Plan``)."""
+
+    best: PlannedPose
+    """The best feasible pose."""
     evaluated: int
     """Candidate poses evaluated."""
-    rejections: Mapping[str, int]
-    """Rejections per constraint (``visibility``, ``size``, ``view_angle``, ``collision``, …)."""
+    rejections: Rejections
+    """Rejections per constraint."""
 
 
 class ActiveState:
@@ -181,9 +318,14 @@ class ActiveState:
         """Names of the estimated parameters (units in the suffix; values inside are SI)."""
         return list(self._inner.names)
 
-    def estimate(self) -> dict[str, F64Array]:
-        """``opening`` (4×4 ``T_wo``), ``camera_translation`` (3, blade frame), ``joint_offsets`` (5)."""
-        return dict(self._inner.estimate())
+    def estimate(self) -> HandEyeParams:
+        """The current estimate: ``opening`` (4×4 ``T_wo``), ``camera_translation`` (3), ``joint_offsets`` (5)."""
+        d = self._inner.estimate()
+        return HandEyeParams(
+            opening=np.asarray(d["opening"]),
+            camera_translation=np.asarray(d["camera_translation"]),
+            joint_offsets=np.asarray(d["joint_offsets"]),
+        )
 
     @property
     def information(self) -> F64Array:
@@ -199,9 +341,9 @@ class ActiveState:
         """The covariance ``P`` (SI units)."""
         return self._inner.covariance()
 
-    def indices(self, power: float | None = None) -> dict[str, float]:
+    def indices(self, power: float | None = None) -> ObservabilityIndices:
         """Observability indices of the information matrix."""
-        return dict(self._inner.indices(power))
+        return ObservabilityIndices._from_core(self._inner.indices(power))
 
     def project(self, joints: ArrayLike) -> F64Array:
         """Corner pixels ``(m, 2)`` under the estimate at encoder readings ``joints`` (NaN = not projectable)."""
@@ -211,9 +353,10 @@ class ActiveState:
         """Observation matrix ``C`` of eq. (6.14), ``(2m, k)``."""
         return self._inner.jacobian(as_f64(joints, "joints"))
 
-    def update(self, joints: ArrayLike, pixels: ArrayLike) -> dict[str, float]:
+    def update(self, joints: ArrayLike, pixels: ArrayLike) -> UpdateSummary:
         """Kalman update (6.15) with detected corner pixels ``(m, 2)`` (NaN rows = not detected)."""
-        return dict(self._inner.update(as_f64(joints, "joints"), as_f64(pixels, "pixels")))
+        d = self._inner.update(as_f64(joints, "joints"), as_f64(pixels, "pixels"))
+        return UpdateSummary(used=int(d["used"]), iterations=int(d["iterations"]), rms_px=float(d["rms_px"]))
 
 
 def plan_next_pose(
@@ -223,7 +366,7 @@ def plan_next_pose(
     method: str = "reduced",
     samples: int | None = None,
     seed: int = 0,
-) -> PlannedPose:
+) -> Plan:
     """Plan the next measurement pose of the one-step greedy planner (eqs. (6.22)-(6.25)).
 
     Maximises the criterion (``"D"``: ``log|I + Cᵀ V^{-1/2} P V^{-1/2} C|``; ``"A"``: reduction of
@@ -233,6 +376,10 @@ def plan_next_pose(
     search, depth sampling, inverse kinematics) or plain random ``"sampling"``; with candidates
     (``(n, 5)`` encoder readings) the best feasible candidate is returned.
 
+    Returns:
+        The :class:`Plan`: the best pose (``plan.best.joints`` to command), the candidates
+        evaluated and the rejections per constraint.
+
     Raises:
         UnreachablePoseError: no candidate is feasible; the message names the binding constraint.
     """
@@ -240,13 +387,53 @@ def plan_next_pose(
         raise InvalidInputError(f"state must be an ActiveState, got {type(state).__name__}")
     c = None if candidates is None else np.ascontiguousarray(np.atleast_2d(as_f64(candidates, "candidates")))
     d = state._inner.plan(c, str(criterion), str(method), samples, int(seed))
-    return PlannedPose(
-        joints=d["joints"],
-        camera_pose=d["camera_pose"],
-        score=float(d["score"]),
+    r = d["rejections"]
+    return Plan(
+        best=PlannedPose(joints=d["joints"], camera_pose=d["camera_pose"], score=float(d["score"])),
         evaluated=int(d["evaluated"]),
-        rejections=dict(d["rejections"]),
+        rejections=Rejections(
+            unreachable=int(r["unreachable"]),
+            lift=int(r["lift"]),
+            visibility=int(r["visibility"]),
+            size=int(r["size"]),
+            view_angle=int(r["view_angle"]),
+            collision=int(r["collision"]),
+            sole=tuple(int(v) for v in r["sole"]),  # type: ignore[arg-type]
+        ),
     )
+
+
+@dataclass(frozen=True, slots=True)
+class TrialRuns:
+    """The trials of :func:`run_trials`, with the names and power they share.
+
+    The fields of ``autoteach_estimate::active::closed_loop::TrialResult``, stacked over the trials
+    (leading axis); errors are truth − estimate in report units (mm, deg).
+    """
+
+    errors: F64Array
+    """(trials, steps, 14) per step, truth − estimate of the full parameter vector (:data:`PARAM_NAMES`)."""
+    indices: F64Array
+    """(trials, steps, 7) per step, O1-O6 and log det of the information (report units), as
+    :data:`INDEX_NAMES` (the fields of :class:`ObservabilityIndices` but ``power``)."""
+    joints: F64Array
+    """(trials, steps, 5) per step, the encoder readings of the measurement pose."""
+    detected: F64Array
+    """(trials, steps) per step, the corners detected."""
+    plan_times: F64Array
+    """(trials, steps − 1) per planning step, the planner's wall time (s)."""
+    scores: F64Array
+    """(trials, steps − 1) per planning step, the planner's score (NaN for the baseline)."""
+    coupled: F64Array
+    """(trials, 3) final coupled error (mm) of the opening relative to the camera (x, y, z)."""
+    infeasible_steps: F64Array
+    """(trials,) planning steps where no feasible pose was found."""
+    names: list[str]
+    """:data:`PARAM_NAMES`, the columns of :attr:`errors`."""
+    estimated: list[str]
+    """The estimated parameters."""
+    power: float
+    """The O6 power ``P``."""
 
 
 def run_trials(
@@ -257,46 +444,51 @@ def run_trials(
     sigma_px: float | None = None,
     power: float | None = None,
     estimate: Sequence[str] | None = None,
-) -> dict[str, Any]:
+) -> TrialRuns:
     """Run the simulated closed loop (Fig. 6.1) for ``trials`` trials of one ``mode``.
 
     ``mode`` is ``"reduced"`` (active planning, reduced search), ``"sampling"`` (active planning,
     plain sampling) or ``"baseline"`` (the straight approach without planning). The same
-    ``(seed, trial)`` gives the same true parameters and start pose in every mode. Returns arrays:
-    ``errors`` (trials, steps, 14) truth − estimate in mm/deg (:data:`PARAM_NAMES`), ``indices``
-    (trials, steps, 7) O1-O6 and log det of the information in mm/deg units, ``joints``,
-    ``detected``, ``plan_times`` (s), ``scores``, ``coupled`` (trials, 3) and
-    ``infeasible_steps``.
+    ``(seed, trial)`` gives the same true parameters and start pose in every mode. Returns the
+    :class:`TrialRuns`: ``errors`` (trials, steps, 14) truth − estimate in mm/deg
+    (:data:`PARAM_NAMES`), ``indices`` (trials, steps, 7) O1-O6 and log det of the information in
+    mm/deg units, ``joints``, ``detected``, ``plan_times`` (s), ``scores``, ``coupled``
+    (trials, 3) and ``infeasible_steps``.
     """
     names = None if estimate is None else [str(n) for n in estimate]
-    return dict(
-        _core.active_run_trials(
-            int(trials),
-            int(seed),
-            str(mode),
-            None if steps is None else int(steps),
-            None if sigma_px is None else float(sigma_px),
-            None if power is None else float(power),
-            names,
-        )
+    d = _core.active_run_trials(
+        int(trials),
+        int(seed),
+        str(mode),
+        None if steps is None else int(steps),
+        None if sigma_px is None else float(sigma_px),
+        None if power is None else float(power),
+        names,
+    )
+    arrays = ("errors", "indices", "joints", "detected", "plan_times", "scores", "coupled", "infeasible_steps")
+    return TrialRuns(
+        **{k: np.asarray(d[k]) for k in arrays},
+        names=[str(n) for n in d["names"]],
+        estimated=[str(n) for n in d["estimated"]],
+        power=float(d["power"]),
     )
 
 
-def _final_stats(run: Mapping[str, Any]) -> dict[str, dict[str, float]]:
+def _final_stats(run: TrialRuns) -> dict[str, dict[str, float]]:
     """``{"std": …, "peak": …}`` of the final error of every estimated quantity over trials."""
-    final = run["errors"][:, -1, :]
+    final = run.errors[:, -1, :]
     out: dict[str, dict[str, float]] = {}
-    for name in run["estimated"]:
+    for name in run.estimated:
         e = final[:, PARAM_NAMES.index(name)]
         out[name] = {"std": float(np.std(e)), "peak": float(np.max(np.abs(e)))}
     for k, axis in enumerate("xyz"):
-        e = run["coupled"][:, k]
+        e = run.coupled[:, k]
         out[f"coupled_{axis}_mm"] = {"std": float(np.std(e)), "peak": float(np.max(np.abs(e)))}
     return out
 
 
-def _index_curves(run: Mapping[str, Any]) -> dict[str, dict[str, list[float]]]:
-    ind = run["indices"]
+def _index_curves(run: TrialRuns) -> dict[str, dict[str, list[float]]]:
+    ind = run.indices
     return {
         name: {"mean": np.mean(ind[:, :, k], axis=0).tolist(), "std": np.std(ind[:, :, k], axis=0).tolist()}
         for k, name in enumerate(INDEX_NAMES)
@@ -323,14 +515,14 @@ def compare(
     active = run_trials(trials, seed, "reduced", steps, sigma_px, power)
     baseline = run_trials(trials, seed, "baseline", steps, sigma_px, power)
     a, b = _final_stats(active), _final_stats(baseline)
-    translation = [n for n in active["estimated"] if n.endswith("_mm")]
+    translation = [n for n in active.estimated if n.endswith("_mm")]
     worst = max(translation, key=lambda n: b[n]["std"])
-    times = active["plan_times"].ravel() * 1e3
+    times = active.plan_times.ravel() * 1e3
     return {
         "trials": int(trials),
         "seed": int(seed),
-        "steps": int(active["errors"].shape[1]),
-        "power": float(active["power"]),
+        "steps": int(active.errors.shape[1]),
+        "power": float(active.power),
         "active": a,
         "baseline": b,
         "indices": {"active": _index_curves(active), "baseline": _index_curves(baseline)},
@@ -342,7 +534,7 @@ def compare(
         },
         "planning_time_ms": {"median": float(np.median(times)), "max": float(np.max(times))},
         "infeasible_steps": {
-            "active": int(np.sum(active["infeasible_steps"])),
-            "baseline": int(np.sum(baseline["infeasible_steps"])),
+            "active": int(np.sum(active.infeasible_steps)),
+            "baseline": int(np.sum(baseline.infeasible_steps)),
         },
     }

@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from autoteach import _core
 from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
+from autoteach.geometry import Camera
 
 F64Array = NDArray[np.float64]
 
@@ -98,7 +99,7 @@ def _views(points: Any, name: str, cols: int) -> list[F64Array]:
     return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Suggestion:
     """A next-view suggestion (see :func:`suggest_next_view`)."""
 
@@ -120,6 +121,31 @@ class Suggestion:
     """The candidate poses (K, 4, 4)."""
 
 
+@dataclass(frozen=True, slots=True)
+class View:
+    """The inlier observations of the planar target in one image (the fields of ``autoteach_estimate::calib::View``)."""
+
+    plane: F64Array
+    """Target coordinates ``(N, 2)`` ``[X, Y]`` of the usable points (the target plane is Z = 0)."""
+    image: F64Array
+    """Their observed pixels ``(N, 2)`` ``[u, v]``."""
+    index: list[int]
+    """Row of each point in the arrays given to :func:`calibrate`."""
+
+
+@dataclass(frozen=True, slots=True)
+class MaxEre:
+    """Max ERE and where it occurs (the fields of ``autoteach_estimate::calib::ere::MaxEre``)."""
+
+    value: float
+    """The largest expected reprojection error over the test grid (Algorithm 5.1), pixels."""
+    pixel: tuple[float, float]
+    """The grid pixel ``(u, v)`` where it occurs."""
+    expected_max: float
+    """The expected largest error over the grid, ``E[max_t |d_t|]`` from the same samples, pixels
+    (see :attr:`Calibration.expected_max_error`)."""
+
+
 class Calibration:
     """A camera calibration (wraps ``autoteach._core.CalibResult``)."""
 
@@ -130,6 +156,11 @@ class Calibration:
         self._expected_max: float | None = None
 
     # -- parameters -------------------------------------------------------------------------
+    @property
+    def camera(self) -> Camera:
+        """The calibrated camera, an :class:`autoteach.geometry.Camera` (model, params, image size)."""
+        return Camera(self.model, self.params, *self.image_size)
+
     @property
     def model(self) -> str:
         """Lens model name."""
@@ -197,6 +228,19 @@ class Calibration:
         return int(self._core.iterations)
 
     @property
+    def final_cost(self) -> float:
+        """Final cost ``½ Σ ‖r/σ_z‖²`` of the last stage."""
+        return float(self._core.final_cost)
+
+    @property
+    def views(self) -> list[View]:
+        """The inlier observations of every view (outliers removed)."""
+        return [
+            View(plane=np.ascontiguousarray(np.asarray(o)[:, :2]), image=np.asarray(i), index=[int(r) for r in rows])
+            for o, i, rows in self._core.views()
+        ]
+
+    @property
     def num_views(self) -> int:
         """Number of views."""
         return len(self._core.view_rms)
@@ -243,12 +287,13 @@ class Calibration:
 
     def max_ere_stats(
         self, samples: int = 200, grid: int = 5, seed: int = 0, *, grid_margin: float | None = None
-    ) -> dict[str, Any]:
+    ) -> MaxEre:
         """Max ERE, its pixel and the expected largest error over the grid (see :attr:`expected_max_error`)."""
         d = self._core.max_ere_stats(
             as_int(samples, "samples"), as_int(grid, "grid"), as_int(seed, "seed"), _margin(grid_margin)
         )
-        return {"max_ere": float(d["max_ere"]), "pixel": tuple(d["pixel"]), "expected_max": float(d["expected_max"])}
+        u, v = d["pixel"]
+        return MaxEre(value=float(d["max_ere"]), pixel=(float(u), float(v)), expected_max=float(d["expected_max"]))
 
     def error_map(self, step: int = 4, samples: int = 100, seed: int = 0) -> F64Array:
         """Expected reprojection error (pixels) at every ``step``-th pixel: ``(ceil(h/step), ceil(w/step))``."""
@@ -288,8 +333,6 @@ class Calibration:
             object_points: per view, target points ``(N_i, 3)`` (or ``(N_i, 2)``).
             poses: per view, the target pose ``T_ct`` (4x4) under the reference.
         """
-        from autoteach.geometry import Camera  # local import: geometry wrapper
-
         ref = reference
         if isinstance(ref, Calibration):
             ref = Camera(ref.model, ref.params, *ref.image_size)
@@ -507,7 +550,7 @@ def suggest_next_view(
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class ModelChoice:
     """One entry of :func:`select_model`."""
 
@@ -859,7 +902,7 @@ def simulate_session(
             continue
         if all(calib.free):
             st = calib.max_ere_stats(grid_margin=grid_margin)
-            ere, emax = st["max_ere"], st["expected_max"]
+            ere, emax = st.value, st.expected_max
         else:
             ere = emax = math.inf
         errs = calib.reference_errors(truth, test_obj, test_poses)

@@ -3,7 +3,7 @@
 Commands::
 
     autoteach simulate --seed 7 --frames 200 --out session.mcap   # simulate and write a log
-    autoteach demo [--seed N] [--frames N] [--out DIR] [--ukf-odometry slam|vo] [--json]  # simulate, auto-teach, report
+    autoteach demo [--seed N] [--frames N] [--out DIR] [--no-log] [--json]  # simulate, auto-teach, report
     autoteach info LOG.mcap [--json]                              # describe a log
 
 User errors (bad arguments, unreadable logs, invalid configurations) print one line to stderr
@@ -16,12 +16,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from autoteach.commands.args import int_in_range, seed
 from autoteach.errors import AutoteachError, InternalError
 
 EXIT_USER_ERROR = 2
@@ -31,23 +33,10 @@ def _progress_enabled(args: argparse.Namespace) -> bool:
     return not args.quiet and sys.stderr.isatty()
 
 
-def _int_at_least(minimum: int, requirement: str) -> Callable[[str], int]:
-    """An argparse ``type`` parsing an integer ``>= minimum``; ``requirement`` words the error."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{requirement}, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"{requirement}, got {value}")
-        return value
-
-    return parse
-
-
-_seed = _int_at_least(0, "seed must be a non-negative integer")
-_frames = _int_at_least(1, "frames must be a positive integer")
+#: At most this many frames: a session's images are held in memory (0.9 MB per 1280×720 frame).
+MAX_FRAMES = 100_000
+_seed = seed
+_frames = int_in_range(1, f"frames must be an integer in [1, {MAX_FRAMES}]", MAX_FRAMES)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -84,6 +73,12 @@ def _parser() -> argparse.ArgumentParser:
         "--no-autoteach", dest="autoteach", action="store_false", help="only simulate, do not run auto-teaching"
     )
     demo.add_argument(
+        "--no-log",
+        dest="log",
+        action="store_false",
+        help="do not keep the simulated session's MCAP log (about 0.7 MB per frame, 144 MB for 200 frames)",
+    )
+    demo.add_argument(
         "--frontend",
         choices=("detect", "simulated"),
         default="detect",
@@ -110,12 +105,15 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _simulate_and_write(args: argparse.Namespace, out: Path) -> tuple[Any, dict[str, Any]]:
+def _simulate_and_write(args: argparse.Namespace, out: Path | None) -> tuple[Any, dict[str, Any]]:
+    """Simulate a session; write its MCAP log to ``out`` unless ``out`` is None."""
     from autoteach.io import write_log
     from autoteach.sim import simulate_session
 
     progress = _progress_enabled(args)
     session = simulate_session(seed=args.seed, frames=args.frames, progress=progress)
+    if out is None:
+        return session, session.summary()
     t0 = time.perf_counter()
     compression = getattr(args, "compression", "zstd")
     write_log(session, out, compression=None if compression == "none" else compression, progress=progress)
@@ -141,7 +139,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
-    out = args.out / f"session_seed{args.seed}.mcap"
+    out = args.out / f"session_seed{args.seed}.mcap" if args.log else None
     t_start = time.perf_counter()
     session, summary = _simulate_and_write(args, out)
     summary_path = args.out / f"session_seed{args.seed}.json"
@@ -263,6 +261,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("autoteach: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print("autoteach: error: not enough memory for this request (try fewer frames or points)", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except Exception as exc:  # noqa: BLE001 - the CLI prints one line, never a traceback
+        if os.environ.get("AUTOTEACH_DEBUG"):
+            raise
+        print(
+            f"autoteach: internal error (please report; AUTOTEACH_DEBUG=1 shows the traceback): "
+            f"{type(exc).__name__}: {exc}",
+            file=sys.stderr,
+        )
+        return 1
 
 
 if __name__ == "__main__":

@@ -66,15 +66,15 @@ __all__ = [
 FitMethod = Literal["direct", "geometric"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class EllipseFit:
-    """The result of :func:`fit_ellipse`.
+    """The result of :func:`fit_ellipse` (the fields of ``autoteach_detect::ellipse::EllipseFit``).
 
     Attributes:
         ellipse: The fitted ellipse (``a ≥ b``, ``theta`` in ``(-π/2, π/2]``).
-        residual: Mean absolute orthogonal distance of the points to the ellipse (pixels): the
+        residual_mean: Mean absolute orthogonal distance of the points to the ellipse (pixels): the
             arc-grouping cost ``r(i, j)`` of the seed's Algorithm 1.
-        rms: Root-mean-square orthogonal distance (pixels).
+        residual_rms: Root-mean-square orthogonal distance (pixels).
         covariance: Covariance of ``(cx, cy, a, b, theta)``, shape ``(5, 5)``:
             ``σ̂²·(JᵀJ)⁻¹`` with ``J`` the Jacobian of the orthogonal distances and
             ``σ̂² = SSR/(n − 5)``; ``None`` for exactly 5 points. For a near-circle whose
@@ -87,8 +87,8 @@ class EllipseFit:
     """
 
     ellipse: Ellipse
-    residual: float
-    rms: float
+    residual_mean: float
+    residual_rms: float
     covariance: NDArray[np.float64] | None
     iterations: int
     converged: bool
@@ -120,8 +120,8 @@ def fit_ellipse(points: ArrayLike, method: FitMethod = "geometric") -> EllipseFi
     inner = _core.fit_ellipse(as_f64(points, "points"), method)
     return EllipseFit(
         ellipse=Ellipse._wrap(inner.ellipse),
-        residual=inner.residual,
-        rms=inner.rms,
+        residual_mean=inner.residual_mean,
+        residual_rms=inner.residual_rms,
         covariance=inner.covariance,
         iterations=inner.iterations,
         converged=inner.converged,
@@ -209,6 +209,18 @@ class WaferEdge:
     kind: Literal["upper", "lower"]
     wafer_id: int
     covariance: NDArray[np.float64] | None
+
+    @classmethod
+    def _from_core(cls, e: _core.WaferEdge) -> WaferEdge:
+        """Wraps a compiled ``_core.WaferEdge`` (every wafer-rim detector returns these)."""
+        return cls(
+            ellipse=Ellipse._wrap(e.ellipse),
+            points=e.points,
+            residual=e.residual,
+            kind=e.kind,
+            wafer_id=e.wafer_id,
+            covariance=e.covariance,
+        )
 
 
 def detect_wafers(
@@ -418,14 +430,16 @@ def detect_wafers(
         edge_profile=str(edge_profile),
         level_band_search=bool(level_band_search),
     )
-    return [
-        WaferEdge(
-            ellipse=Ellipse._wrap(e.ellipse),
-            points=e.points,
-            residual=e.residual,
-            kind=e.kind,
-            wafer_id=e.wafer_id,
-            covariance=e.covariance,
-        )
-        for e in edges
-    ]
+    return [WaferEdge._from_core(e) for e in edges]
+
+
+# --- general ellipse detection (issue 42) ---
+from autoteach.ellipse_detection import (  # noqa: E402
+    EllipseDetection,
+    EllipseDetectOptions,
+    WaferGeometry,
+    detect_ellipses,
+    detect_wafer_rims,
+)
+
+__all__ += ["EllipseDetectOptions", "EllipseDetection", "WaferGeometry", "detect_ellipses", "detect_wafer_rims"]

@@ -48,23 +48,39 @@ import math
 import sys
 from collections.abc import Callable, Sequence
 from copy import deepcopy
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
+from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
+from autoteach.geometry import so3_exp, so3_log
+from autoteach.sigma_points import (
+    JulierSigmaPoints,
+    MerweScaledSigmaPoints,
+    SimplexSigmaPoints,
+    _is_default_sqrt,
+    _is_default_subtract,
+    _SigmaPoints,
+    cholesky_upper,
+    unscented_transform,
+)
 
 __all__ = [
     "BundleAdjustResult",
     "ConstantVelocityModel",
+    "JulierSigmaPoints",
     "LeastSquaresProblem",
     "LinearModel",
     "MerweScaledSigmaPoints",
+    "SimplexSigmaPoints",
+    "SolverSummary",
     "UnscentedKalmanFilter",
     "bundle_adjust",
+    "unscented_transform",
 ]
 
 F64Array = NDArray[np.float64]
@@ -72,76 +88,15 @@ F64Array = NDArray[np.float64]
 
 
 def _matrix(a: ArrayLike, name: str) -> F64Array:
-    try:
-        m = np.array(a, dtype=np.float64, copy=True)
-    except (TypeError, ValueError) as e:
-        raise InvalidInputError(f"{name} must be a real matrix: {e}") from None
+    # as_f64 refuses complex, object, string, bool and datetime arrays (a cast would drop data).
+    m = np.array(as_f64(a, name), dtype=np.float64, copy=True)
     if m.ndim != 2:
         raise InvalidInputError(f"{name} must be two-dimensional, got shape {m.shape}")
     return m
 
 
 def _vector(a: ArrayLike, name: str) -> F64Array:
-    try:
-        return np.array(a, dtype=np.float64, copy=True).reshape(-1)
-    except (TypeError, ValueError) as e:
-        raise InvalidInputError(f"{name} must be a real vector: {e}") from None
-
-
-class MerweScaledSigmaPoints:
-    """Van der Merwe's scaled sigma points (as ``filterpy.kalman.MerweScaledSigmaPoints``).
-
-    With ``lambda = alpha**2 * (n + kappa) - n``: ``Wm[0] = lambda / (n + lambda)``,
-    ``Wc[0] = Wm[0] + 1 - alpha**2 + beta``, all other weights ``1 / (2 (n + lambda))``. The
-    points are ``x``, then ``x + U[k]`` and ``x - U[k]`` for the rows ``U[k]`` of the upper
-    Cholesky factor of ``(n + lambda) P`` (or of ``sqrt_method((n + lambda) P)``), with
-    ``subtract(x, -U[k])`` / ``subtract(x, U[k])`` when ``subtract`` is given.
-    """
-
-    def __init__(
-        self,
-        n: int,
-        alpha: float,
-        beta: float,
-        kappa: float,
-        sqrt_method: Callable[[F64Array], ArrayLike] | None = None,
-        subtract: Callable[[F64Array, F64Array], ArrayLike] | None = None,
-    ) -> None:
-        self.n = int(n)
-        self.alpha = float(alpha)
-        self.beta = float(beta)
-        self.kappa = float(kappa)
-        self.sqrt = sqrt_method
-        self.subtract = subtract
-        self.Wm, self.Wc = _core.merwe_weights(self.n, self.alpha, self.beta, self.kappa)
-
-    def num_sigmas(self) -> int:
-        """Number of sigma points, ``2n + 1``."""
-        return 2 * self.n + 1
-
-    def sigma_points(self, x: ArrayLike, P: ArrayLike) -> F64Array:  # noqa: N803 (filterpy's name)
-        """Sigma points ``(2n + 1, n)`` of mean ``x`` and covariance ``P`` (a scalar means ``P * I``)."""
-        xv = np.atleast_1d(np.asarray(x, dtype=np.float64)).reshape(-1)
-        if xv.size != self.n:
-            raise InvalidInputError(f"expected size(x) {self.n}, but size is {xv.size}")
-        Pm = np.eye(self.n) * float(P) if np.isscalar(P) else np.atleast_2d(np.asarray(P, dtype=np.float64))  # noqa: N806
-        if self.sqrt is None and self.subtract is None:
-            return _core.merwe_sigma_points(xv, Pm, self.alpha, self.beta, self.kappa)
-        lam = self.alpha**2 * (self.n + self.kappa) - self.n
-        if self.sqrt is None:
-            U = np.linalg.cholesky((lam + self.n) * Pm).T  # noqa: N806
-        else:
-            U = np.asarray(self.sqrt((lam + self.n) * Pm), dtype=np.float64)  # noqa: N806
-        sub = self.subtract if self.subtract is not None else np.subtract
-        sigmas = np.zeros((2 * self.n + 1, self.n))
-        sigmas[0] = xv
-        for k in range(self.n):
-            sigmas[k + 1] = sub(xv, -U[k])
-            sigmas[self.n + k + 1] = sub(xv, U[k])
-        return sigmas
-
-    def __repr__(self) -> str:
-        return f"MerweScaledSigmaPoints(n={self.n}, alpha={self.alpha}, beta={self.beta}, kappa={self.kappa})"
+    return np.array(as_f64(a, name), dtype=np.float64, copy=True).reshape(-1)
 
 
 class LinearModel:
@@ -240,8 +195,104 @@ class ConstantVelocityModel:
 _BUILTIN = (LinearModel, ConstantVelocityModel)
 
 
+def _noise(v: ArrayLike, d: int, name: str) -> F64Array:
+    """A noise covariance attribute as a ``(d, d)`` matrix.
+
+    A scalar (or 1-element array) is broadcast to every entry, as filterpy's ``P += noise_cov`` does.
+    """
+    try:
+        m = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise InvalidInputError(f"{name} must be a real matrix: {e}") from None
+    if m.ndim < 2 and m.size == 1:
+        return np.full((d, d), float(m.reshape(-1)[0]))
+    return _matrix(m, name)
+
+
+def _points_args(points: Any, dim_x: int, builtin: bool) -> dict[str, Any]:
+    """The compiled filter's sigma-point arguments for ``points``.
+
+    One of our families (with its non-default hooks), or an external object (filterpy's, or any
+    with ``Wm``, ``Wc``, ``sigma_points`` and ``num_sigmas``) whose ``sigma_points`` the filter calls.
+    """
+    if isinstance(points, _SigmaPoints):
+        if points.n != dim_x:
+            raise InvalidInputError(f"points.n = {points.n} must equal dim_x = {dim_x}")
+        sqrt, sub = points._hooks()
+        return {
+            "family_name": points._family,
+            "alpha": points.alpha,
+            "beta": points.beta,
+            "kappa": points.kappa,
+            "sqrt": sqrt,
+            "subtract": sub,
+        }
+    missing = [a for a in ("Wm", "Wc", "sigma_points", "num_sigmas") if not hasattr(points, a)]
+    if missing:
+        raise InvalidInputError(f"points must be a sigma-point object; {type(points).__name__} has no {missing}")
+    n = getattr(points, "n", dim_x)
+    if n != dim_x:
+        raise InvalidInputError(f"points.n = {n} must equal dim_x = {dim_x}")
+    wm = np.asarray(points.Wm, dtype=np.float64).reshape(-1)
+    wc = np.asarray(points.Wc, dtype=np.float64).reshape(-1)
+    if wm.size != points.num_sigmas() or wc.size != wm.size:
+        raise InvalidInputError(
+            f"points.Wm ({wm.size}) and points.Wc ({wc.size}) must have num_sigmas() = {points.num_sigmas()} entries"
+        )
+    if not builtin:
+        return {
+            "family_name": "merwe",
+            "alpha": 1.0,
+            "beta": 0.0,
+            "kappa": 0.0,
+            "draw": points.sigma_points,
+            "wm": wm,
+            "wc": wc,
+        }
+    # A built-in model draws in Rust: filterpy's own families (default sqrt and subtract) map
+    # onto ours; the weights must then agree.
+    ours = _as_ours(points)
+    if ours is None:
+        raise InvalidInputError(
+            f"a built-in model needs autoteach's sigma points (or filterpy's with the default sqrt_method and "
+            f"subtract), got {type(points).__name__}: pass Python callbacks for other sigma points"
+        )
+    if not (np.allclose(ours.Wm, wm, rtol=1e-12, atol=1e-12) and np.allclose(ours.Wc, wc, rtol=1e-12, atol=1e-12)):
+        raise InvalidInputError(f"the weights of {type(points).__name__} are not those of its family")
+    return _points_args(ours, dim_x, builtin)
+
+
+def _as_ours(points: Any) -> _SigmaPoints | None:
+    """Our family equal to filterpy's sigma-point object ``points`` (default hooks), else ``None``."""
+    name = type(points).__name__
+    if not (
+        _is_default_sqrt(getattr(points, "sqrt", None)) and _is_default_subtract(getattr(points, "subtract", None))
+    ):
+        return None
+    if name == "MerweScaledSigmaPoints":
+        return MerweScaledSigmaPoints(points.n, points.alpha, points.beta, points.kappa)
+    if name == "JulierSigmaPoints":
+        return JulierSigmaPoints(points.n, points.kappa)
+    if name == "SimplexSigmaPoints":
+        return SimplexSigmaPoints(points.n, getattr(points, "alpha", 1.0))
+    return None
+
+
+def _log_gauss(y: F64Array, S: F64Array) -> float:  # noqa: N803
+    """``log N(y; 0, S)``, with the pseudo-inverse and -determinant of a singular ``S`` (scipy's ``allow_singular``)."""
+    w, v = np.linalg.eigh(S)
+    eps = 1e6 * np.finfo(np.float64).eps * max(float(np.abs(w).max()), 1e-300)
+    keep = w > eps
+    proj = v[:, keep].T @ y
+    maha = float(np.sum(proj**2 / w[keep]))
+    return -0.5 * (maha + float(np.sum(np.log(w[keep]))) + int(keep.sum()) * math.log(2.0 * math.pi))
+
+
 class UnscentedKalmanFilter:
     """Unscented Kalman filter with filterpy's interface (``filterpy.kalman.UnscentedKalmanFilter``).
+
+    A drop-in replacement: filterpy's own test suite passes with only its import changed
+    (``benchmarks/filterpy_suite.py``). The filter of seed 000_3b1454b2b2194811.txt §5.2.
 
     Args:
         dim_x: State dimension.
@@ -250,12 +301,14 @@ class UnscentedKalmanFilter:
         hx: Measurement function ``hx(x, **hx_args)``, or ``None`` with a built-in model.
         fx: Process function ``fx(x, dt, **fx_args)``, or a :class:`LinearModel` /
             :class:`ConstantVelocityModel` (the fast path).
-        points: A :class:`MerweScaledSigmaPoints` with ``n == dim_x`` (its ``alpha``, ``beta``,
-            ``kappa``, ``sqrt_method`` and ``subtract`` are used). Another sigma-point object
-            with ``n``, ``alpha``, ``beta``, ``kappa`` (e.g. filterpy's) contributes those four.
-        sqrt_fn: Kept as ``self.msqrt`` for compatibility; like filterpy, the square root
-            actually used is the sigma points' ``sqrt_method``.
-        x_mean_fn: ``x_mean_fn(sigmas, Wm)`` mean of state sigma points ``(2n+1, n)``.
+        points: Sigma points with ``n == dim_x``: :class:`MerweScaledSigmaPoints`,
+            :class:`JulierSigmaPoints`, :class:`SimplexSigmaPoints` (drawn in Rust, with their
+            ``sqrt_method``/``subtract`` hooks if given), or any object with ``Wm``, ``Wc``,
+            ``sigma_points(x, P)`` and ``num_sigmas()`` such as filterpy's (its weights are read
+            and its ``sigma_points`` called, exactly as filterpy does).
+        sqrt_fn: Kept as ``self.msqrt`` (like filterpy, the square root actually used is the
+            sigma points' ``sqrt_method``).
+        x_mean_fn: ``x_mean_fn(sigmas, Wm)`` mean of state sigma points ``(N, n)``.
         z_mean_fn: Likewise for measurement sigma points.
         residual_x: ``residual_x(a, b)`` state difference (e.g. wrapping angles).
         residual_z: ``residual_z(a, b)`` measurement difference.
@@ -267,9 +320,14 @@ class UnscentedKalmanFilter:
         dim_w: Process-noise dimension in the augmented form (default ``dim_x``).
         dim_v: Measurement-noise dimension in the augmented form (default ``dim_z``).
 
-    Attributes ``x``, ``P``, ``Q``, ``R`` are NumPy arrays you may set or modify in place;
-    ``x_prior``, ``P_prior``, ``x_post``, ``P_post``, ``K``, ``y``, ``S``, ``z``,
-    ``log_likelihood``, ``likelihood``, ``mahalanobis`` are as in filterpy.
+    Attributes ``x``, ``P``, ``Q``, ``R`` are NumPy arrays you may set or modify in place (a
+    scalar ``Q`` or ``R`` is broadcast as filterpy's ``P += noise`` does); ``x_prior``,
+    ``P_prior`` (set by :meth:`predict`), ``x_post``, ``P_post`` (set by :meth:`update`), ``K``,
+    ``y``, ``S``, ``SI``, ``z``, ``sigmas_f``, ``sigmas_h``, ``log_likelihood``, ``likelihood``,
+    ``mahalanobis``, ``inv`` and ``msqrt`` are as in filterpy. ``predict``/``update``/
+    ``batch_filter``/``rts_smoother`` run in Rust unless a custom ``UT``, an overridden
+    ``inv`` or per-epoch ``Fs`` asks for filterpy's Python formulation, which is then followed
+    step by step (with the same results).
     """
 
     # The compiled filter and the sync bookkeeping live in slots, outside ``__dict__``, so that
@@ -283,7 +341,7 @@ class UnscentedKalmanFilter:
         dt: float,
         hx: Callable[..., ArrayLike] | None,
         fx: Callable[..., ArrayLike] | LinearModel | ConstantVelocityModel,
-        points: MerweScaledSigmaPoints,
+        points: Any,
         sqrt_fn: Callable[[F64Array], ArrayLike] | None = None,
         x_mean_fn: Callable[[F64Array, F64Array], ArrayLike] | None = None,
         z_mean_fn: Callable[[F64Array, F64Array], ArrayLike] | None = None,
@@ -299,12 +357,14 @@ class UnscentedKalmanFilter:
     ) -> None:
         if noise not in ("additive", "augmented"):
             raise InvalidInputError(f"noise must be 'additive' or 'augmented', got {noise!r}")
-        if not isinstance(points, MerweScaledSigmaPoints):
-            points = MerweScaledSigmaPoints(points.n, points.alpha, points.beta, points.kappa)
-        if points.n != dim_x:
-            raise InvalidInputError(f"points.n = {points.n} must equal dim_x = {dim_x}")
         augmented = noise == "augmented"
         self._model = fx if isinstance(fx, _BUILTIN) else None
+        spec = _points_args(points, int(dim_x), builtin=self._model is not None)
+        if "draw" in spec and (square_root or augmented):
+            raise InvalidInputError(
+                "external sigma points (e.g. filterpy's) run in the standard filter with additive noise; "
+                "use autoteach's sigma-point classes for square_root=True or noise='augmented'"
+            )
         if self._model is not None:
             model = self._model
             if hx is not None and hx is not model:
@@ -313,19 +373,20 @@ class UnscentedKalmanFilter:
                 raise InvalidInputError(
                     f"the model has dim_x={model.dim_x}, dim_z={model.dim_z}; got dim_x={dim_x}, dim_z={dim_z}"
                 )
-            hooks = [x_mean_fn, z_mean_fn, residual_x, residual_z, state_add, points.sqrt, points.subtract]
+            hooks = [x_mean_fn, z_mean_fn, residual_x, residual_z, state_add, spec["sqrt"], spec["subtract"]]
             if any(h is not None for h in hooks) or dim_w is not None or dim_v is not None:
                 raise InvalidInputError(
                     "built-in models use vector-space means and residuals; pass Python callbacks for custom hooks"
                 )
             self._inner = _core.UkfFilter.builtin(
                 model._inner,
-                points.alpha,
-                points.beta,
-                points.kappa,
+                spec["alpha"],
+                spec["beta"],
+                spec["kappa"],
                 square_root=square_root,
                 augmented=augmented,
                 repair=repair,
+                family_name=spec["family_name"],
             )
         else:
             if not callable(fx) or not callable(hx):
@@ -335,27 +396,31 @@ class UnscentedKalmanFilter:
                 int(dim_z),
                 fx,
                 hx,
-                points.alpha,
-                points.beta,
-                points.kappa,
+                spec["alpha"],
+                spec["beta"],
+                spec["kappa"],
                 x_mean=x_mean_fn,
                 z_mean=z_mean_fn,
                 residual_x=residual_x,
                 residual_z=residual_z,
                 state_add=state_add,
-                subtract=points.subtract,
-                sqrt=points.sqrt,
+                subtract=spec.get("subtract"),
+                sqrt=spec.get("sqrt"),
                 square_root=square_root,
                 augmented=augmented,
                 repair=repair,
                 dim_w=dim_w,
                 dim_v=dim_v,
+                family_name=spec["family_name"],
+                draw=spec.get("draw"),
+                wm=spec.get("wm"),
+                wc=spec.get("wc"),
             )
         self._dim_x = int(dim_x)
         self._dim_z = int(dim_z)
         self._dt = float(dt)
         self.points_fn = points
-        self._num_sigmas = points.num_sigmas()
+        self._num_sigmas = int(points.num_sigmas())
         self.fx = fx
         self.hx = hx
         self.x_mean = x_mean_fn
@@ -363,8 +428,8 @@ class UnscentedKalmanFilter:
         self.residual_x = residual_x if residual_x is not None else np.subtract
         self.residual_z = residual_z if residual_z is not None else np.subtract
         self.state_add = state_add if state_add is not None else np.add
-        self.msqrt = sqrt_fn
-        self.Wm, self.Wc = points.Wm, points.Wc
+        self.msqrt = sqrt_fn if sqrt_fn is not None else cholesky_upper
+        self.Wm, self.Wc = np.asarray(points.Wm, dtype=np.float64), np.asarray(points.Wc, dtype=np.float64)
         self.square_root = bool(square_root)
         self.noise = noise
         self.repair = bool(repair)
@@ -373,6 +438,7 @@ class UnscentedKalmanFilter:
         self.P: F64Array = np.eye(dim_x)
         self.Q: F64Array = np.asarray(self._inner.Q)
         self.R: F64Array = np.asarray(self._inner.R)
+        self._noise_dims = (self.Q.shape[0], self.R.shape[0])
         self.x_prior = self.x.copy()
         self.P_prior = self.P.copy()
         self.x_post = self.x.copy()
@@ -380,15 +446,23 @@ class UnscentedKalmanFilter:
         self.K = np.zeros((dim_x, dim_z))
         self.y = np.zeros(dim_z)
         self.S = np.zeros((dim_z, dim_z))
+        self.SI = np.zeros((dim_z, dim_z))
         self.z = np.array([[None] * dim_z]).T
-        self._log_likelihood = math.log(sys.float_info.min)
+        # filterpy's sigmas_f / sigmas_h: arrays, or None while the filter can derive them
+        # (the prior's sigma points; hx of those) when first read.
+        self._sigmas_f: F64Array | None = np.zeros((self._num_sigmas, self._dim_x))
+        self._sigmas_h: F64Array | None = np.zeros((self._num_sigmas, self._dim_z))
+        self._last_hx: tuple[Callable[..., ArrayLike] | None, dict[str, Any]] = (None, {})
+        self._log_likelihood: float | None = math.log(sys.float_info.min)
+        self._likelihood: float | None = sys.float_info.min
+        self._mahalanobis: float | None = None
         self._synced: tuple[F64Array, F64Array, F64Array, F64Array] | None = None
 
     @classmethod
     def from_model(
         cls,
         model: LinearModel | ConstantVelocityModel,
-        points: MerweScaledSigmaPoints,
+        points: Any,
         dt: float | None = None,
         **options: Any,
     ) -> UnscentedKalmanFilter:
@@ -405,12 +479,15 @@ class UnscentedKalmanFilter:
 
     # -- synchronisation with the compiled filter ---------------------------------------------
 
+    def _qr(self) -> tuple[F64Array, F64Array]:
+        q_dim, r_dim = self._noise_dims
+        return _noise(self.Q, q_dim, "Q"), _noise(self.R, r_dim, "R")
+
     def _push(self) -> None:
         """Sends x, P, Q, R to the compiled filter if they changed since the last sync."""
         x = _vector(self.x, "x")
         P = _matrix(self.P, "P")  # noqa: N806
-        Q = _matrix(self.Q, "Q")  # noqa: N806
-        R = _matrix(self.R, "R")  # noqa: N806
+        Q, R = self._qr()  # noqa: N806
         old = self._synced
         if old is not None and all(np.array_equal(a, b) for a, b in zip((x, P, Q, R), old, strict=True)):
             return
@@ -431,44 +508,158 @@ class UnscentedKalmanFilter:
         if prior:
             self.x_prior = self.x.copy()
             self.P_prior = self.P.copy()
+            self._sigmas_f = None
         if post:
             self.x_post = self.x.copy()
             self.P_post = self.P.copy()
-        self._synced = (x.copy(), self.P.copy(), _matrix(self.Q, "Q"), _matrix(self.R, "R"))
+        # Q and R are those sent by the _push that preceded this call.
+        Q, R = self._qr() if self._synced is None else self._synced[2:]  # noqa: N806
+        self._synced = (x.copy(), self.P.copy(), Q, R)
+
+    def _custom(self, UT: Any) -> bool:  # noqa: N803
+        """True when filterpy's Python formulation must be followed (a custom UT or inverse)."""
+        return UT is not None or self.inv is not np.linalg.inv
+
+    def _after_update(self, z: Any) -> None:
+        """Reads the compiled filter's update results into filterpy's attributes."""
+        inner = self._inner
+        self.K = np.asarray(inner.K)
+        self.y = np.asarray(inner.y)
+        self.S = np.asarray(inner.S)
+        self.SI = self.inv(self.S)
+        self.z = deepcopy(z)
+        self._sigmas_h = None
+        self._log_likelihood = float(inner.log_likelihood)
+        self._likelihood = None
+        self._mahalanobis = None
 
     # -- filterpy interface --------------------------------------------------------------------
 
+    @property
+    def sigmas_f(self) -> F64Array:
+        """Sigma points ``(num_sigmas, dim_x)``.
+
+        After :meth:`predict` those of the prior (redrawn, as filterpy); after
+        :meth:`compute_process_sigmas` their images under ``fx``.
+        """
+        if self._sigmas_f is None:
+            self._sigmas_f = np.asarray(
+                self._inner.sigma_points(_vector(self.x_prior, "x"), _matrix(self.P_prior, "P"))
+            )
+        return self._sigmas_f
+
+    @sigmas_f.setter
+    def sigmas_f(self, value: ArrayLike) -> None:
+        self._sigmas_f = np.asarray(value, dtype=np.float64)
+
+    @property
+    def sigmas_h(self) -> F64Array:
+        """``hx`` of :attr:`sigmas_f` at the last :meth:`update`; ``(num_sigmas, dim_z)``."""
+        if self._sigmas_h is None:
+            hx, hx_args = self._last_hx
+            h = self._hx(hx)
+            self._sigmas_h = np.atleast_2d(
+                np.array([np.asarray(h(s, **hx_args), dtype=np.float64).reshape(-1) for s in self.sigmas_f])
+            )
+        return self._sigmas_h
+
+    @sigmas_h.setter
+    def sigmas_h(self, value: ArrayLike) -> None:
+        self._sigmas_h = np.asarray(value, dtype=np.float64)
+
+    def _fx(self, fx: Callable[..., ArrayLike] | None) -> Callable[..., ArrayLike]:
+        if fx is not None:
+            return fx
+        return self._model.fx if self._model is not None else self.fx  # type: ignore[return-value]
+
+    def _hx(self, hx: Callable[..., ArrayLike] | None) -> Callable[..., ArrayLike]:
+        if hx is not None:
+            return hx
+        return self._model.hx if self._model is not None else self.hx  # type: ignore[return-value]
+
+    def compute_process_sigmas(
+        self, dt: float | None = None, fx: Callable[..., ArrayLike] | None = None, **fx_args: Any
+    ) -> None:
+        """``sigmas_f[i] = fx(sigma_i, dt, **fx_args)`` for the sigma points of the current (x, P), as filterpy."""
+        dt = self._dt if dt is None else float(dt)
+        f = self._fx(fx)
+        sigmas = self.points_fn.sigma_points(self.x, self.P)
+        out = np.zeros((self._num_sigmas, self._dim_x))
+        for i, s in enumerate(sigmas):
+            out[i] = np.asarray(f(s, dt, **fx_args), dtype=np.float64).reshape(-1)
+        self._sigmas_f = out
+
+    def cross_variance(self, x: ArrayLike, z: ArrayLike, sigmas_f: ArrayLike, sigmas_h: ArrayLike) -> F64Array:
+        """``Pxz = sum_i Wc_i residual_x(sigmas_f[i], x) residual_z(sigmas_h[i], z)^T``."""
+        sf = np.atleast_2d(np.asarray(sigmas_f, dtype=np.float64))
+        sh = np.atleast_2d(np.asarray(sigmas_h, dtype=np.float64))
+        if sf.shape[0] != self.Wc.size or sh.shape[0] != self.Wc.size:
+            raise InvalidInputError(
+                f"sigmas_f ({sf.shape[0]}) and sigmas_h ({sh.shape[0]}) must have {self.Wc.size} rows (sigma points)"
+            )
+        pxz = np.zeros((sf.shape[1], sh.shape[1]))
+        for i in range(sf.shape[0]):
+            dx = np.asarray(self.residual_x(sf[i], x), dtype=np.float64).reshape(-1)
+            dz = np.asarray(self.residual_z(sh[i], z), dtype=np.float64).reshape(-1)
+            pxz += self.Wc[i] * np.outer(dx, dz)
+        return pxz
+
     def predict(
-        self, dt: float | None = None, UT: Any = None, fx: Callable[..., ArrayLike] | None = None, **fx_args: Any
-    ) -> None:  # noqa: N803
+        self,
+        dt: float | None = None,
+        UT: Callable[..., tuple[ArrayLike, ArrayLike]] | None = None,  # noqa: N803
+        fx: Callable[..., ArrayLike] | None = None,
+        **fx_args: Any,
+    ) -> None:
         """Predict over ``dt`` (default the constructor's); ``fx_args`` go to ``fx``.
 
-        With a built-in model, ``u=`` is the control input and no other argument is accepted.
+        With a built-in model, ``u=`` is the control input. ``UT(sigmas, Wm, Wc, Q, x_mean_fn,
+        residual_x)`` replaces the unscented transform (then the step follows filterpy in Python).
         """
-        if UT is not None:
-            raise InvalidInputError("a custom UT is not supported: customise with x_mean_fn / residual_x")
         dt = self._dt if dt is None else float(dt)
+        if UT is not None:
+            self._predict_python(dt, UT, fx, fx_args)
+            return
         self._push()
         if self._model is not None:
             u = fx_args.pop("u", None)
             if fx is not None or fx_args:
-                raise InvalidInputError("a built-in model takes only u= in predict()")
+                raise InvalidInputError("a built-in model takes only u= in predict() (or a custom UT)")
             self._inner.predict(dt, u=None if u is None else _vector(u, "u"))
         else:
             self._inner.predict(dt, fx_kwargs=fx_args or None, fx=fx)
         self._pull(prior=True, post=False)
 
+    def _ut(self, UT: Any, sigmas: F64Array, noise: F64Array, mean: Any, residual: Any) -> tuple[F64Array, F64Array]:  # noqa: N803
+        out = UT(sigmas, self.Wm, self.Wc, noise, mean, residual)
+        try:
+            m, c = out
+            return np.asarray(m, dtype=np.float64), np.atleast_2d(np.asarray(c, dtype=np.float64))
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"UT must return (mean, covariance), got {type(out).__name__}") from None
+
+    def _predict_python(self, dt: float, UT: Any, fx: Any, fx_args: dict[str, Any]) -> None:  # noqa: N803
+        if self.noise != "additive":
+            raise InvalidInputError("a custom UT needs additive noise")
+        self.compute_process_sigmas(dt, fx, **fx_args)
+        x, P = self._ut(UT or unscented_transform, self.sigmas_f, self.Q, self.x_mean, self.residual_x)  # noqa: N806
+        self.x, self.P = x, P
+        self._sigmas_f = np.asarray(self.points_fn.sigma_points(self.x, self.P), dtype=np.float64)
+        self.x_prior = np.copy(self.x)
+        self.P_prior = np.copy(self.P)
+
     def update(
         self,
         z: ArrayLike | None,
         R: ArrayLike | float | None = None,  # noqa: N803
-        UT: Any = None,  # noqa: N803
+        UT: Callable[..., tuple[ArrayLike, ArrayLike]] | None = None,  # noqa: N803
         hx: Callable[..., ArrayLike] | None = None,
         **hx_args: Any,
     ) -> None:
-        """Update with measurement ``z`` (``None``: no measurement); ``R`` overrides ``self.R`` once."""
-        if UT is not None:
-            raise InvalidInputError("a custom UT is not supported: customise with z_mean_fn / residual_z")
+        """Update with measurement ``z`` (``None``: no measurement); ``R`` overrides ``self.R`` once.
+
+        A custom ``UT`` or an overridden ``self.inv`` makes the step follow filterpy in Python.
+        """
         if z is None:
             self.z = np.array([[None] * self._dim_z]).T
             self.x_post = self.x.copy()
@@ -476,21 +667,45 @@ class UnscentedKalmanFilter:
             self._inner.skip_update()
             return
         if R is not None:
-            R = np.eye(self._dim_z) * float(R) if np.isscalar(R) else _matrix(R, "R")  # noqa: N806
-        if self._model is not None and (hx is not None or hx_args):
+            R = np.eye(self._dim_z) * float(R) if np.ndim(R) == 0 else _matrix(R, "R")  # type: ignore[arg-type]  # noqa: N806
+        if self._model is not None and (hx is not None or hx_args) and not self._custom(UT):
             raise InvalidInputError("a built-in model takes no hx override or arguments in update()")
+        if self._custom(UT):
+            self._update_python(z, R, UT or unscented_transform, hx, hx_args)
+            return
         self._push()
         if self._model is not None:
             self._inner.update(_vector(z, "z"), r=R)
         else:
             self._inner.update(_vector(z, "z"), r=R, hx_kwargs=hx_args or None, hx=hx)
+        self._last_hx = (hx, dict(hx_args))
         self._pull(prior=False, post=True)
-        inner = self._inner
-        self.K = np.asarray(inner.K)
-        self.y = np.asarray(inner.y)
-        self.S = np.asarray(inner.S)
+        self._after_update(z)
+
+    def _update_python(self, z: Any, R: Any, UT: Any, hx: Any, hx_args: dict[str, Any]) -> None:  # noqa: N803
+        if self.noise != "additive":
+            raise InvalidInputError("a custom UT or inv needs additive noise")
+        h = self._hx(hx)
+        R = _noise(self.R, self._dim_z, "R") if R is None else R  # noqa: N806
+        sigmas_f = self.sigmas_f
+        sigmas_h = np.atleast_2d(
+            np.array([np.asarray(h(s, **hx_args), dtype=np.float64).reshape(-1) for s in sigmas_f])
+        )
+        zp, S = self._ut(UT, sigmas_h, R, self.z_mean, self.residual_z)  # noqa: N806
+        SI = np.asarray(self.inv(S), dtype=np.float64)  # noqa: N806
+        pxz = self.cross_variance(self.x, zp, sigmas_f, sigmas_h)
+        K = pxz @ SI  # noqa: N806
+        y = np.asarray(self.residual_z(np.asarray(z, dtype=np.float64).reshape(-1), zp), dtype=np.float64)
+        self.x = np.asarray(self.state_add(self.x, K @ y), dtype=np.float64)
+        self.P = self.P - K @ S @ K.T
+        self.K, self.y, self.S, self.SI = K, y, S, SI
+        self._sigmas_h = sigmas_h
         self.z = deepcopy(z)
-        self._log_likelihood = float(inner.log_likelihood)
+        self.x_post = self.x.copy()
+        self.P_post = self.P.copy()
+        self._log_likelihood = None
+        self._likelihood = None
+        self._mahalanobis = None
 
     def batch(
         self,
@@ -504,10 +719,10 @@ class UnscentedKalmanFilter:
         """Run predict/update for every measurement in one call into Rust.
 
         ``zs``: ``(n, dim_z)`` (``None`` entries are missing measurements); ``us``: ``(n, dim_u)``
-        control inputs (built-in models); ``dts``: scalar or ``(n,)``; ``Rs``: ``(n, dim_z, dim_z)``
-        or ``(n,)`` scalars. Returns ``xs``, ``Ps`` (posteriors), ``log_likelihoods`` (NaN where
-        missing) and, with ``priors``, ``x_priors``, ``P_priors``. The filter ends in the last
-        posterior.
+        control inputs (built-in models); ``dts``: scalar or ``(n,)``; ``Rs``: ``(n, dim_z, dim_z)``,
+        ``(n,)`` scalars or a list with ``None`` for ``self.R``. Returns ``xs``, ``Ps`` (posteriors),
+        ``log_likelihoods`` (NaN where missing) and, with ``priors``, ``x_priors``, ``P_priors``.
+        The filter ends in the last posterior.
         """
         n = len(zs)  # type: ignore[arg-type]
         Z, mask = self._measurements(zs, n)  # noqa: N806
@@ -518,12 +733,8 @@ class UnscentedKalmanFilter:
             u_arr = u_arr[:, None]
         dt_arr = None
         if dts is not None:
-            dt_arr = np.full(n, float(dts)) if np.isscalar(dts) else np.asarray(dts, dtype=np.float64)  # type: ignore[arg-type]
-        r_arr = None
-        if Rs is not None:
-            r_arr = np.asarray(Rs, dtype=np.float64)
-            if r_arr.ndim == 1:
-                r_arr = r_arr[:, None, None] * np.eye(self._dim_z)
+            dt_arr = np.full(n, float(dts)) if np.ndim(dts) == 0 else np.asarray(dts, dtype=np.float64)  # type: ignore[arg-type]
+        r_arr = None if Rs is None else self._rs(Rs, n)
         self._push()
         try:
             out = self._inner.batch(
@@ -535,13 +746,28 @@ class UnscentedKalmanFilter:
         if n:
             self.x_prior = np.asarray(self._inner.x_prior)
             self.P_prior = np.asarray(self._inner.P_prior)
+            self._sigmas_f = None
             if mask[-1]:
-                inner = self._inner
-                self.K = np.asarray(inner.K)
-                self.y = np.asarray(inner.y)
-                self.S = np.asarray(inner.S)
-                self.z = deepcopy(zs[-1])  # type: ignore[index]
-                self._log_likelihood = float(inner.log_likelihood)
+                self._last_hx = (None, {})
+                self._after_update(zs[-1])  # type: ignore[index]
+        return out
+
+    def _rs(self, Rs: Any, n: int) -> F64Array:  # noqa: N803
+        """Per-epoch measurement noises as ``(n, dim_z, dim_z)``: ``None`` is ``self.R``, a scalar ``r * I``."""
+        if isinstance(Rs, np.ndarray) and Rs.ndim == 3:
+            return np.asarray(Rs, dtype=np.float64)
+        items = list(Rs)
+        if len(items) != n:
+            raise InvalidInputError(f"Rs must have one entry per measurement ({n}), got {len(items)}")
+        m = self._dim_z
+        out = np.empty((n, m, m))
+        for i, r in enumerate(items):
+            if r is None:
+                out[i] = _noise(self.R, m, "R")
+            elif np.ndim(r) == 0:
+                out[i] = np.eye(m) * float(r)
+            else:
+                out[i] = _matrix(r, f"Rs[{i}]")
         return out
 
     def _measurements(self, zs: Any, n: int) -> tuple[F64Array, list[bool]]:
@@ -569,38 +795,121 @@ class UnscentedKalmanFilter:
         zs: Sequence[ArrayLike | None] | ArrayLike,
         Rs: ArrayLike | None = None,  # noqa: N803
         dts: ArrayLike | float | None = None,
-        UT: Any = None,  # noqa: N803
+        UT: Callable[..., tuple[ArrayLike, ArrayLike]] | None = None,  # noqa: N803
         saver: Any = None,
         us: ArrayLike | None = None,
     ) -> tuple[F64Array, F64Array]:
         """Filter all measurements: ``(means (n, dim_x), covariances (n, dim_x, dim_x))`` as filterpy.
 
-        Without ``saver`` the whole run is one call into Rust (:meth:`batch`); with a
-        ``filterpy.common.Saver`` it steps in Python and calls ``saver.save()`` after each epoch.
+        Without ``saver`` (and without a custom ``UT`` or ``inv``) the whole run is one call into
+        Rust (:meth:`batch`); otherwise it steps through :meth:`predict` / :meth:`update` and calls
+        ``saver.save()`` after each epoch, as filterpy does.
         """
-        if UT is not None:
-            raise InvalidInputError("a custom UT is not supported: customise with x_mean_fn / residual_x")
         n = len(zs)  # type: ignore[arg-type]
-        if saver is None:
+        if saver is None and not self._custom(UT):
             out = self.batch(zs, us=us, dts=dts, Rs=Rs, priors=False)
             means, covs = out["xs"], out["Ps"]
         else:
             means = np.zeros((n, self._dim_x))
             covs = np.zeros((n, self._dim_x, self._dim_x))
-            dt_list = [self._dt] * n if dts is None else ([float(dts)] * n if np.isscalar(dts) else list(dts))  # type: ignore[arg-type]
+            dt_list = [self._dt] * n if dts is None else ([float(dts)] * n if np.ndim(dts) == 0 else list(dts))  # type: ignore[arg-type]
             r_list = [None] * n if Rs is None else list(Rs)  # type: ignore[arg-type]
             for i, z in enumerate(zs):  # type: ignore[arg-type]
                 if us is not None:
-                    self.predict(dt=dt_list[i], u=np.asarray(us)[i])
+                    self.predict(dt=dt_list[i], UT=UT, u=np.asarray(us)[i])
                 else:
-                    self.predict(dt=dt_list[i])
-                self.update(z, r_list[i])
+                    self.predict(dt=dt_list[i], UT=UT)
+                self.update(z, r_list[i], UT=UT)
                 means[i] = np.asarray(self.x).reshape(-1)
                 covs[i] = self.P
-                saver.save()
+                if saver is not None:
+                    saver.save()
         if np.ndim(self.x) == 2:
             means = means[:, :, None]
         return means, covs
+
+    def rts_smoother(
+        self,
+        Xs: ArrayLike,  # noqa: N803 (filterpy's names)
+        Ps: ArrayLike,  # noqa: N803
+        Qs: ArrayLike | None = None,  # noqa: N803
+        dts: ArrayLike | float | None = None,
+        UT: Callable[..., tuple[ArrayLike, ArrayLike]] | None = None,  # noqa: N803
+        *,
+        Fs: Sequence[Callable[..., ArrayLike]] | None = None,  # noqa: N803
+        us: ArrayLike | None = None,
+    ) -> tuple[F64Array, F64Array, F64Array]:
+        """The unscented Rauch-Tung-Striebel smoother of a filtered run: ``(xs, Ps, Ks)`` as filterpy.
+
+        ``Xs`` ``(n, dim_x)`` and ``Ps`` ``(n, dim_x, dim_x)`` are the filtered means and covariances
+        (e.g. from :meth:`batch_filter`); ``Qs`` one process noise per epoch (default ``self.Q``;
+        filterpy ignores ``Qs`` and always uses ``self.Q``, so the two agree when ``Qs`` equals
+        ``self.Q``); ``dts`` a scalar or one step per epoch (default the filter's ``dt``). ``Fs``
+        (keyword) gives one process function per epoch, ``us`` inputs of a built-in model. Runs in
+        Rust (built-in models without the GIL) unless a custom ``UT``, ``inv`` or ``Fs`` asks for
+        filterpy's Python formulation. The equations are in
+        :func:`autoteach_estimate::ukf::rts_smoother` (Rust docs).
+        """
+        xs = np.asarray(Xs, dtype=np.float64)
+        if xs.ndim == 3 and xs.shape[2] == 1:
+            xs = xs[:, :, 0]
+        ps = np.asarray(Ps, dtype=np.float64)
+        if xs.ndim != 2 or xs.shape[1] != self._dim_x:
+            raise InvalidInputError(f"Xs must have shape (n, {self._dim_x}), got {xs.shape}")
+        n = xs.shape[0]
+        if len(ps) != n:
+            raise InvalidInputError(f"Xs and Ps must have the same length, got {n} and {len(ps)}")
+        dt_arr = (
+            np.full(n, self._dt)
+            if dts is None
+            else (np.full(n, float(dts)) if np.ndim(dts) == 0 else np.asarray(dts, dtype=np.float64))
+        )  # type: ignore[arg-type]
+        if Qs is None:
+            q_arr = _noise(self.Q, self._dim_x, "Q")
+        else:
+            q_list = list(Qs) if not isinstance(Qs, np.ndarray) else Qs
+            q_arr = np.array([_noise(q, self._dim_x, f"Qs[{i}]") for i, q in enumerate(q_list)])
+        if self.noise != "additive":
+            raise InvalidInputError("the RTS smoother needs additive noise")
+        if self._custom(UT) or Fs is not None:
+            return self._rts_python(xs, ps, q_arr, dt_arr, UT or unscented_transform, Fs)
+        u_arr = None if us is None else np.asarray(us, dtype=np.float64)
+        if u_arr is not None and u_arr.ndim == 1:
+            u_arr = u_arr[:, None]
+        if u_arr is not None and self._model is None:
+            raise InvalidInputError("us is only for built-in models")
+        out_x, out_p, out_k = self._inner.rts_smoother(xs, ps, q_arr, dt_arr, us=u_arr)
+        return np.asarray(out_x), np.asarray(out_p), np.asarray(out_k)
+
+    def _rts_python(
+        self,
+        xs: F64Array,
+        ps: F64Array,
+        q_arr: F64Array,
+        dts: F64Array,
+        UT: Any,
+        Fs: Any,  # noqa: N803
+    ) -> tuple[F64Array, F64Array, F64Array]:
+        n, dim = xs.shape
+        if Fs is not None and len(Fs) != n:
+            raise InvalidInputError(f"Fs must have one process function per epoch ({n}), got {len(Fs)}")
+        out_x, out_p = xs.copy(), ps.copy()
+        gains = np.zeros((n, dim, dim))
+        for k in reversed(range(n - 1)):
+            f = self._fx(None if Fs is None else Fs[k])
+            sigmas = np.asarray(self.points_fn.sigma_points(out_x[k], out_p[k]), dtype=np.float64)
+            sf = np.array([np.asarray(f(s, dts[k]), dtype=np.float64).reshape(-1) for s in sigmas])
+            xb, pb = self._ut(UT, sf, q_arr if q_arr.ndim == 2 else q_arr[k], self.x_mean, self.residual_x)
+            pxb = np.zeros((dim, dim))
+            for i in range(len(sigmas)):
+                dy = np.asarray(self.residual_x(sf[i], xb), dtype=np.float64).reshape(-1)
+                dx = np.asarray(self.residual_x(sigmas[i], xs[k]), dtype=np.float64).reshape(-1)
+                pxb += self.Wc[i] * np.outer(dx, dy)
+            gain = pxb @ np.asarray(self.inv(pb), dtype=np.float64)
+            out_x[k] += gain @ np.asarray(self.residual_x(out_x[k + 1], xb), dtype=np.float64).reshape(-1)
+            out_p[k] += gain @ (out_p[k + 1] - pb) @ gain.T
+            gains[k] = gain
+        return out_x, out_p, gains
 
     # -- derived quantities ------------------------------------------------------------------
 
@@ -616,25 +925,26 @@ class UnscentedKalmanFilter:
 
     @property
     def log_likelihood(self) -> float:
-        """Gaussian log-likelihood of the last measurement."""
+        """Gaussian log-likelihood of the last measurement (``log N(y; 0, S)``)."""
+        if self._log_likelihood is None:
+            self._log_likelihood = _log_gauss(np.asarray(self.y, dtype=np.float64).reshape(-1), np.atleast_2d(self.S))
         return self._log_likelihood
 
     @property
     def likelihood(self) -> float:
         """``exp(log_likelihood)``, at least ``sys.float_info.min``."""
-        lik = math.exp(self._log_likelihood)
-        return lik if lik > 0.0 else sys.float_info.min
-
-    @property
-    def SI(self) -> F64Array:  # noqa: N802 (filterpy's name)
-        """Inverse of the innovation covariance ``S``."""
-        return np.linalg.inv(self.S)
+        if self._likelihood is None:
+            lik = math.exp(self.log_likelihood)
+            self._likelihood = lik if lik > 0.0 else sys.float_info.min
+        return self._likelihood
 
     @property
     def mahalanobis(self) -> float:
-        """Mahalanobis distance of the last measurement."""
-        y = np.asarray(self.y).reshape(-1)
-        return float(math.sqrt(float(y @ np.linalg.solve(self.S, y))))
+        """Mahalanobis distance of the last innovation, ``sqrt(y^T SI y)`` (0 before any update)."""
+        if self._mahalanobis is None:
+            y = np.asarray(self.y, dtype=np.float64).reshape(-1)
+            self._mahalanobis = float(math.sqrt(float(y @ np.atleast_2d(self.SI) @ y)))
+        return self._mahalanobis
 
     @property
     def repairs(self) -> int:
@@ -645,7 +955,8 @@ class UnscentedKalmanFilter:
         kind = "square-root " if self.square_root else ""
         model = type(self._model).__name__ if self._model is not None else "callbacks"
         return (
-            f"UnscentedKalmanFilter({kind}dim_x={self._dim_x}, dim_z={self._dim_z}, model={model}, noise={self.noise})"
+            f"UnscentedKalmanFilter({kind}dim_x={self._dim_x}, dim_z={self._dim_z}, model={model}, noise={self.noise}, "
+            f"points={type(self.points_fn).__name__})"
         )
 
 
@@ -662,13 +973,20 @@ _LOSSES = ("linear", "huber", "cauchy", "tukey")
 def _solver_kwargs(
     method: str, linear_solver: str, max_iterations: int, ftol: float, gtol: float, xtol: float
 ) -> dict[str, Any]:
+    iterations = as_int(max_iterations, "max_iterations")
+    if iterations < 0:
+        raise InvalidInputError(f"max_iterations must be a non-negative integer, got {iterations}")
+    tolerances = {name: as_float(v, name) for name, v in (("ftol", ftol), ("gtol", gtol), ("xtol", xtol))}
+    for name, v in tolerances.items():
+        if v < 0.0:
+            raise InvalidInputError(f"{name} must be a non-negative number, got {v}")
     return {
         "method": method,
         "linear_solver": linear_solver,
-        "max_iterations": int(max_iterations),
-        "function_tolerance": float(ftol),
-        "gradient_tolerance": float(gtol),
-        "parameter_tolerance": float(xtol),
+        "max_iterations": iterations,
+        "function_tolerance": tolerances["ftol"],
+        "gradient_tolerance": tolerances["gtol"],
+        "parameter_tolerance": tolerances["xtol"],
     }
 
 
@@ -683,20 +1001,113 @@ def _index_array(a: ArrayLike, name: str) -> NDArray[np.int64]:
     return np.ascontiguousarray(arr, dtype=np.int64)
 
 
-@dataclass
+_CONVERGED_TERMINATIONS = frozenset(
+    {"FunctionTolerance", "GradientTolerance", "ParameterTolerance", "NoFreeParameters"}
+)
+
+
+@dataclass(frozen=True, slots=True)
+class SolverSummary:
+    """What the least-squares solver did (the fields of ``autoteach_estimate::lsq::Summary``).
+
+    Returned by :meth:`LeastSquaresProblem.solve` and held by :attr:`BundleAdjustResult.summary`.
+    """
+
+    iterations: int
+    """Iterations (trial steps)."""
+    successful_steps: int
+    """Accepted steps."""
+    initial_cost: float
+    """Cost ½ Σ ρ(‖r‖²) at the start."""
+    final_cost: float
+    """Cost at the end."""
+    termination: str
+    """Why it stopped: ``FunctionTolerance``, ``GradientTolerance``, ``ParameterTolerance``,
+    ``MaxIterations``, ``NoFreeParameters``, ``DampingLimit``, ``LinearSolverFailure`` or ``NonFinite``."""
+    message: str
+    """Human-readable reason."""
+    time_s: float
+    """Wall time of the solve (s)."""
+    linear_solver: str
+    """Linear solver used (``Dense``, ``SparseCholesky``, ``SparseSchur``, …; resolved from ``auto``)."""
+    num_parameters: int
+    """Free tangent dimension."""
+    num_residuals: int
+    """Total residual dimension."""
+    num_eliminated_blocks: int
+    """Blocks eliminated first (Schur), 0 unless the Schur solver ran."""
+    gradient_max_norm: float
+    """max |Jᵀr| at the end."""
+    time_setup_s: float
+    """Time (s) in structure analysis."""
+    time_evaluate_s: float
+    """Time (s) evaluating residuals and Jacobians."""
+    time_assemble_s: float
+    """Time (s) assembling the normal equations."""
+    time_linear_s: float
+    """Time (s) factorising and solving the normal equations."""
+    time_schur_reduce_s: float
+    """Part of :attr:`time_linear_s` spent eliminating the point blocks (Schur path)."""
+    time_schur_factor_s: float
+    """Part of :attr:`time_linear_s` spent on the reduced camera system (Schur path)."""
+
+    @property
+    def converged(self) -> bool:
+        """Whether :attr:`termination` is a convergence criterion (not a failure or a limit)."""
+        return self.termination in _CONVERGED_TERMINATIONS
+
+    @classmethod
+    def _from_core(cls, d: Any) -> SolverSummary:
+        """From the binding's summary dict (keys are the Rust field names, plus ``converged``)."""
+        return cls(**{f: d[f] for f in cls.__dataclass_fields__})
+
+
+@dataclass(frozen=True, slots=True)
 class BundleAdjustResult:
-    """Result of :func:`bundle_adjust`."""
+    """Result of :func:`bundle_adjust` (the fields of ``autoteach_estimate::lsq::BundleResult``).
+
+    ``poses`` are 4×4 like every pose of the API; the binding's N×6 form is kept as
+    :attr:`pose_vectors`.
+    """
 
     poses: F64Array
-    """Optimised world-to-camera poses, N×6 (rotation vector, translation)."""
+    """Optimised world-to-camera poses ``T_cw``, N×4×4 (the project's pose convention)."""
     points: F64Array
     """Optimised world points, M×3."""
-    final_cost: float
-    """½ Σ ρ(‖r‖²) with r the pixel reprojection errors (scipy's ``cost``)."""
-    iterations: int
-    """Solver iterations (trial steps)."""
-    summary: dict[str, Any] = field(default_factory=dict)
-    """Solver summary: iterations, initial/final cost, termination, message, time_s, …"""
+    summary: SolverSummary
+    """What the solver did."""
+    pose_vectors: F64Array
+    """The same poses as N×6 (rotation vector, translation), scipy's bundle-adjustment layout."""
+
+    @property
+    def final_cost(self) -> float:
+        """½ Σ ρ(‖r‖²) with r the pixel reprojection errors (scipy's ``cost``): ``summary.final_cost``."""
+        return self.summary.final_cost
+
+    @property
+    def iterations(self) -> int:
+        """Solver iterations (trial steps): ``summary.iterations``."""
+        return self.summary.iterations
+
+
+def _pose_vectors(poses: ArrayLike) -> F64Array:
+    """Bundle-adjustment poses as N×6 (rotation vector, translation) from N×4×4 or N×6."""
+    arr = as_f64(poses, "poses")
+    if arr.ndim == 3 and arr.shape[1:] == (4, 4):
+        if not np.allclose(arr[:, 3, :], [0.0, 0.0, 0.0, 1.0]):
+            raise InvalidInputError("poses: the last row of every 4×4 pose must be [0, 0, 0, 1]")
+        return np.ascontiguousarray(np.concatenate([so3_log(arr[:, :3, :3]), arr[:, :3, 3]], axis=1))
+    return _matrix(arr, "poses")
+
+
+def _pose_matrices(vectors: F64Array) -> F64Array:
+    """N×4×4 poses from N×6 (rotation vector, translation)."""
+    out = np.zeros((len(vectors), 4, 4))
+    if len(vectors):
+        out[:, :3, :3] = so3_exp(vectors[:, :3])
+        out[:, :3, 3] = vectors[:, 3:]
+    out[:, 3, 3] = 1.0
+    return out
 
 
 def bundle_adjust(
@@ -728,7 +1139,8 @@ def bundle_adjust(
 
     Args:
         K: 3×3 intrinsic matrix.
-        poses: N×6 world-to-camera poses, rotation vector then translation.
+        poses: world-to-camera poses ``T_cw``: N×4×4 matrices, or N×6 (rotation vector then
+            translation, scipy's bundle-adjustment layout).
         points: M×3 world points.
         observations: K×2 pixel observations.
         pose_index: K pose indices.
@@ -752,7 +1164,8 @@ def bundle_adjust(
     """
     if loss not in _LOSSES:
         raise InvalidInputError(f"loss must be one of {_LOSSES}, got {loss!r}")
-    poses_m, points_m, obs_m = _matrix(poses, "poses"), _matrix(points, "points"), _matrix(observations, "observations")
+    poses_m = _pose_vectors(poses)
+    points_m, obs_m = _matrix(points, "points"), _matrix(observations, "observations")
     pi, xi = _index_array(pose_index, "pose_index"), _index_array(point_index, "point_index")
     fixed = [int(i) for i in fixed_poses]
     for name, idx, n in (
@@ -778,12 +1191,12 @@ def bundle_adjust(
         fixed,
         **_solver_kwargs(method, linear_solver, max_iterations, ftol, gtol, xtol),
     )
+    poses_a = np.asarray(poses_a)
     return BundleAdjustResult(
-        poses=poses_a,
+        poses=_pose_matrices(poses_a),
         points=points_a,
-        final_cost=float(summary["final_cost"]),
-        iterations=int(summary["iterations"]),
-        summary=dict(summary),
+        summary=SolverSummary._from_core(summary),
+        pose_vectors=poses_a,
     )
 
 
@@ -948,9 +1361,11 @@ class LeastSquaresProblem:
         ftol: float = 1e-10,
         gtol: float = 1e-10,
         xtol: float = 1e-10,
-    ) -> dict[str, Any]:
-        """Solve (GIL released); returns the summary dict (``termination``, ``message``, costs, …)."""
-        return dict(self._inner.solve(**_solver_kwargs(method, linear_solver, max_iterations, ftol, gtol, xtol)))
+    ) -> SolverSummary:
+        """Solve (GIL released); returns what the solver did (``termination``, ``message``, costs, …)."""
+        return SolverSummary._from_core(
+            self._inner.solve(**_solver_kwargs(method, linear_solver, max_iterations, ftol, gtol, xtol))
+        )
 
     def marginal_covariance(self, blocks: Sequence[int]) -> F64Array:
         """Joint tangent covariance of ``blocks`` from (JᵀJ)⁻¹.

@@ -40,6 +40,7 @@ from __future__ import annotations
 import base64
 import json
 import os
+import stat
 import struct
 from collections import defaultdict
 from pathlib import Path
@@ -478,6 +479,29 @@ def _rim_from_json(d: dict[str, Any]) -> dict[str, Any]:
 # --------------------------------------------------------------------------------------------
 
 
+def _writable_target(path: Path) -> Path:
+    """The ``.part`` file beside ``path`` after checking that both may be written.
+
+    A log is written to ``<path>.part`` and renamed over ``path``. Renaming over something that
+    is not a regular file (a device, a FIFO, a directory) would replace it, and opening a FIFO
+    ``.part`` would block: both are refused, and nothing is touched.
+    """
+    part = path.with_name(path.name + ".part")
+    for p, what in ((path, "target"), (part, "temporary file")):
+        try:
+            st = os.stat(p)
+        except FileNotFoundError:
+            continue
+        except OSError as err:
+            raise InvalidInputError(f"cannot write the log: the {what} {p} cannot be inspected ({err})") from None
+        if not stat.S_ISREG(st.st_mode):
+            raise InvalidInputError(
+                f"cannot write the log: the {what} {p} exists and is not a regular file; "
+                "choose another path (it was left untouched)"
+            )
+    return part
+
+
 def write_log(
     session: Session,
     path: str | os.PathLike[str],
@@ -517,7 +541,7 @@ def write_log(
         raise InvalidInputError("timestamps must be non-negative nanoseconds for MCAP")
     ctype = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}.get(compression or "", CompressionType.NONE)
     path = Path(path)
-    part = path.with_name(path.name + ".part")
+    part = _writable_target(path)
     gt = session.has_ground_truth
     topics = list(REQUIRED_TOPICS) + ([TOPIC_SCENE, *GROUND_TRUTH_FRAME_TOPICS] if gt else [])
     try:
@@ -1066,7 +1090,7 @@ def write_results(
     if n != session.n_frames:
         raise InvalidInputError(f"the result has {n} camera poses but the log {log} has {session.n_frames} frames")
     target = Path(out) if out is not None else log
-    part = target.with_name(target.name + ".part")
+    part = _writable_target(target)
     ctype = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}.get(compression or "", CompressionType.NONE)
     try:
         with open(log, "rb") as fin, open(part, "wb") as fout:

@@ -454,8 +454,13 @@ def detect_all(images: np.ndarray, *, progress: bool = False, workers: int = 2, 
     from autoteach.detect import detect_wafers
 
     images = np.asarray(images)
-    if images.ndim != 3 or images.shape[0] == 0 or not images.any():
+    if images.ndim != 3 or images.shape[0] == 0:
         raise InvalidInputError("the session has no images: the detection front end cannot run")
+    if not images.any():
+        raise InvalidInputError(
+            f"all {images.shape[0]} images are black (every pixel 0; a session simulated with render=False "
+            "has no images): nothing can be detected"
+        )
     with ThreadPoolExecutor(max(1, int(workers))) as ex:
         it = ex.map(lambda im: detect_wafers(im, **options), images)
         return list(tqdm(it, total=len(images), desc="detecting", unit="frame", disable=not progress, leave=False))
@@ -511,7 +516,7 @@ def detect_frontend(
         tracker.update(edges, camera_poses[f])
     tracks = tracker.all_tracks()
     used = [t for t in tracks if t.hits >= min_track_frames]
-    centres = np.array([t.circle[0] for t in used if t.circle is not None and np.all(np.isfinite(t.circle[0]))])
+    centres = np.array([t.circle.center for t in used if t.circle is not None and np.all(np.isfinite(t.circle.center))])
     xy0 = np.median(centres[:, :2], axis=0) if len(centres) else np.zeros(2)
     slot_of: dict[int, int] = {}
     slot_cost: dict[int, float] = {}
@@ -1120,6 +1125,13 @@ def autoteach(
     timings["frontend_s"] = time.perf_counter() - t0
     stages.update()
     if len(obs) == 0:
+        n_rims = sum(len(d) for d in detections) if frontend == "detect" else 0
+        if n_rims:
+            raise InvalidInputError(
+                f"{n_rims} wafer rims were detected in {session.n_frames} frames, but no track lasted "
+                f"min_track_frames = {min_track_frames} frames, so all were dropped: record a longer session "
+                "or lower min_track_frames"
+            )
         raise InvalidInputError(
             "no wafer edge was detected in any frame: nothing constrains the calibration "
             f"({session.n_frames} frames, front end {frontend!r})"

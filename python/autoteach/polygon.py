@@ -46,6 +46,7 @@ __all__ = [
     "PolygonDetection",
     "PolygonPose",
     "RigidHypothesis",
+    "VoteMap",
     "detect_polygon",
     "detect_segments",
     "global_voting",
@@ -76,9 +77,13 @@ CROSS_TEMPLATE: NDArray[np.float64] = np.array(
 BAR_TEMPLATE: NDArray[np.float64] = np.array([[-80.0, -20.0], [80.0, -20.0], [80.0, 20.0], [-80.0, 20.0]])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class RigidHypothesis:
-    """A rigid transform ``x ≈ rotation @ y + translation`` and its votes."""
+    """A rigid transform ``x ≈ rotation @ y + translation`` and its votes.
+
+    The fields of ``autoteach_detect::voting::RigidHypothesis``; also the initial transform of a
+    :class:`~autoteach.registration.GlobalCpdHypothesis`.
+    """
 
     rotation: NDArray[np.float64]
     translation: NDArray[np.float64]
@@ -167,25 +172,46 @@ def vote_cells(
     return _hypotheses(_core.polygon_vote_cells(as_f64(X, "X"), as_f64(Y, "Y"), opts))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class PolygonPose:
-    """Template pose in the reference plane: ``p = centre + scale · R(rotation) · v``."""
+    """Template pose in the reference plane: ``p = centre + scale · R(rotation) · v``.
+
+    The fields of ``autoteach_detect::polygon::PolygonPose``.
+    """
 
     centre: NDArray[np.float64]
     rotation: float
     scale: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
+class VoteMap:
+    """The centre vote map of the best (rotation, scale) slice (the fields of ``autoteach_detect::polygon::VoteMap``).
+
+    Cell ``[r, c]`` of :attr:`data` is centred at ``origin + cell · (c + ½, r + ½)``.
+    """
+
+    data: NDArray[np.float64] = field(repr=False)
+    """Votes, shape ``(rows, cols)``."""
+    rows: int
+    """Rows."""
+    cols: int
+    """Columns."""
+    origin: NDArray[np.float64]
+    """Reference-plane position of the map's corner, ``(2,)``."""
+    cell: float
+    """Cell size (reference units)."""
+
+
+@dataclass(frozen=True, slots=True)
 class PolygonDetection:
-    """Result of :func:`detect_polygon`.
+    """Result of :func:`detect_polygon` (the fields of ``autoteach_detect::polygon::PolygonDetection``).
 
     ``pose`` is the IRLS fit, ``coarse`` the best Hough cell, ``votes`` its supported edge length
     (reference units), ``support`` the ``(segment index, template edge index)`` pairs used by the
     fit, ``segments`` the image segments ``(N, 4)``, ``centre_image`` the pixel position of the
     centre, ``rms`` the support's end-point distance from the fitted polygon, and ``vote_map`` the
-    centre votes of the best (rotation, scale) slice; cell ``[r, c]`` is centred at
-    ``vote_map_origin + vote_map_cell · (c + ½, r + ½)``.
+    centre votes of the best (rotation, scale) slice (a :class:`VoteMap`).
     """
 
     pose: PolygonPose
@@ -195,9 +221,7 @@ class PolygonDetection:
     segments: NDArray[np.float64]
     centre_image: NDArray[np.float64]
     rms: float
-    vote_map: NDArray[np.float64] = field(repr=False)
-    vote_map_origin: NDArray[np.float64] = field(repr=False)
-    vote_map_cell: float = field(repr=False)
+    vote_map: VoteMap = field(repr=False)
 
     @property
     def supporting_segments(self) -> NDArray[np.float64]:
@@ -263,6 +287,7 @@ def detect_polygon(
         d = _core.polygon_detect(t, h, segments=as_f64(arr, "segments"), options=params)
     else:
         d = _core.polygon_detect(t, h, image=_image_u8(arr), options=params, segment_options=segment_options or {})
+    vm = np.asarray(d["vote_map"])
     return PolygonDetection(
         pose=_pose(d["pose"]),
         coarse=_pose(d["coarse"]),
@@ -271,9 +296,13 @@ def detect_polygon(
         segments=np.asarray(d["segments"]),
         centre_image=np.array(d["centre_image"]),
         rms=float(d["rms"]),
-        vote_map=np.asarray(d["vote_map"]),
-        vote_map_origin=np.array(d["vote_map_origin"]),
-        vote_map_cell=float(d["vote_map_cell"]),
+        vote_map=VoteMap(
+            data=vm,
+            rows=int(vm.shape[0]),
+            cols=int(vm.shape[1]),
+            origin=np.array(d["vote_map_origin"]),
+            cell=float(d["vote_map_cell"]),
+        ),
     )
 
 

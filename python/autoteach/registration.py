@@ -30,7 +30,7 @@ Example:
     >>> c, s = np.cos(0.4), np.sin(0.4)
     >>> X = 1.5 * Y @ np.array([[c, -s], [s, c]]).T + [0.2, -0.1]
     >>> fit = cpd_rigid(X, Y)
-    >>> round(fit.s, 6), bool(np.allclose(fit.transformed, X, atol=1e-6))
+    >>> round(fit.scale, 6), bool(np.allclose(fit.transformed, X, atol=1e-6))
     (1.5, True)
 
 """
@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from autoteach import _core
 from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
+from autoteach.polygon import RigidHypothesis
 
 __all__ = [
     "AffineCpdResult",
@@ -61,81 +62,92 @@ __all__ = [
 EStepMode = Literal["auto", "dense", "truncated", "fast_gauss"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class RigidCpdResult:
-    """The result of :func:`cpd_rigid`: ``x ≈ s R y + t``.
+    """The result of :func:`cpd_rigid`: ``x ≈ scale · rotation · y + translation``.
+
+    The fields are those of ``autoteach_detect::cpd::RigidResult``.
 
     Attributes:
+        rotation: Rotation ``R``, shape ``(D, D)``, ``det R = +1``.
+        translation: Translation ``t``, shape ``(D,)``.
+        scale: Uniform scale ``s`` (``1.0`` with ``scale=False``).
         transformed: The moved ``Y``, ``s Y Rᵀ + t``, shape ``(M, D)``.
-        R: Rotation, shape ``(D, D)``, ``det R = +1``.
-        t: Translation, shape ``(D,)``.
-        s: Uniform scale (``1.0`` with ``scale=False``).
         sigma2: Final variance σ² of the mixture.
         iterations: EM iterations run.
         converged: Whether the tolerance was met before ``max_iterations``.
-        P: Posterior matrix of the last E-step, shape ``(M, N)`` (``P[m, n] = p(y_m | x_n)``),
+        p: Posterior matrix ``P`` of the last E-step, shape ``(M, N)`` (``P[m, n] = p(y_m | x_n)``),
             or ``None`` unless ``return_P=True``.
 
     """
 
+    rotation: NDArray[np.float64]
+    translation: NDArray[np.float64]
+    scale: float
     transformed: NDArray[np.float64]
-    R: NDArray[np.float64]
-    t: NDArray[np.float64]
-    s: float
     sigma2: float
     iterations: int
     converged: bool
-    P: NDArray[np.float64] | None
+    p: NDArray[np.float64] | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class AffineCpdResult:
-    """The result of :func:`cpd_affine`: ``x ≈ B y + t``.
+    """The result of :func:`cpd_affine`: ``x ≈ matrix · y + translation``.
+
+    The fields are those of ``autoteach_detect::cpd::AffineResult``.
 
     Attributes:
+        matrix: Linear part ``B``, shape ``(D, D)``.
+        translation: Translation ``t``, shape ``(D,)``.
         transformed: The moved ``Y``, ``Y Bᵀ + t``, shape ``(M, D)``.
-        B: Linear part, shape ``(D, D)``.
-        t: Translation, shape ``(D,)``.
         sigma2: Final variance σ².
         iterations: EM iterations run.
         converged: Whether the tolerance was met before ``max_iterations``.
-        P: Posterior matrix ``(M, N)`` of the last E-step, or ``None``.
+        p: Posterior matrix ``P`` ``(M, N)`` of the last E-step, or ``None``.
 
     """
 
+    matrix: NDArray[np.float64]
+    translation: NDArray[np.float64]
     transformed: NDArray[np.float64]
-    B: NDArray[np.float64]
-    t: NDArray[np.float64]
     sigma2: float
     iterations: int
     converged: bool
-    P: NDArray[np.float64] | None
+    p: NDArray[np.float64] | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class NonrigidCpdResult:
     """The result of :func:`cpd_nonrigid`: ``T(Y) = Y + G W``.
 
+    The fields are those of ``autoteach_detect::cpd::NonrigidResult``.
+
     Attributes:
+        w: Kernel weights ``W``, shape ``(M, D)`` (seed eq. (3.17)); not the outlier weight
+            argument ``w`` of the functions.
         transformed: The moved ``Y``, shape ``(M, D)``.
-        W: Kernel weights, shape ``(M, D)`` (seed eq. (3.17)).
         energy: Deformation energy ``‖f‖²_H = tr(Wᵀ G W)`` (seed eq. (3.17)).
         sigma2: Final variance σ².
         iterations: EM iterations run.
         converged: Whether the tolerance was met before ``max_iterations``.
         rank: Number of eigenpairs of ``G`` used, or ``None`` for the full kernel.
-        P: Posterior matrix ``(M, N)`` of the last E-step, or ``None``.
+        p: Posterior matrix ``P`` ``(M, N)`` of the last E-step, or ``None``.
 
     """
 
+    w: NDArray[np.float64]
     transformed: NDArray[np.float64]
-    W: NDArray[np.float64]
     energy: float
     sigma2: float
     iterations: int
     converged: bool
     rank: int | None
-    P: NDArray[np.float64] | None
+    p: NDArray[np.float64] | None
+
+    @classmethod
+    def _from_core(cls, r: _core.CpdNonrigidResult) -> NonrigidCpdResult:
+        return cls(r.w, r.transformed, r.energy, r.sigma2, r.iterations, r.converged, r.rank, r.p)
 
 
 def _common(
@@ -194,7 +206,7 @@ def cpd_rigid(
     r = _core.cpd_rigid(
         as_f64(X, "X"), as_f64(Y, "Y"), w, bool(scale), max_iterations, tolerance, sigma2, e_step, bool(return_P)
     )
-    return RigidCpdResult(r.transformed, r.R, r.t, r.s, r.sigma2, r.iterations, r.converged, r.P)
+    return RigidCpdResult(r.rotation, r.translation, r.scale, r.transformed, r.sigma2, r.iterations, r.converged, r.p)
 
 
 def cpd_affine(
@@ -229,7 +241,7 @@ def cpd_affine(
     """
     w, max_iterations, tolerance, sigma2, e_step = _common(w, max_iterations, tolerance, sigma2, e_step)
     r = _core.cpd_affine(as_f64(X, "X"), as_f64(Y, "Y"), w, max_iterations, tolerance, sigma2, e_step, bool(return_P))
-    return AffineCpdResult(r.transformed, r.B, r.t, r.sigma2, r.iterations, r.converged, r.P)
+    return AffineCpdResult(r.matrix, r.translation, r.transformed, r.sigma2, r.iterations, r.converged, r.p)
 
 
 def cpd_nonrigid(
@@ -293,35 +305,26 @@ def cpd_nonrigid(
         e_step,
         bool(return_P),
     )
-    return NonrigidCpdResult(r.transformed, r.W, r.energy, r.sigma2, r.iterations, r.converged, r.rank, r.P)
+    return NonrigidCpdResult._from_core(r)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class GlobalCpdHypothesis:
     """One hypothesis of :func:`global_cpd`.
 
+    The fields are those of ``autoteach_detect::cpd::GlobalHypothesis``.
+
     Attributes:
-        transformed: The model ``Y`` after non-rigid CPD from this hypothesis, ``(M, D)``.
-        energy: Deformation energy ``tr(Wᵀ G W)`` of that CPD (least is best).
-        votes: Y-count votes of the rigid hypothesis (distinct model points in its cluster).
-        pair_votes: Pair votes of the rigid hypothesis.
-        R: Rotation of the rigid initial transform, ``(D, D)`` (``x ≈ R y + t``).
-        t: Translation of the rigid initial transform, ``(D,)``.
-        W: Kernel weights of the CPD, ``(M, D)``.
-        sigma2: Final σ² of the CPD.
-        iterations: EM iterations of the CPD.
+        initial: The rigid initial transform from global voting, ``x ≈ R y + t``, with its votes
+            (the :class:`~autoteach.polygon.RigidHypothesis` that :func:`~autoteach.polygon.global_voting`
+            returns).
+        cpd: The non-rigid CPD run from it; ``cpd.transformed`` is the model in the frame of ``X``
+            and ``cpd.energy`` (``tr(Wᵀ G W)``, least is best) ranks the hypotheses.
 
     """
 
-    transformed: NDArray[np.float64]
-    energy: float
-    votes: int
-    pair_votes: int
-    R: NDArray[np.float64]
-    t: NDArray[np.float64]
-    W: NDArray[np.float64]
-    sigma2: float
-    iterations: int
+    initial: RigidHypothesis
+    cpd: NonrigidCpdResult
 
 
 def global_cpd(
@@ -405,7 +408,9 @@ def global_cpd(
         as_int(min_votes, "min_votes"),
         as_int(max_points, "max_points"),
     )
-    return [
-        GlobalCpdHypothesis(h.transformed, h.energy, h.votes, h.pair_votes, h.R, h.t, h.W, h.sigma2, h.iterations)
-        for h in hyps
-    ]
+    out = []
+    for h in hyps:
+        rotation, translation, votes, pair_votes = h.initial
+        initial = RigidHypothesis(rotation, translation, int(votes), int(pair_votes))
+        out.append(GlobalCpdHypothesis(initial, NonrigidCpdResult._from_core(h.cpd)))
+    return out

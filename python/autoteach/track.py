@@ -22,14 +22,22 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linear_sum_assignment
 
 from autoteach import _core
 from autoteach.errors import InvalidInputError
+from autoteach.geometry import Ellipse
+
+
+def _assign(cost: ArrayLike, maximize: bool = False) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The project's Jonker–Volgenant solver (:func:`autoteach.detect.linear_sum_assignment`)."""
+    return _core.linear_sum_assignment(np.ascontiguousarray(cost, dtype=np.float64), bool(maximize))
+
 
 __all__ = [
+    "Circle3",
     "Edge",
     "Track",
+    "UpdateTimings",
     "WaferTracker",
     "clear_mot",
     "idf1",
@@ -45,7 +53,8 @@ class Edge:
     """One elliptic edge segment of a wafer rim (the fields of ``autoteach_detect::wafers::WaferEdge``).
 
     Attributes:
-        ellipse: ``(cx, cy, a, b, theta)`` (pixels, radians).
+        ellipse: the rim's ellipse (pixels, radians), an :class:`~autoteach.geometry.Ellipse`; five
+            numbers ``(cx, cy, a, b, theta)`` are accepted and converted.
         points: ``(N, 2)`` edge points ``(u, v)``; empty means the whole ellipse.
         kind: ``"upper"`` or ``"lower"`` rim.
         wafer_id: groups the two rims of one wafer within one frame.
@@ -55,7 +64,7 @@ class Edge:
 
     """
 
-    ellipse: NDArray[np.float64]
+    ellipse: Ellipse
     points: NDArray[np.float64]
     kind: str = "upper"
     wafer_id: int = 0
@@ -63,37 +72,74 @@ class Edge:
     covariance: NDArray[np.float64] | None = None
     label: Any = None
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.ellipse, Ellipse):
+            self.ellipse = Ellipse(*_ellipse_array(self.ellipse, 0))
+
+
+@dataclass(frozen=True, slots=True)
+class Circle3:
+    """A circle in 3D (the fields of ``autoteach_detect::track::circle::Circle3``), metres."""
+
+    center: NDArray[np.float64]
+    """Centre ``(3,)``."""
+    normal: NDArray[np.float64]
+    """Unit normal ``(3,)`` of the circle's plane."""
+    radius: float
+    """Radius."""
+
+
+@dataclass(frozen=True, slots=True)
+class UpdateTimings:
+    """Wall-clock seconds of the stages of the last :meth:`WaferTracker.update`.
+
+    The fields of ``autoteach_detect::track::UpdateTimings``.
+    """
+
+    predict: float
+    """Prediction of every track's segment (§4.2)."""
+    associate: float
+    """Association (Algorithm 5: point sets, kd-tree, kNN, E-step, cost matrix, assignment -- or the
+    greedy baseline)."""
+    manage: float
+    """Track management (Algorithm 4), including the multi-view 3D rim estimates."""
+
 
 @dataclass
 class Track:
-    """One tracked wafer.
+    """One tracked wafer (the fields of ``autoteach_detect::track::Track``, updated in place by the tracker).
+
+    ``ellipse`` and ``circle`` are what the Rust ``Track::ellipse()`` and ``Track::circle()``
+    methods return.
 
     Attributes:
         id: track identifier.
-        ellipse: latest registered ellipse ``(cx, cy, a, b, theta)`` (upper rim preferred).
+        ellipse: latest registered ellipse (upper rim preferred), an :class:`~autoteach.geometry.Ellipse`.
         visible: registered in the current frame.
         confirmed: registered in at least ``min_hits`` frames.
         history: ``(frame index, edge)`` of every edge registered to the track (the caller's
             edge objects).
-        predicted: the predicted ellipse of the current frame, if any.
-        circle: ``(centre (3,), normal (3,), radius)`` of the estimated 3D rim (world frame), if
-            estimated.
+        predicted: the predicted ellipse of the current frame (an ``Ellipse``), if any.
+        circle: the estimated 3D rim (world frame), a :class:`Circle3`, if estimated.
         hits, missed, first_frame, last_frame: registered frames, consecutive misses, first and
             last registered frame.
+        edges: the edges (the caller's objects) registered in the last frame the track was seen
+            (one or two rims).
 
     """
 
     id: int
-    ellipse: NDArray[np.float64] | None = None
+    ellipse: Ellipse | None = None
     visible: bool = False
     confirmed: bool = False
     history: list[tuple[int, Any]] = field(default_factory=list)
-    predicted: NDArray[np.float64] | None = None
-    circle: tuple[NDArray[np.float64], NDArray[np.float64], float] | None = None
+    predicted: Ellipse | None = None
+    circle: Circle3 | None = None
     hits: int = 0
     missed: int = 0
     first_frame: int = 0
     last_frame: int = 0
+    edges: list[Any] = field(default_factory=list)
 
 
 def _get(obj: Any, name: str, default: Any = None) -> Any:
@@ -204,15 +250,10 @@ class WaferTracker:
         return int(self._inner.frame)
 
     @property
-    def last_timings(self) -> dict[str, float]:
-        """Seconds spent in the stages of the last :meth:`update` (inside Rust).
-
-        ``predict`` (§4.2), ``associate`` (Algorithm 5: point sets, kd-tree, kNN, E-step, cost
-        matrix, assignment — or the greedy baseline) and ``manage`` (Algorithm 4, including the
-        multi-view 3D rim estimates).
-        """
+    def last_timings(self) -> UpdateTimings:
+        """Seconds spent in the stages of the last :meth:`update` (inside Rust), see :class:`UpdateTimings`."""
         p, a, m = self._inner.last_timings
-        return {"predict": float(p), "associate": float(a), "manage": float(m)}
+        return UpdateTimings(predict=float(p), associate=float(a), manage=float(m))
 
     def update(self, edges: Iterable[Any], camera_pose: ArrayLike | None = None) -> list[Track]:
         """Process one frame and return the live confirmed tracks.
@@ -249,10 +290,11 @@ class WaferTracker:
             t = self._tracks.setdefault(tid, Track(id=tid))
             t.visible, t.confirmed, t.hits, t.missed = d["visible"], d["confirmed"], d["hits"], d["missed"]
             t.first_frame, t.last_frame = d["first_frame"], d["last_frame"]
-            t.ellipse = None if d["ellipse"] is None else np.array(d["ellipse"])
-            t.predicted = None if d["predicted"] is None else np.array(d["predicted"])
+            t.ellipse = None if d["ellipse"] is None else Ellipse(*d["ellipse"])
+            t.predicted = None if d["predicted"] is None else Ellipse(*d["predicted"])
             c = d["circle"]
-            t.circle = None if c is None else (np.array(c[0]), np.array(c[1]), float(c[2]))
+            t.circle = None if c is None else Circle3(np.array(c[0]), np.array(c[1]), float(c[2]))
+            t.edges = [e for f, e in t.history if f == t.last_frame]
         return [t for t in self._tracks.values() if t.confirmed]
 
     def tracks(self, include_tentative: bool = False) -> list[Track]:
@@ -375,7 +417,7 @@ def clear_mot(
             # Larger than any sum of valid distances: the most valid pairs first, then the least cost.
             big = 1.0 + 2.0 * float(np.abs(sub).sum())
             cost = np.where(valid, sub, big)
-            r, c = linear_sum_assignment(cost)
+            r, c = _assign(cost)
             for a, b in zip(r, c, strict=True):
                 if ok[rows[a], cols[b]]:
                     g, h = gt[rows[a]], hyp[cols[b]]
@@ -433,7 +475,7 @@ def idf1(
         m = np.zeros((len(gts), len(hyps)))
         for (g, h), c in counts.items():
             m[gts[g], hyps[h]] = c
-        r, c = linear_sum_assignment(m, maximize=True)
+        r, c = _assign(m, maximize=True)
         idtp = int(m[r, c].sum())
     return {
         "idtp": float(idtp),
@@ -545,18 +587,16 @@ def synthetic_detections(
                     continue
                 e = fit.ellipse
                 edge = Edge(
-                    ellipse=np.array([e.cx, e.cy, e.a, e.b, e.theta]),
+                    ellipse=e,
                     points=pts,
                     kind=r["rim"],
                     wafer_id=int(rank),
-                    residual=fit.residual,
+                    residual=fit.residual_mean,
                     label=wafer,
                 )
                 edges.append(edge)
                 if rng.random() < p_duplicate:
-                    edges.append(
-                        Edge(edge.ellipse.copy(), pts.copy(), edge.kind, edge.wafer_id, edge.residual, None, wafer)
-                    )
+                    edges.append(Edge(edge.ellipse, pts.copy(), edge.kind, edge.wafer_id, edge.residual, None, wafer))
         for k in range(rng.poisson(false_arcs)):
             a = rng.uniform(30.0, 400.0)
             b = rng.uniform(3.0, min(a, 120.0))
@@ -568,6 +608,6 @@ def synthetic_detections(
             y = ell[3] * np.sin(t)
             pts = np.stack([ell[0] + c * x - s * y, ell[1] + s * x + c * y], axis=1)
             pts += rng.normal(0.0, pixel_noise, pts.shape)
-            edges.append(Edge(ell, pts, "upper" if k % 2 == 0 else "lower", 10_000 + k, 0.0, None, None))
+            edges.append(Edge(Ellipse(*ell), pts, "upper" if k % 2 == 0 else "lower", 10_000 + k, 0.0, None, None))
         out.append(edges)
     return out

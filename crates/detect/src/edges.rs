@@ -222,7 +222,7 @@ pub struct EdgeMap {
 const NONE: u32 = u32::MAX;
 
 /// Separable Gaussian blur of a float image (clamped borders).
-fn gaussian_blur(img: &mut [f32], w: usize, h: usize, sigma: f64) {
+pub(crate) fn gaussian_blur(img: &mut [f32], w: usize, h: usize, sigma: f64) {
     let r = (3.0 * sigma).ceil() as isize;
     let kernel: Vec<f32> = (-r..=r)
         .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp() as f32)
@@ -1021,7 +1021,7 @@ fn rdp(points: &[Vector2<f64>], tol: f64) -> Vec<usize> {
 /// absolute distance of each point to the chord of its neighbours three points away, scaled to
 /// a Gaussian σ (1.4826 · MAD; for independent noise that distance has variance 1.5 σ²).
 /// Floored at 0.01 px.
-fn chain_noise(pts: &[Vector2<f64>]) -> f64 {
+pub(crate) fn chain_noise(pts: &[Vector2<f64>]) -> f64 {
     const K: usize = 3;
     if pts.len() < 2 * K + 1 {
         return 0.01;
@@ -1376,7 +1376,7 @@ mod tests {
         img
     }
 
-    /// The whole-image implementation of `canny` of session 4 (Sobel, magnitude, state and
+    /// The whole-image implementation of `canny` (Sobel, magnitude, state and
     /// offset images, hysteresis over all pixels): the reference of the fused pass.
     fn canny_reference<T: Pixel>(image: &GrayView<'_, T>, params: &CannyParams) -> Result<EdgeMap> {
         params.validate()?;

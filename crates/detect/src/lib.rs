@@ -34,15 +34,18 @@ pub mod assignment;
 pub mod cpd;
 pub mod edges;
 pub mod ellipse;
+pub mod ellipse_detection;
 pub mod error;
 pub mod fusion;
 pub mod polygon;
 pub mod track;
 pub mod uncertainty;
 pub mod voting;
+pub mod wafer_rims;
 pub mod wafers;
 
 pub use error::DetectError;
 
 /// Result type of this crate.
 pub type Result<T> = std::result::Result<T, DetectError>;
+pub mod segment;

@@ -201,4 +201,77 @@ pub enum EstimateError {
         /// The final convergence measure.
         residual: f64,
     },
+
+    /// A radio link kernel matrix is not positive definite (seed 004 eq. 3.3: a kernel of
+    /// the symmetric pair distance d_s4 is not positive definite in general).
+    #[error(
+        "the {kernel} covariance of {links} links is not positive definite (Cholesky pivot \
+         {column} is not positive); the d_s4 kernel of eq. 3.3 is not positive definite in \
+         general: use the swap-average kernel"
+    )]
+    KernelNotPositiveDefinite {
+        /// The kernel's name.
+        kernel: String,
+        /// Number of links in the matrix.
+        links: usize,
+        /// The column (link index) where the factorisation failed.
+        column: usize,
+    },
+
+    /// A radio link has coincident (or nearly coincident) transmitter and receiver, where the
+    /// path loss `log10 ‖r − t‖` of eq. 3.1 is undefined.
+    #[error(
+        "{what}: link {index} has transmitter and receiver {distance:.3e} m apart (minimum {minimum} m)"
+    )]
+    CoincidentLink {
+        /// What was passed.
+        what: String,
+        /// The link index.
+        index: usize,
+        /// Its length.
+        distance: f64,
+        /// The minimum accepted length.
+        minimum: f64,
+    },
+
+    /// A point lies outside the map a model was fitted on.
+    #[error("{what}: point {index} = ({x}, {y}) lies outside the map [{x0}, {x1}] × [{y0}, {y1}]")]
+    OutsideMap {
+        /// What was passed.
+        what: String,
+        /// The row index.
+        index: usize,
+        /// Its x coordinate.
+        x: f64,
+        /// Its y coordinate.
+        y: f64,
+        /// Map's minimum x.
+        x0: f64,
+        /// Map's maximum x.
+        x1: f64,
+        /// Map's minimum y.
+        y0: f64,
+        /// Map's maximum y.
+        y1: f64,
+    },
+
+    /// An input that must not be empty is empty (e.g. a training set with no measurement).
+    #[error("{0} is empty")]
+    EmptyInput(String),
+
+    /// Mapping input that the rasterizer cannot use (seed 004_815695db12a6b16c.txt ch. 2): a
+    /// repeated or vanished node id, a node that changed robot, a new node without a scan,
+    /// a negative range, an empty graph.
+    #[error("invalid mapping input: {0}")]
+    InvalidMapInput(String),
+    /// A linear model (transfer function) or frequency-response data set is unusable for the
+    /// requested operation: improper, unstable where stability is required, a zero
+    /// denominator, unsorted or non-positive frequencies (issue 31, [`crate::control`]).
+    #[error("invalid linear model {what}: {reason}")]
+    InvalidModel {
+        /// Which model or data set.
+        what: String,
+        /// Why it is rejected, with the offending values.
+        reason: String,
+    },
 }

@@ -22,12 +22,16 @@
 
 pub mod active;
 pub mod calib;
+pub mod control;
 pub mod error;
 pub mod handeye;
 pub mod lsq;
+pub mod mapping;
+pub mod radio;
 pub mod ukf;
 
 pub use error::EstimateError;
 
 /// Result type of this crate.
 pub type Result<T> = std::result::Result<T, EstimateError>;
+pub mod lidar_camera;

@@ -58,6 +58,20 @@ const SMALL_ANGLE: f64 = 0.3;
 /// Below this angle (rad) `sin θ/θ` and `(1 − cos θ)/θ²` use their series.
 const TINY_ANGLE: f64 = 1e-4;
 
+/// Above this ‖ω‖ the product `[ω]×²` would overflow: the exponential maps and the left
+/// Jacobian then work with the unit axis and the angle (see [`angle_axis`]).
+const HUGE_ANGLE: f64 = 1e150;
+
+/// `(θ, u)` with `ω = θ·u`, ‖u‖ = 1, computed without overflowing ‖ω‖² (θ saturates at
+/// `f64::MAX`). Angles this large carry no fractional turn in f64: the maps return the exact
+/// rotation by the angle as the float holds it, finite and orthonormal.
+fn angle_axis(w: &Vector3<f64>) -> (f64, Vector3<f64>) {
+    let s = w.amax();
+    let u = w / s;
+    let n = u.norm();
+    ((s * n).min(f64::MAX), u / n)
+}
+
 /// The skew-symmetric matrix `[v]×` with `[v]× u = v × u` (Solà App. B, "hat" operator of so(3)).
 pub fn hat(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
@@ -184,6 +198,11 @@ fn q_coeff3(t: f64) -> f64 {
 /// every angle, with the series of sin(θ/2)/θ near zero.
 pub fn quat_exp(w: &Vector3<f64>) -> UnitQuaternion<f64> {
     let t = w.norm();
+    if t > HUGE_ANGLE {
+        let (t, u) = angle_axis(w);
+        let h = 0.5 * t;
+        return UnitQuaternion::new_unchecked(Quaternion::from_parts(h.cos(), u * h.sin()));
+    }
     let h = 0.5 * t;
     // sin(θ/2)/θ = ½ sinc(θ/2)
     let k = 0.5 * sinc(h);
@@ -215,6 +234,13 @@ pub fn quat_log(q: &UnitQuaternion<f64>) -> Vector3<f64> {
 /// (Solà App. B, Exp map), with series near θ = 0.
 pub fn so3_exp(w: &Vector3<f64>) -> Rotation3<f64> {
     let t = w.norm();
+    if t > HUGE_ANGLE {
+        let (t, u) = angle_axis(w);
+        let ux = hat(&u);
+        return Rotation3::from_matrix_unchecked(
+            Matrix3::identity() + ux * t.sin() + ux * ux * (1.0 - t.cos()),
+        );
+    }
     let wx = hat(w);
     let m = Matrix3::identity() + wx * sinc(t) + wx * wx * one_minus_cos_sq(t);
     Rotation3::from_matrix_unchecked(m)
@@ -256,6 +282,11 @@ pub fn so3_log(r: &Rotation3<f64>) -> Vector3<f64> {
 /// (Solà App. B, left Jacobian), series near zero. It is also the `V(ω)` of [`se3_exp`].
 pub fn so3_left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
     let t = w.norm();
+    if t > HUGE_ANGLE {
+        let (t, u) = angle_axis(w);
+        let ux = hat(&u);
+        return Matrix3::identity() + ux * ((1.0 - t.cos()) / t) + ux * ux * (1.0 - t.sin() / t);
+    }
     let wx = hat(w);
     Matrix3::identity() + wx * one_minus_cos_sq(t) + wx * wx * theta_minus_sin_cu(t)
 }
@@ -666,6 +697,31 @@ mod tests {
         assert!((hat(&v) * u - v.cross(&u)).norm() < 1e-15);
         assert!((hat(&v) + hat(&v).transpose()).amax() == 0.0);
         assert_eq!(vee(&hat(&v)), v);
+    }
+
+    #[test]
+    fn exp_maps_of_huge_rotation_vectors_are_finite_and_exact() {
+        // Regression: ‖ω‖ ≳ 1e154 overflowed [ω]×² and returned NaN.
+        for scale in [1e151, 1e200, 1e300, f64::MAX] {
+            // Axis-aligned: the angle is exactly `scale`, so nalgebra's axis-angle is the truth.
+            for (k, axis) in [Vector3::x_axis(), Vector3::y_axis(), -Vector3::z_axis()]
+                .into_iter()
+                .enumerate()
+            {
+                let w = axis.into_inner() * scale;
+                let truth = Rotation3::from_axis_angle(&axis, scale);
+                let r = so3_exp(&w);
+                assert!((r.matrix() - truth.matrix()).norm() < 1e-12, "{scale} {k}");
+                let q = quat_exp(&w).to_rotation_matrix();
+                assert!((q.matrix() - truth.matrix()).norm() < 1e-12, "{scale} {k}");
+            }
+            let w = Vector3::new(0.3, 0.2, -0.1) * scale;
+            let r = so3_exp(&w).into_inner();
+            assert!((r.transpose() * r - Matrix3::identity()).norm() < 1e-12);
+            let x = se3_exp(&Vector6::new(w.x, w.y, w.z, 1.0, 2.0, 3.0));
+            assert!(x.translation.vector.iter().all(|v| v.is_finite()));
+            assert!(so3_left_jacobian(&w).iter().all(|v| v.is_finite()));
+        }
     }
 
     #[test]

@@ -551,6 +551,7 @@ impl PyActiveSystem {
         rej.set_item("collision", r.collision)?;
         rej.set_item("unreachable", r.unreachable)?;
         rej.set_item("lift", r.lift)?;
+        rej.set_item("sole", r.sole.to_vec())?;
         d.set_item("rejections", rej)?;
         Ok(d)
     }

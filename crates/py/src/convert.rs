@@ -227,14 +227,24 @@ fn with_index(err: PyErr, name: &str, flat: usize, lead: &[usize]) -> PyErr {
     ))
 }
 
+/// Tolerance on `|RᵀR − I|` (Frobenius) for a matrix accepted as a rotation.
+pub const ROTATION_TOL: f64 = 1e-6;
+
+/// `|RᵀR − I|` (Frobenius); NaN when `RᵀR` overflows.
+fn orthonormality_defect(r: &nalgebra::Matrix3<f64>) -> f64 {
+    (r.transpose() * r - nalgebra::Matrix3::identity()).norm()
+}
+
 /// Converts a 3×3 matrix to a rotation, rejecting matrices that are not orthonormal with
-/// determinant +1 (to 1e-6).
+/// determinant +1 (to [`ROTATION_TOL`]); NaN or overflowing entries are rejected too.
 pub fn matrix_to_rotation(
     r: &nalgebra::Matrix3<f64>,
     name: &str,
 ) -> PyResult<nalgebra::Rotation3<f64>> {
-    let orth = (r.transpose() * r - nalgebra::Matrix3::identity()).norm();
-    if orth > 1e-6 || r.determinant() < 0.0 {
+    let orth = orthonormality_defect(r);
+    // Written so that NaN fails: a huge matrix overflows RᵀR to NaN, which must not pass.
+    let is_rotation = orth <= ROTATION_TOL && r.determinant() > 0.0;
+    if !is_rotation {
         return Err(errors::invalid_input(format!(
             "{name} is not a rotation matrix (|RᵀR − I| = {orth:.3e}, det R = {:.6})",
             r.determinant()
@@ -297,10 +307,12 @@ pub fn matrix_to_isometry(
     name: &str,
 ) -> PyResult<nalgebra::Isometry3<f64>> {
     let r = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let orth = (r.transpose() * r - nalgebra::Matrix3::identity()).norm();
-    let last =
-        (m[(3, 0)].abs() + m[(3, 1)].abs() + m[(3, 2)].abs() + (m[(3, 3)] - 1.0).abs()) > 1e-9;
-    if orth > 1e-6 || r.determinant() < 0.0 || last {
+    let orth = orthonormality_defect(&r);
+    let last_ok =
+        (m[(3, 0)].abs() + m[(3, 1)].abs() + m[(3, 2)].abs() + (m[(3, 3)] - 1.0).abs()) <= 1e-9;
+    // Written so that NaN fails (see `matrix_to_rotation`).
+    let is_rigid = orth <= ROTATION_TOL && r.determinant() > 0.0 && last_ok;
+    if !is_rigid {
         return Err(errors::invalid_input(format!(
             "{name} is not a rigid transform (|RᵀR − I| = {orth:.3e}, det R = {:.6}, last row {:?})",
             r.determinant(),

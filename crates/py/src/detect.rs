@@ -33,13 +33,13 @@ impl PyEllipseFit {
 
     /// Mean absolute orthogonal distance (pixels).
     #[getter]
-    fn residual(&self) -> f64 {
+    fn residual_mean(&self) -> f64 {
         self.inner.residual_mean
     }
 
     /// RMS orthogonal distance (pixels).
     #[getter]
-    fn rms(&self) -> f64 {
+    fn residual_rms(&self) -> f64 {
         self.inner.residual_rms
     }
 
@@ -67,7 +67,7 @@ impl PyEllipseFit {
     fn __repr__(&self) -> String {
         let e = &self.inner.ellipse;
         format!(
-            "_core.EllipseFit(ellipse=({:?}, {:?}, {:?}, {:?}, {:?}), residual={:?}, iterations={})",
+            "_core.EllipseFit(ellipse=({:?}, {:?}, {:?}, {:?}, {:?}), residual_mean={:?}, iterations={})",
             e.cx, e.cy, e.a, e.b, e.theta, self.inner.residual_mean, self.inner.iterations
         )
     }

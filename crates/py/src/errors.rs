@@ -132,6 +132,8 @@ pub fn estimate(err: autoteach_estimate::EstimateError) -> PyErr {
         | E::InvalidCovariance { .. }
         | E::Model { .. } => invalid_input(err.to_string()),
         E::InvalidProblem(_) | E::TooFewPoints { .. } => invalid_input(err.to_string()),
+        E::InvalidMapInput(_) => invalid_input(err.to_string()),
+        E::InvalidModel { .. } => invalid_input(err.to_string()),
         // An unconstrained direction (gauge freedom), a singular information matrix, a
         // calibration that the views cannot determine, no pose meeting the constraints.
         E::RankDeficient { .. } | E::SingularInformation { .. } | E::DegenerateCalibration(_) => {
@@ -144,6 +146,12 @@ pub fn estimate(err: autoteach_estimate::EstimateError) -> PyErr {
         | E::NonFiniteResidual { .. }
         | E::LinearSolver(_)
         | E::NoConvergence { .. } => new_err("ConvergenceError", err.to_string()),
+        // Radio models (issue 33): a kernel that is not positive definite on the data, a
+        // link with coincident ends or outside the map, an empty training set.
+        E::KernelNotPositiveDefinite { .. }
+        | E::CoincidentLink { .. }
+        | E::OutsideMap { .. }
+        | E::EmptyInput(_) => invalid_input(err.to_string()),
         // `EstimateError` is `#[non_exhaustive]`: variants added later default to a numerical
         // failure until they get their own arm.
         _ => new_err("ConvergenceError", err.to_string()),

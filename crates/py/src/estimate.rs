@@ -7,6 +7,10 @@
 //!   Callbacks are called from Rust holding the GIL; an exception raised by a callback is
 //!   re-raised unchanged.
 //! * `merwe_sigma_points(x, P, alpha, beta, kappa)` and `merwe_weights(n, alpha, beta, kappa)`.
+//! * `family_sigma_points(family, x, P, alpha, beta, kappa)` and `family_weights(family, n,
+//!   alpha, beta, kappa)` for `family` in `"merwe"`, `"julier"`, `"simplex"`.
+//! * `UkfFilter.rts_smoother(xs, Ps, Qs, dts)`: the unscented RTS smoother on the filter's
+//!   model and sigma points (built-in models without the GIL).
 //!
 //! The friendly filterpy-compatible classes live in `autoteach.estimate`.
 
@@ -14,8 +18,9 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use autoteach_estimate::EstimateError;
 use autoteach_estimate::ukf::{
-    BatchInputs, ConstantVelocityModel, CovariancePolicy, LinearModel, MerweScaledSigmaPoints,
-    NoiseForm, SigmaPointFilter, SquareRootUkf, UkfModel, UnscentedKalmanFilter,
+    BatchInputs, ConstantVelocityModel, CovariancePolicy, GivenWeights, JulierSigmaPoints,
+    LinearModel, MerweScaledSigmaPoints, NoiseForm, SigmaPointFilter, SigmaPoints,
+    SimplexSigmaPoints, SquareRootUkf, UkfModel, UnscentedKalmanFilter, rts_smoother,
 };
 use nalgebra::{DMatrix, DVector, DVectorView};
 use numpy::{PyArray1, PyArrayDyn, PyReadonlyArrayDyn, PyUntypedArrayMethods};
@@ -32,6 +37,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyUkf>()?;
     m.add_function(wrap_pyfunction!(merwe_sigma_points, m)?)?;
     m.add_function(wrap_pyfunction!(merwe_weights, m)?)?;
+    m.add_function(wrap_pyfunction!(family_sigma_points, m)?)?;
+    m.add_function(wrap_pyfunction!(family_weights, m)?)?;
     Ok(())
 }
 
@@ -94,6 +101,56 @@ fn merwe_sigma_points<'py>(
     let s = pts.sigma_points(&x, &p).map_err(errors::estimate)?;
     // Columns are the points: the column-major data is the row-major (2n+1, n) array.
     to_numpy(py, s.as_slice().to_vec(), &[s.ncols(), s.nrows()])
+}
+
+/// The sigma-point family `family` (`"merwe"`: α, β, κ; `"julier"`: κ; `"simplex"`) for
+/// dimension `n`.
+fn family(family: &str, n: usize, alpha: f64, beta: f64, kappa: f64) -> PyResult<SigmaPoints> {
+    let pts: autoteach_estimate::Result<SigmaPoints> = match family {
+        "merwe" => MerweScaledSigmaPoints::new(n, alpha, beta, kappa).map(Into::into),
+        "julier" => JulierSigmaPoints::new(n, kappa).map(Into::into),
+        "simplex" => SimplexSigmaPoints::new(n).map(Into::into),
+        other => {
+            return Err(errors::invalid_input(format!(
+                "family must be 'merwe', 'julier' or 'simplex', got {other:?}"
+            )));
+        }
+    };
+    pts.map_err(errors::estimate)
+}
+
+/// Sigma points `(N, n)` of (x, P) of a family (in filterpy's order).
+#[pyfunction]
+#[pyo3(signature = (family_name, x, p, alpha=1.0, beta=0.0, kappa=0.0))]
+fn family_sigma_points<'py>(
+    py: Python<'py>,
+    family_name: &str,
+    x: &Bound<'py, PyAny>,
+    p: &Bound<'py, PyAny>,
+    alpha: f64,
+    beta: f64,
+    kappa: f64,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let x = vector(x, "x")?;
+    let p = matrix(p, "P")?;
+    let pts = family(family_name, x.len(), alpha, beta, kappa)?;
+    let s = pts.sigma_points(&x, &p).map_err(errors::estimate)?;
+    to_numpy(py, s.as_slice().to_vec(), &[s.ncols(), s.nrows()])
+}
+
+/// The weights `(Wm, Wc)` of a family.
+#[pyfunction]
+#[pyo3(signature = (family_name, n, alpha=1.0, beta=0.0, kappa=0.0))]
+fn family_weights<'py>(
+    py: Python<'py>,
+    family_name: &str,
+    n: usize,
+    alpha: f64,
+    beta: f64,
+    kappa: f64,
+) -> PyResult<Weights<'py>> {
+    let pts = family(family_name, n, alpha, beta, kappa)?;
+    Ok((vec_out(py, pts.wm()), vec_out(py, pts.wc())))
 }
 
 /// `(Wm, Wc)` as NumPy arrays.
@@ -222,6 +279,10 @@ struct Hooks {
     state_add: Option<Py<PyAny>>,
     subtract: Option<Py<PyAny>>,
     sqrt: Option<Py<PyAny>>,
+    /// `sigma_points(x, P)` of an external sigma-point object (returns `(N, n)`).
+    draw: Option<Py<PyAny>>,
+    /// N, the number of points `draw` returns.
+    num_sigmas: usize,
 }
 
 /// A [`UkfModel`] whose functions are Python callables, called as filterpy calls them:
@@ -596,13 +657,33 @@ impl UkfModel for PyModel {
         // transpose, whose columns are those rows.
         Some(r.map(|()| DMatrix::from_column_slice(n, n, flat.as_slice())))
     }
+
+    fn draw_sigmas(
+        &self,
+        x: &DVector<f64>,
+        p: &DMatrix<f64>,
+        out: &mut DMatrix<f64>,
+    ) -> Option<autoteach_estimate::Result<()>> {
+        let f = self.hooks.draw.as_ref()?;
+        let (n, ns) = (x.len(), self.hooks.num_sigmas);
+        let mut flat = DVector::zeros(n * ns);
+        let r = self.call(
+            "sigma_points",
+            f,
+            |py| PyTuple::new(py, [vec_out(py, x).into_any(), mat_out(py, p)?.into_any()]),
+            None,
+            &mut flat,
+        );
+        // The (N, n) row-major result read column-major is n × N with the points as columns.
+        Some(r.map(|()| out.copy_from_slice(flat.as_slice())))
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
 // The filter
 // ---------------------------------------------------------------------------------------------
 
-type DynModel = Box<dyn UkfModel + Send + Sync>;
+type DynModel = Arc<dyn UkfModel + Send + Sync>;
 type DynFilter = Box<dyn SigmaPointFilter + Send + Sync>;
 
 /// The compiled unscented Kalman filter behind `autoteach.estimate.UnscentedKalmanFilter`.
@@ -611,13 +692,15 @@ struct PyUkf {
     inner: DynFilter,
     /// Set for callback models: per-call arguments and the last callback exception.
     shared: Option<Arc<Shared>>,
-    points: MerweScaledSigmaPoints,
+    points: SigmaPoints,
+    /// The model (shared with `inner`), for the smoother and the sigma points.
+    model: DynModel,
 }
 
 /// Builds the engine.
 fn build(
     model: DynModel,
-    points: MerweScaledSigmaPoints,
+    points: SigmaPoints,
     square_root: bool,
     augmented: bool,
     repair: bool,
@@ -710,7 +793,9 @@ impl PyUkf {
 impl PyUkf {
     /// A filter on a built-in model (`UkfLinearModel` or `UkfConstantVelocityModel`).
     #[staticmethod]
-    #[pyo3(signature = (model, alpha, beta, kappa, *, square_root=false, augmented=false, repair=false))]
+    #[pyo3(signature = (model, alpha, beta, kappa, *, square_root=false, augmented=false, repair=false,
+        family_name="merwe"))]
+    #[allow(clippy::too_many_arguments)]
     fn builtin(
         model: &Bound<'_, PyAny>,
         alpha: f64,
@@ -719,24 +804,26 @@ impl PyUkf {
         square_root: bool,
         augmented: bool,
         repair: bool,
+        family_name: &str,
     ) -> PyResult<Self> {
         let m: DynModel = if let Ok(m) = model.cast::<PyLinearModel>() {
-            Box::new(m.get().inner.clone())
+            Arc::new(m.get().inner.clone())
         } else if let Ok(m) = model.cast::<PyCvModel>() {
-            Box::new(m.get().inner)
+            Arc::new(m.get().inner)
         } else {
             return Err(errors::invalid_input(format!(
                 "model must be a UkfLinearModel or UkfConstantVelocityModel, got {}",
                 model.get_type().name()?
             )));
         };
-        let points = sigma_points(alpha, beta, kappa, m.dim_x())?;
-        let inner =
-            build(m, points.clone(), square_root, augmented, repair).map_err(errors::estimate)?;
+        let points = family(family_name, m.dim_x(), alpha, beta, kappa)?;
+        let inner = build(m.clone(), points.clone(), square_root, augmented, repair)
+            .map_err(errors::estimate)?;
         Ok(Self {
             inner,
             shared: None,
             points,
+            model: m,
         })
     }
 
@@ -744,7 +831,8 @@ impl PyUkf {
     #[staticmethod]
     #[pyo3(signature = (dim_x, dim_z, fx, hx, alpha, beta, kappa, *, x_mean=None, z_mean=None,
         residual_x=None, residual_z=None, state_add=None, subtract=None, sqrt=None,
-        square_root=false, augmented=false, repair=false, dim_w=None, dim_v=None))]
+        square_root=false, augmented=false, repair=false, dim_w=None, dim_v=None, family_name="merwe",
+        draw=None, wm=None, wc=None))]
     #[allow(clippy::too_many_arguments)]
     fn callbacks(
         dim_x: usize,
@@ -766,6 +854,10 @@ impl PyUkf {
         repair: bool,
         dim_w: Option<usize>,
         dim_v: Option<usize>,
+        family_name: &str,
+        draw: Option<Bound<'_, PyAny>>,
+        wm: Option<&Bound<'_, PyAny>>,
+        wc: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         if dim_x == 0 || dim_z == 0 {
             return Err(errors::invalid_input(format!(
@@ -782,6 +874,7 @@ impl PyUkf {
             ("state_add", state_add.as_ref()),
             ("subtract", subtract.as_ref()),
             ("sqrt_method", sqrt.as_ref()),
+            ("sigma_points", draw.as_ref()),
         ] {
             if let Some(f) = f
                 && !f.is_callable()
@@ -789,6 +882,19 @@ impl PyUkf {
                 return Err(errors::invalid_input(format!("{name} must be callable")));
             }
         }
+        // An external sigma-point object: its weights, and its `sigma_points` draws.
+        let points = match (&draw, wm, wc) {
+            (Some(_), Some(wm), Some(wc)) => SigmaPoints::from(
+                GivenWeights::new(dim_x, vector(wm, "Wm")?, vector(wc, "Wc")?)
+                    .map_err(errors::estimate)?,
+            ),
+            (None, None, None) => family(family_name, dim_x, alpha, beta, kappa)?,
+            _ => {
+                return Err(errors::invalid_input(
+                    "external sigma points need all of draw, Wm and Wc",
+                ));
+            }
+        };
         let shared = Arc::new(Shared::default());
         let model = PyModel {
             dim_x,
@@ -805,12 +911,14 @@ impl PyUkf {
                 state_add: state_add.map(Bound::unbind),
                 subtract: subtract.map(Bound::unbind),
                 sqrt: sqrt.map(Bound::unbind),
+                draw: draw.map(Bound::unbind),
+                num_sigmas: points.num_sigmas(),
             },
             shared: shared.clone(),
         };
-        let points = sigma_points(alpha, beta, kappa, dim_x)?;
+        let model: DynModel = Arc::new(model);
         let inner = build(
-            Box::new(model),
+            model.clone(),
             points.clone(),
             square_root,
             augmented,
@@ -821,6 +929,7 @@ impl PyUkf {
             inner,
             shared: Some(shared),
             points,
+            model,
         })
     }
 
@@ -1115,6 +1224,129 @@ impl PyUkf {
     #[getter]
     fn repairs(&self) -> usize {
         self.inner.repairs()
+    }
+
+    /// Sigma points `(N, n)` of (x, P) as this filter draws them (its family, and the
+    /// model's `subtract` / `sqrt_method` / external `sigma_points` hooks).
+    fn sigma_points<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        p: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let x = vector(x, "x")?;
+        let p = matrix(p, "P")?;
+        self.set_call(None, None, None, None)?;
+        let r = convert::guarded(|| Ok(self.points.draw_with(&self.model, &x, &p)))?;
+        let s = r.map_err(|e| self.error(e))?;
+        to_numpy(py, s.as_slice().to_vec(), &[s.ncols(), s.nrows()])
+    }
+
+    /// The unscented RTS smoother of filtered means `xs` `(n, dim_x)` and covariances `Ps`
+    /// `(n, dim_x, dim_x)`, with `Qs` `(dim_x, dim_x)` or `(n, dim_x, dim_x)` and `dts` `(n,)`
+    /// (and `us` `(n, dim_u)` for built-in models). Returns `(xs, Ps, Ks)`. Built-in models
+    /// run without the GIL.
+    #[pyo3(signature = (xs, ps, qs, dts, us=None))]
+    #[allow(clippy::type_complexity)]
+    fn rts_smoother<'py>(
+        &self,
+        py: Python<'py>,
+        xs: &Bound<'py, PyAny>,
+        ps: &Bound<'py, PyAny>,
+        qs: &Bound<'py, PyAny>,
+        dts: &Bound<'py, PyAny>,
+        us: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<(
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyAny>,
+        Bound<'py, PyAny>,
+    )> {
+        let n = self.inner.dim_x();
+        let (xd, lead) = convert::finite_batch(xs, "Xs", &[n], &format!("(k, {n})"))?;
+        if lead.len() != 1 {
+            return Err(errors::invalid_input(format!(
+                "Xs must have shape (k, {n}), got {}",
+                convert::shape_str(&convert::batched_shape(&lead, &[n]))
+            )));
+        }
+        let steps = lead[0];
+        let (pd, plead) =
+            convert::finite_batch(ps, "Ps", &[n, n], &format!("({steps}, {n}, {n})"))?;
+        if plead != [steps] {
+            return Err(errors::invalid_input(format!(
+                "Ps must have shape ({steps}, {n}, {n}) (one per mean), got {}",
+                convert::shape_str(&convert::batched_shape(&plead, &[n, n]))
+            )));
+        }
+        let (qd, qlead) = convert::finite_batch(qs, "Qs", &[n, n], &format!("({n}, {n})"))?;
+        if !(qlead.is_empty() || qlead == [steps]) {
+            return Err(errors::invalid_input(format!(
+                "Qs must have shape ({n}, {n}) or ({steps}, {n}, {n}), got {}",
+                convert::shape_str(&convert::batched_shape(&qlead, &[n, n]))
+            )));
+        }
+        let (dd, dlead) = convert::finite_batch(dts, "dts", &[], "(k,)")?;
+        if dlead != [steps] {
+            return Err(errors::invalid_input(format!(
+                "dts must have shape ({steps},), got {}",
+                convert::shape_str(&dlead)
+            )));
+        }
+        let us = match us {
+            Some(u) => {
+                let a = convert::finite_array(u, "us")?;
+                let shape = a.shape().to_vec();
+                if shape.len() != 2 || shape[0] != steps {
+                    return Err(errors::invalid_input(format!(
+                        "us must have shape ({steps}, dim_u), got {}",
+                        convert::shape_str(&shape)
+                    )));
+                }
+                let data = a.exact(&shape)?;
+                Some(
+                    data.chunks_exact(shape[1].max(1))
+                        .map(DVector::from_column_slice)
+                        .collect::<Vec<_>>(),
+                )
+            }
+            None => None,
+        };
+        let xv: Vec<DVector<f64>> = xd.chunks_exact(n).map(DVector::from_column_slice).collect();
+        let mats = |d: &[f64]| -> Vec<DMatrix<f64>> {
+            d.chunks_exact(n * n)
+                .map(|c| DMatrix::from_row_slice(n, n, c))
+                .collect()
+        };
+        let (pv, qv) = (mats(&pd), mats(&qd));
+        self.set_call(None, None, None, None)?;
+        let run = || {
+            Ok(rts_smoother(
+                &self.model,
+                &self.points,
+                &xv,
+                &pv,
+                &qv,
+                &dd,
+                us.as_deref(),
+            ))
+        };
+        let result = if self.is_callback() {
+            convert::guarded(run)?
+        } else {
+            convert::detached(py, run)?
+        };
+        let out = result.map_err(|e| self.error(e))?;
+        let flat_x: Vec<f64> = out.xs.iter().flat_map(|v| v.iter().copied()).collect();
+        // Column-major matrices: swap the last two axes of the (k, n, n) array (a view).
+        let mats_out = |m: &[DMatrix<f64>]| -> PyResult<Bound<'py, PyAny>> {
+            let flat: Vec<f64> = m.iter().flat_map(|a| a.iter().copied()).collect();
+            to_numpy(py, flat, &[steps, n, n])?.call_method1("swapaxes", (1, 2))
+        };
+        Ok((
+            to_numpy(py, flat_x, &[steps, n])?,
+            mats_out(&out.ps)?,
+            mats_out(&out.ks)?,
+        ))
     }
 
     /// The mean weights of the sigma points.

@@ -864,6 +864,14 @@ impl PyEllipse {
     #[allow(non_snake_case)]
     fn from_conic(C: &Bound<'_, PyAny>) -> PyResult<Self> {
         let c = matrix3(C, "C")?;
+        // The core uses the symmetric part; the Python API promises to refuse an asymmetric C.
+        let asym = (c - c.transpose()).norm();
+        if asym.is_nan() || asym > 1e-9 * c.norm() {
+            return Err(errors::invalid_input(format!(
+                "C must be a symmetric 3×3 conic matrix, got |C − Cᵀ| = {asym:.3e} (|C| = {:.3e})",
+                c.norm()
+            )));
+        }
         let inner = convert::guarded(|| Ellipse::from_conic(&c).map_err(errors::geometry))?;
         Ok(Self { inner })
     }

@@ -8,15 +8,21 @@ use pyo3::prelude::*;
 
 mod active;
 mod calib;
+mod control;
 pub mod convert;
 mod detect;
+mod ellipse_detection;
 pub mod errors;
 mod estimate;
 mod geometry;
+mod gray;
 mod handeye;
 mod lsq;
+mod mapping;
 mod polygon;
+mod radio;
 mod registration;
+mod segment;
 mod sim;
 mod track;
 mod wafers;
@@ -37,6 +43,11 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     active::register(m)?;
+    radio::register(m)?;
+    ellipse_detection::register(m)?;
+    mapping::register(m)?;
+    segment::register(m)?;
+    control::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

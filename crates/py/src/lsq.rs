@@ -303,6 +303,7 @@ impl LsqProblem {
             Manifold::So3 => "so3",
             Manifold::UnitQuaternion => "quaternion",
             Manifold::Se3 => "se3",
+            Manifold::Se2 => "se2",
         }
         .to_string())
     }

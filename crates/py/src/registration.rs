@@ -84,18 +84,18 @@ pub struct PyCpdRigid {
 #[pymethods]
 impl PyCpdRigid {
     /// Rotation `R` (D × D).
-    #[getter(R)]
+    #[getter]
     fn rotation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         matrix_out(py, &self.inner.rotation)
     }
     /// Translation `t` (D,).
     #[getter]
-    fn t<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    fn translation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         vector_out(py, &self.inner.translation)
     }
     /// Scale `s`.
     #[getter]
-    fn s(&self) -> f64 {
+    fn scale(&self) -> f64 {
         self.inner.scale
     }
     /// The moved Y (M × D).
@@ -119,7 +119,7 @@ impl PyCpdRigid {
         self.inner.converged
     }
     /// Posterior matrix `P` (M × N) of the last E-step, or `None`.
-    #[getter(P)]
+    #[getter]
     fn p<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArrayDyn<f64>>>> {
         self.inner.p.as_ref().map(|p| matrix_out(py, p)).transpose()
     }
@@ -134,13 +134,13 @@ pub struct PyCpdAffine {
 #[pymethods]
 impl PyCpdAffine {
     /// Linear part `B` (D × D).
-    #[getter(B)]
+    #[getter]
     fn matrix<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         matrix_out(py, &self.inner.matrix)
     }
     /// Translation `t` (D,).
     #[getter]
-    fn t<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    fn translation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         vector_out(py, &self.inner.translation)
     }
     /// The moved Y (M × D).
@@ -164,7 +164,7 @@ impl PyCpdAffine {
         self.inner.converged
     }
     /// Posterior matrix `P` (M × N) of the last E-step, or `None`.
-    #[getter(P)]
+    #[getter]
     fn p<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArrayDyn<f64>>>> {
         self.inner.p.as_ref().map(|p| matrix_out(py, p)).transpose()
     }
@@ -179,7 +179,7 @@ pub struct PyCpdNonrigid {
 #[pymethods]
 impl PyCpdNonrigid {
     /// Kernel weights `W` (M × D).
-    #[getter(W)]
+    #[getter]
     fn w<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         matrix_out(py, &self.inner.w)
     }
@@ -214,7 +214,7 @@ impl PyCpdNonrigid {
         self.inner.rank
     }
     /// Posterior matrix `P` (M × N) of the last E-step, or `None`.
-    #[getter(P)]
+    #[getter]
     fn p<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArrayDyn<f64>>>> {
         self.inner.p.as_ref().map(|p| matrix_out(py, p)).transpose()
     }
@@ -312,52 +312,35 @@ pub struct PyGlobalHypothesis {
 
 #[pymethods]
 impl PyGlobalHypothesis {
-    /// The moved Y after non-rigid CPD (M × D).
+    /// The rigid initial transform from global voting, as the arrays and counts of
+    /// `autoteach_detect::voting::RigidHypothesis`: `(rotation (D, D), translation (D,), votes,
+    /// pair_votes)`.
     #[getter]
-    fn transformed<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        matrix_out(py, &self.inner.cpd.transformed)
+    fn initial<'py>(&self, py: Python<'py>) -> PyResult<GlobalInitial<'py>> {
+        let h = &self.inner.initial;
+        Ok((
+            matrix_out(py, &h.rotation)?,
+            vector_out(py, &h.translation)?,
+            h.votes,
+            h.pair_votes,
+        ))
     }
-    /// Deformation energy `tr(Wᵀ G W)` (ranks the hypotheses, least first).
+    /// The non-rigid CPD run from the initial transform (its `energy` ranks the hypotheses).
     #[getter]
-    fn energy(&self) -> f64 {
-        self.inner.cpd.energy
-    }
-    /// Y-count votes of the rigid hypothesis.
-    #[getter]
-    fn votes(&self) -> usize {
-        self.inner.initial.votes
-    }
-    /// Pair votes of the rigid hypothesis.
-    #[getter]
-    fn pair_votes(&self) -> usize {
-        self.inner.initial.pair_votes
-    }
-    /// Rotation of the rigid initial transform (D × D).
-    #[getter(R)]
-    fn rotation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        matrix_out(py, &self.inner.initial.rotation)
-    }
-    /// Translation of the rigid initial transform (D,).
-    #[getter]
-    fn t<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        vector_out(py, &self.inner.initial.translation)
-    }
-    /// Kernel weights `W` (M × D) of the CPD run.
-    #[getter(W)]
-    fn w<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        matrix_out(py, &self.inner.cpd.w)
-    }
-    /// Final σ² of the CPD run.
-    #[getter]
-    fn sigma2(&self) -> f64 {
-        self.inner.cpd.sigma2
-    }
-    /// EM iterations of the CPD run.
-    #[getter]
-    fn iterations(&self) -> usize {
-        self.inner.cpd.iterations
+    fn cpd(&self) -> PyCpdNonrigid {
+        PyCpdNonrigid {
+            inner: self.inner.cpd.clone(),
+        }
     }
 }
+
+/// `(rotation, translation, votes, pair_votes)` of a global-CPD hypothesis's initial transform.
+type GlobalInitial<'py> = (
+    Bound<'py, PyArrayDyn<f64>>,
+    Bound<'py, PyArrayDyn<f64>>,
+    usize,
+    usize,
+);
 
 /// Global-CPD of `y` (M, D) onto `x` (N, D): top-`k` voting hypotheses refined by non-rigid
 /// CPD, ranked by deformation energy.

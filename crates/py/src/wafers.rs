@@ -4,22 +4,23 @@
 //! [`autoteach_detect::wafers::detect_wafers`] without the GIL and wraps the edges; the friendly
 //! front is `autoteach.detect.detect_wafers`.
 
+use autoteach_detect::DetectError;
 use autoteach_detect::edges::{GrayView, Pixel};
 use autoteach_detect::wafers::{
     DetectParams, EdgeProfile, RimOffsetPrior, WaferEdge, WaferPrior, detect_wafers,
 };
-use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::convert;
 use crate::errors;
 use crate::geometry::PyEllipse;
+use crate::gray::{GrayJob, on_gray_image};
 
 /// One detected wafer rim (`autoteach._core.WaferEdge`); see `autoteach.detect.WaferEdge`.
 #[pyclass(name = "WaferEdge", module = "autoteach._core", frozen)]
 pub struct PyWaferEdge {
-    inner: WaferEdge,
+    pub(crate) inner: WaferEdge,
 }
 
 #[pymethods]
@@ -87,28 +88,14 @@ impl PyWaferEdge {
     }
 }
 
-/// Runs the detector on a 2-D array of one pixel type.
-fn run<T: Pixel + numpy::Element>(
-    py: Python<'_>,
-    arr: PyReadonlyArray2<'_, T>,
-    params: &DetectParams,
-) -> PyResult<Vec<WaferEdge>> {
-    let shape = arr.shape();
-    let (h, w) = (shape[0], shape[1]);
-    // A C-contiguous array is read in place; any other view is copied row-major first.
-    let copied: Vec<T>;
-    // (`as_slice` also accepts Fortran order, whose memory order is not row-major.)
-    let data: &[T] = match arr.as_slice() {
-        Ok(slice) if arr.is_c_contiguous() => slice,
-        _ => {
-            copied = arr.as_array().iter().copied().collect();
-            &copied
-        }
-    };
-    convert::detached(py, || {
-        let view = GrayView::new(data, w, h).map_err(errors::detect)?;
-        detect_wafers(&view, params).map_err(errors::detect)
-    })
+/// The wafer detector as a [`GrayJob`].
+struct WaferJob<'a>(&'a DetectParams);
+
+impl GrayJob for WaferJob<'_> {
+    type Output = Vec<WaferEdge>;
+    fn run<T: Pixel>(&self, view: &GrayView<'_, T>) -> Result<Self::Output, DetectError> {
+        detect_wafers(view, self.0)
+    }
 }
 
 /// The detector's default parameters, by the keyword names of `wafer_detect` (the Python front
@@ -301,39 +288,7 @@ fn wafer_detect(
             ));
         }
     };
-    let ndim = image
-        .getattr("ndim")
-        .and_then(|n| n.extract::<usize>())
-        .map_err(|_| {
-            errors::invalid_input(format!(
-                "image must be a 2-D NumPy array, got a {}",
-                image
-                    .get_type()
-                    .name()
-                    .map(|n| n.to_string())
-                    .unwrap_or_default()
-            ))
-        })?;
-    if ndim != 2 {
-        return Err(errors::invalid_input(format!(
-            "image must be 2-D (height, width) grayscale, got {ndim} dimensions"
-        )));
-    }
-    let edges = if let Ok(a) = image.extract::<PyReadonlyArray2<'_, u8>>() {
-        run(py, a, &params)?
-    } else if let Ok(a) = image.extract::<PyReadonlyArray2<'_, f32>>() {
-        run(py, a, &params)?
-    } else if let Ok(a) = image.extract::<PyReadonlyArray2<'_, f64>>() {
-        run(py, a, &params)?
-    } else {
-        let dtype = image
-            .getattr("dtype")
-            .map(|d| d.to_string())
-            .unwrap_or_else(|_| "unknown".into());
-        return Err(errors::invalid_input(format!(
-            "image must have dtype uint8, float32 or float64, got {dtype}"
-        )));
-    };
+    let edges = on_gray_image(py, image, &WaferJob(&params), false)?;
     Ok(edges
         .into_iter()
         .map(|inner| PyWaferEdge { inner })

@@ -8,3 +8,8 @@ sub-parsers ``sub`` (with ``parents=[common]`` for ``--json``/``--quiet``) and s
 from __future__ import annotations
 
 MODULES = ("autoteach.commands.run", "autoteach.commands.calibrate", "autoteach.commands.active")
+MODULES += ("autoteach.commands.scenes",)
+MODULES += ("autoteach.commands.map",)
+MODULES += ("autoteach.commands.radio",)
+MODULES += ("autoteach.commands.segment",)
+MODULES += ("autoteach.commands.tune",)

@@ -12,25 +12,7 @@ import argparse
 import json
 from typing import Any
 
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
-    return value
-
-
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {value}")
-    return value
+from autoteach.commands.args import positive, seed
 
 
 def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:  # type: ignore[type-arg]
@@ -40,9 +22,9 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
         parents=[common],
         help="active auto-teaching on simulation: errors with and without measurement-pose planning",
     )
-    p.add_argument("--trials", type=_positive, default=10, help="number of random trials (default 10)")
-    p.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
-    p.add_argument("--steps", type=_positive, default=None, help="measurements per trial (default 12)")
+    p.add_argument("--trials", type=positive, default=10, help="number of random trials (default 10)")
+    p.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
+    p.add_argument("--steps", type=positive, default=None, help="measurements per trial (default 12)")
     p.set_defaults(func=_run)
 
 

@@ -15,11 +15,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from autoteach.commands.args import positive, seed
 from autoteach.errors import InvalidInputError
 
 
@@ -50,12 +52,22 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
         help="how views are chosen: suggestions, random, or a novice following the ROS checklist (default guided)",
     )
     p.add_argument("--threshold", type=float, default=0.5, help="stop when Max ERE < this many pixels (default 0.5)")
-    p.add_argument("--max-views", type=int, default=12, help="at most this many views (default 12)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--max-views", type=positive, default=12, help="at most this many views (default 12)")
+    p.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     p.set_defaults(func=run)
 
 
 def _load_npz(path: Path) -> tuple[list[np.ndarray], list[np.ndarray], tuple[int, int]]:
+    try:
+        return _read_npz(path)
+    except (ValueError, EOFError, KeyError, zipfile.BadZipFile) as err:
+        # np.load raises these for files that are not an .npz of plain arrays.
+        raise InvalidInputError(
+            f"{path}: not a readable .npz archive of calibration views ({type(err).__name__})"
+        ) from None
+
+
+def _read_npz(path: Path) -> tuple[list[np.ndarray], list[np.ndarray], tuple[int, int]]:
     with np.load(path, allow_pickle=False) as z:
         keys = set(z.files)
         if "image_size" not in keys:

@@ -128,13 +128,19 @@ def plan_joint_waypoints(robot: WaferRobot, waypoints: np.ndarray, elbow: int = 
     return out
 
 
-def _check_count(value: Any, name: str, minimum: int) -> int:
+#: At most this many frames per session: the images are held in memory (0.9 MB per 1280×720 frame).
+MAX_FRAMES = 1_000_000
+
+
+def _check_count(value: Any, name: str, minimum: int, maximum: int | None = None) -> int:
     try:
         n = operator.index(value)
     except TypeError:
-        raise InvalidInputError(f"{name} must be an integer, got {value!r}") from None
-    if n < minimum:
-        raise InvalidInputError(f"{name} must be >= {minimum}, got {n}")
+        raise InvalidInputError(f"{name} must be an integer, got {type(value).__name__}") from None
+    if n < minimum or (maximum is not None and n > maximum):
+        shown = str(n) if len(str(n)) <= 24 else f"a {len(str(n))}-digit number"
+        bound = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
+        raise InvalidInputError(f"{name} must be {bound}, got {shown}")
     return n
 
 
@@ -172,7 +178,7 @@ def simulate_session(
     from tqdm import tqdm
 
     seed = _check_count(seed, "seed", 0)
-    frames = _check_count(frames, "frames", 1)
+    frames = _check_count(frames, "frames", 1, MAX_FRAMES)
     if config is None:
         config = SimConfig()
     elif not isinstance(config, SimConfig):

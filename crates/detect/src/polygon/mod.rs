@@ -357,23 +357,25 @@ fn vote(refs: &[Option<Segment>], e: &[Edge], o: &PolygonOptions) -> Result<Houg
     }
     let origin = lo - Vector2::repeat(radius + 2.0 * o.cell);
     let ext = hi + Vector2::repeat(radius + 2.0 * o.cell) - origin;
-    let cols = (ext.x / o.cell).ceil() as usize;
-    let rows = (ext.y / o.cell).ceil() as usize;
-    let total = n_rot * scales.len() * rows * cols;
-    if total > 200_000_000 {
+    let (cols_f, rows_f) = ((ext.x / o.cell).ceil(), (ext.y / o.cell).ceil());
+    // The size in f64, written so that NaN fails: a `usize` product of huge extents would
+    // saturate, then wrap, and pass the limit.
+    let total = n_rot as f64 * scales.len() as f64 * rows_f * cols_f;
+    if total.is_nan() || total > 2e8 {
         return Err(DetectError::InvalidParameter {
             what: "cell",
             value: o.cell,
             reason: "the Hough space would exceed 2·10⁸ cells; enlarge cell or the steps, or narrow the ranges",
         });
     }
+    let (cols, rows) = (cols_f as usize, rows_f as usize);
     let mut h = Hough {
         n_rot,
         n_scale: scales.len(),
         rows,
         cols,
         origin,
-        data: vec![0f32; total],
+        data: vec![0f32; n_rot * scales.len() * rows * cols],
     };
     let theta0 = o.rotation_nominal - o.rotation_range;
     let plane = rows * cols;

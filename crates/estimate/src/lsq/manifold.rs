@@ -27,6 +27,8 @@ pub enum Manifold {
     UnitQuaternion,
     /// SE(3) stored as `[qw, qx, qy, qz, tx, ty, tz]`.
     Se3,
+    /// SE(2) stored as `[x, y, θ]`; tangent `[ρx, ρy, θ]` (see [`super::se2`]).
+    Se2,
 }
 
 /// Tolerance on ‖q‖ − 1 and on ‖RᵀR − I‖ when validating stored values.
@@ -40,6 +42,7 @@ impl Manifold {
             Manifold::So3 => 9,
             Manifold::UnitQuaternion => 4,
             Manifold::Se3 => 7,
+            Manifold::Se2 => 3,
         }
     }
 
@@ -49,6 +52,7 @@ impl Manifold {
             Manifold::Euclidean(n) => *n,
             Manifold::So3 | Manifold::UnitQuaternion => 3,
             Manifold::Se3 => 6,
+            Manifold::Se2 => 3,
         }
     }
 
@@ -74,6 +78,11 @@ impl Manifold {
                 "{what}: a Euclidean block needs at least one dimension"
             ))),
             Manifold::Euclidean(_) => Ok(values.to_vec()),
+            Manifold::Se2 => Ok(vec![
+                values[0],
+                values[1],
+                super::se2::wrap_angle(values[2]),
+            ]),
             Manifold::So3 => {
                 let m = Matrix3::from_column_slice(values);
                 let err = (m.transpose() * m - Matrix3::identity()).norm();
@@ -122,6 +131,13 @@ impl Manifold {
                 let t = se3_plus(&se3_from_params(x), &xi);
                 out.copy_from_slice(&se3_to_params(&t));
             }
+            Manifold::Se2 => {
+                let (x, d) = (
+                    super::se2::se2_from_slice(x),
+                    super::se2::se2_from_slice(delta),
+                );
+                out.copy_from_slice(&super::se2::se2_plus(&x, &d));
+            }
         }
     }
 
@@ -144,6 +160,10 @@ impl Manifold {
             Manifold::Se3 => {
                 let d = se3_minus(&se3_from_params(y), &se3_from_params(x));
                 out.copy_from_slice(d.as_slice());
+            }
+            Manifold::Se2 => {
+                let (y, x) = (super::se2::se2_from_slice(y), super::se2::se2_from_slice(x));
+                out.copy_from_slice(&super::se2::se2_minus(&y, &x));
             }
         }
     }

@@ -46,6 +46,7 @@ mod numeric;
 mod problem;
 mod residuals;
 mod schur;
+pub mod se2;
 mod solver;
 pub mod synthetic;
 #[cfg(test)]
@@ -60,4 +61,5 @@ pub use manifold::{
 pub use numeric::NumericDiff;
 pub use problem::{BlockId, PriorResidual, Problem, Residual, ResidualId};
 pub use residuals::{Intrinsics, PointToConicResidual, RelativePoseResidual, ReprojectionResidual};
+pub use se2::Se2BetweenResidual;
 pub use solver::{LinearSolver, Method, SolverOptions, Summary, Termination};

@@ -33,6 +33,13 @@ pub trait Residual: Send + Sync {
         residual: &mut [f64],
         jacobians: Option<&mut [DMatrix<f64>]>,
     ) -> std::result::Result<(), EstimateError>;
+
+    /// The manifold each block must have, in order, when the residual knows it; checked by
+    /// [`Problem::add_residual`] so that a residual never reads blocks of the wrong kind (which
+    /// would index past their values during the solve). `None` (the default) accepts any blocks.
+    fn block_manifolds(&self) -> Option<Vec<Manifold>> {
+        None
+    }
 }
 
 /// A parameter block.
@@ -163,8 +170,26 @@ impl Problem {
                 "residual {id} has dimension 0"
             )));
         }
+        if let Some(expected) = r.block_manifolds()
+            && expected.len() != blocks.len()
+        {
+            return Err(EstimateError::InvalidProblem(format!(
+                "residual {id} reads {} blocks, got {}",
+                expected.len(),
+                blocks.len()
+            )));
+        }
+        let expected = r.block_manifolds();
         for (k, b) in blocks.iter().enumerate() {
-            self.block(*b)?;
+            let have = self.block(*b)?.manifold;
+            if let Some(want) = expected.as_ref().map(|e| e[k])
+                && have != want
+            {
+                return Err(EstimateError::InvalidProblem(format!(
+                    "residual {id}: block {} is {have:?}, but this residual needs {want:?} there",
+                    b.0
+                )));
+            }
             if blocks[..k].contains(b) {
                 return Err(EstimateError::InvalidProblem(format!(
                     "residual {id} lists block {} twice",
@@ -331,6 +356,11 @@ impl Residual for PriorResidual {
                     let (jy, _) =
                         se3_minus_jacobians(&se3_from_params(x), &se3_from_params(&self.mean));
                     DMatrix::from_column_slice(6, 6, jy.as_slice())
+                }
+                Manifold::Se2 => {
+                    let d = [d[0], d[1], d[2]];
+                    let j = super::se2::se2_right_jacobian_inv(&d);
+                    DMatrix::from_column_slice(3, 3, j.as_slice())
                 }
             };
             if let Some(j0) = jac.first_mut() {

@@ -7,7 +7,7 @@
 use autoteach_geometry::lie::{hat, se3_adjoint, se3_log, se3_right_jacobian_inv};
 use nalgebra::{DMatrix, Isometry3, Matrix3, Vector3, Vector6};
 
-use super::manifold::se3_from_params;
+use super::manifold::{Manifold, se3_from_params};
 use super::problem::Residual;
 use crate::{EstimateError, Result};
 
@@ -116,6 +116,10 @@ impl ReprojectionResidual {
 }
 
 impl Residual for ReprojectionResidual {
+    fn block_manifolds(&self) -> Option<Vec<Manifold>> {
+        Some(vec![Manifold::Se3, Manifold::Euclidean(3)])
+    }
+
     fn dim(&self) -> usize {
         2
     }
@@ -218,6 +222,10 @@ impl RelativePoseResidual {
 }
 
 impl Residual for RelativePoseResidual {
+    fn block_manifolds(&self) -> Option<Vec<Manifold>> {
+        Some(vec![Manifold::Se3, Manifold::Se3])
+    }
+
     fn dim(&self) -> usize {
         6
     }
@@ -300,6 +308,10 @@ impl PointToConicResidual {
 }
 
 impl Residual for PointToConicResidual {
+    fn block_manifolds(&self) -> Option<Vec<Manifold>> {
+        Some(vec![Manifold::Se3, Manifold::Se3])
+    }
+
     fn dim(&self) -> usize {
         1
     }

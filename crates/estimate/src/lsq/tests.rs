@@ -673,3 +673,37 @@ fn numeric_diff_matches_the_analytic_reprojection() {
         assert!((a - n).amax() < 1e-5 * a.amax().max(1.0), "{a}\n{n}");
     }
 }
+
+#[test]
+fn residual_on_blocks_of_the_wrong_manifold_is_refused() {
+    // Regression: a relative pose between two Euclidean 3-vectors was accepted, and the solve
+    // then indexed past the blocks' values and panicked.
+    let cov = DMatrix::identity(6, 6);
+    let r = RelativePoseResidual::new(&Isometry3::identity(), &cov).unwrap();
+    let mut p = Problem::new();
+    let a = p
+        .add_block(&[0.0, 0.0, 0.0], Manifold::Euclidean(3))
+        .unwrap();
+    let b = p
+        .add_block(&[1.0, 0.0, 0.0], Manifold::Euclidean(3))
+        .unwrap();
+    let err = p
+        .add_residual(r.clone(), &[a, b], Loss::Trivial)
+        .unwrap_err();
+    assert!(
+        matches!(err, EstimateError::InvalidProblem(ref m) if m.contains("needs Se3")),
+        "{err}"
+    );
+    let c = p
+        .add_block(&se3_to_params(&Isometry3::identity()), Manifold::Se3)
+        .unwrap();
+    let err = p.add_residual(r.clone(), &[c], Loss::Trivial).unwrap_err();
+    assert!(
+        matches!(err, EstimateError::InvalidProblem(ref m) if m.contains("reads 2 blocks")),
+        "{err}"
+    );
+    let d = p
+        .add_block(&se3_to_params(&pose(3)), Manifold::Se3)
+        .unwrap();
+    assert!(p.add_residual(r, &[c, d], Loss::Trivial).is_ok());
+}

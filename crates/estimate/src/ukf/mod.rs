@@ -1,6 +1,9 @@
 //! The unscented Kalman filter (seed 000_3b1454b2b2194811.txt §5.2).
 //!
 //! * [`MerweScaledSigmaPoints`]: van der Merwe's scaled sigma points, weights as filterpy.
+//! * [`JulierSigmaPoints`], [`SimplexSigmaPoints`]: filterpy's other two families; [`SigmaPoints`]
+//!   holds any of them (or [`GivenWeights`] of points a model draws itself).
+//! * [`rts_smoother`]: the unscented Rauch–Tung–Striebel smoother of a filtered run.
 //! * [`UkfModel`]: the process/measurement model with ⊕/⊖ hooks for angle and SO(3) parts.
 //! * [`UnscentedKalmanFilter`]: the covariance-form filter (additive or augmented noise).
 //! * [`SquareRootUkf`]: the square-root form (van der Merwe & Wan 2001).
@@ -30,21 +33,29 @@
 //! # Ok::<(), autoteach_estimate::EstimateError>(())
 //! ```
 
+mod family;
 mod filter;
+mod julier;
 mod kernels;
 mod linalg;
 mod model;
 mod models;
 mod points;
+mod simplex;
+mod smoother;
 mod sqrt;
 mod standard;
 mod transform;
 
+pub use family::{GivenWeights, SigmaPoints};
 pub use filter::{BatchInputs, BatchResult, FlatBatch, NoiseForm, SigmaPointFilter};
+pub use julier::JulierSigmaPoints;
 pub use linalg::CovariancePolicy;
 pub use model::UkfModel;
 pub use models::{ConstantVelocityModel, LinearModel};
 pub use points::MerweScaledSigmaPoints;
+pub use simplex::SimplexSigmaPoints;
+pub use smoother::{RtsResult, rts_smoother};
 pub use sqrt::SquareRootUkf;
 pub use standard::UnscentedKalmanFilter;
 

@@ -246,6 +246,20 @@ pub trait UkfModel {
         let _ = (p, scale);
         None
     }
+
+    /// Sigma points of (x, P) drawn by the model itself into the columns of `out` (`n × N`),
+    /// for a [`SigmaPoints::Given`](super::SigmaPoints::Given) family (a sigma-point object
+    /// defined outside this crate, e.g. filterpy's, whose weights the filter was given).
+    /// `None` (the default): the model cannot draw, and such a family is refused.
+    fn draw_sigmas(
+        &self,
+        x: &DVector<f64>,
+        p: &DMatrix<f64>,
+        out: &mut DMatrix<f64>,
+    ) -> Option<Result<()>> {
+        let _ = (x, p, out);
+        None
+    }
 }
 
 /// Fills the first `ncols` columns of `out` with `f(i, tmp)` (`tmp` of length `len`): the
@@ -341,6 +355,9 @@ macro_rules! forward_model {
             }
             fn sqrt_cov(&self, p: &DMatrix<f64>, scale: f64) -> Option<Result<DMatrix<f64>>> {
                 (**self).sqrt_cov(p, scale)
+            }
+            fn draw_sigmas(&self, x: &DVector<f64>, p: &DMatrix<f64>, out: &mut DMatrix<f64>) -> Option<Result<()>> {
+                (**self).draw_sigmas(x, p, out)
             }
         }
     )*};

@@ -2,10 +2,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::family::SigmaPoints;
 use super::filter::{NoiseForm, SigmaPointFilter};
 use super::linalg::{self, CovariancePolicy};
 use super::model::UkfModel;
-use super::points::MerweScaledSigmaPoints;
 use super::transform::{self, Offsets, Space, Workspace};
 use crate::{EstimateError, Result};
 
@@ -31,9 +31,9 @@ const LN_2PI: f64 = 1.837_877_066_409_345_3;
 #[derive(Debug, Clone)]
 pub struct SquareRootUkf<M: UkfModel> {
     model: M,
-    points: MerweScaledSigmaPoints,
-    pred_points: MerweScaledSigmaPoints,
-    upd_points: MerweScaledSigmaPoints,
+    points: SigmaPoints,
+    pred_points: SigmaPoints,
+    upd_points: SigmaPoints,
     noise: NoiseForm,
     policy: CovariancePolicy,
     x: DVector<f64>,
@@ -60,7 +60,15 @@ pub struct SquareRootUkf<M: UkfModel> {
 impl<M: UkfModel> SquareRootUkf<M> {
     /// A filter for `model` with sigma points `points` (`n == model.dim_x()`), additive noise
     /// and the strict policy; x = 0, P = Q = R = I initially.
-    pub fn new(model: M, points: MerweScaledSigmaPoints) -> Result<Self> {
+    pub fn new(model: M, points: impl Into<SigmaPoints>) -> Result<Self> {
+        let points: SigmaPoints = points.into();
+        if let SigmaPoints::Given(_) = points {
+            return Err(EstimateError::InvalidParameter {
+                name: "points",
+                value: points.n() as f64,
+                reason: "the square-root filter needs a built-in sigma-point family (Merwe, Julier or simplex)",
+            });
+        }
         let n = model.dim_x();
         let m = model.dim_z();
         if n == 0 || m == 0 {

@@ -2,11 +2,11 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::family::SigmaPoints;
 use super::filter::{NoiseForm, SigmaPointFilter};
 use super::kernels;
 use super::linalg::{self, CovariancePolicy};
 use super::model::UkfModel;
-use super::points::MerweScaledSigmaPoints;
 use super::transform::{self, Offsets, Space, Workspace};
 use crate::{EstimateError, Result};
 
@@ -26,9 +26,9 @@ const LN_2PI: f64 = 1.837_877_066_409_345_3;
 #[derive(Debug, Clone)]
 pub struct UnscentedKalmanFilter<M: UkfModel> {
     model: M,
-    points: MerweScaledSigmaPoints,
-    pred_points: MerweScaledSigmaPoints,
-    upd_points: MerweScaledSigmaPoints,
+    points: SigmaPoints,
+    pred_points: SigmaPoints,
+    upd_points: SigmaPoints,
     noise: NoiseForm,
     policy: CovariancePolicy,
     x: DVector<f64>,
@@ -96,7 +96,8 @@ impl<M: UkfModel> UnscentedKalmanFilter<M> {
     /// A filter for `model` with sigma points `points` (whose `n` must equal
     /// `model.dim_x()`), additive noise and the strict covariance policy. The state starts
     /// at zero with P = I, Q = I, R = I (as in filterpy): set them before filtering.
-    pub fn new(model: M, points: MerweScaledSigmaPoints) -> Result<Self> {
+    pub fn new(model: M, points: impl Into<SigmaPoints>) -> Result<Self> {
+        let points: SigmaPoints = points.into();
         let n = model.dim_x();
         let m = model.dim_z();
         if n == 0 || m == 0 {
@@ -190,7 +191,7 @@ impl<M: UkfModel> UnscentedKalmanFilter<M> {
     }
 
     /// The sigma points (for the state dimension).
-    pub fn points(&self) -> &MerweScaledSigmaPoints {
+    pub fn points(&self) -> &SigmaPoints {
         &self.points
     }
 
@@ -222,10 +223,7 @@ impl<M: UkfModel> UnscentedKalmanFilter<M> {
             return Ok(None);
         }
         let n = self.x.len();
-        match self
-            .model
-            .sqrt_cov(&self.p, n as f64 + self.points.lambda())
-        {
+        match self.model.sqrt_cov(&self.p, self.points.spread()) {
             None => Ok(None),
             Some(r) => {
                 let a = r.map_err(|e| transform::at_step(e, step))?;
@@ -300,9 +298,10 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
         linalg::check_predict_inputs(dt, u, self.model.dim_u())?;
         let augmented = self.noise == NoiseForm::Augmented;
         let custom = self.custom_offsets(step)?;
-        let offsets = match &custom {
-            Some(a) => Offsets::Scaled(a),
-            None => Offsets::Factor(&self.l),
+        let offsets = match (&custom, &self.points) {
+            (_, SigmaPoints::Given(_)) => Offsets::Covariance(&self.p),
+            (Some(a), _) => Offsets::Scaled(a),
+            (None, _) => Offsets::Factor(&self.l),
         };
         let ws = &mut self.pred_ws;
         let sc = &mut self.scratch;
@@ -370,9 +369,10 @@ impl<M: UkfModel> SigmaPointFilter for UnscentedKalmanFilter<M> {
             None => (&self.r, self.r_sqrt.as_ref()),
         };
         let custom = self.custom_offsets(step)?;
-        let offsets = match &custom {
-            Some(a) => Offsets::Scaled(a),
-            None => Offsets::Factor(&self.l),
+        let offsets = match (&custom, &self.points) {
+            (_, SigmaPoints::Given(_)) => Offsets::Covariance(&self.p),
+            (Some(a), _) => Offsets::Scaled(a),
+            (None, _) => Offsets::Factor(&self.l),
         };
         let ws = &mut self.upd_ws;
         let sc = &mut self.scratch;

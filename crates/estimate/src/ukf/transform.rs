@@ -4,10 +4,10 @@
 
 use nalgebra::{DMatrix, DVector, DVectorView};
 
+use super::family::{Layout, SigmaPoints};
 use super::kernels;
 use super::linalg;
 use super::model::UkfModel;
-use super::points::MerweScaledSigmaPoints;
 use crate::{EstimateError, Result};
 
 /// Stamps the filter step into errors raised by a model.
@@ -82,18 +82,22 @@ impl Workspace {
 
 /// Where the state offsets of the sigma points come from.
 pub(crate) enum Offsets<'a> {
-    /// `γ · (column k of L)` with `L Lᵀ = P`, γ = √(n_a + λ).
+    /// `√s · (column k of L)` with `L Lᵀ = P` and `s` the family's spread.
     Factor(&'a DMatrix<f64>),
-    /// The columns of a given square root of `(n + λ) P` (a custom `sqrt_cov`).
+    /// The columns of a given square root of `s · P` (a custom `sqrt_cov`).
     Scaled(&'a DMatrix<f64>),
+    /// The covariance itself, for points the model draws ([`Layout::Given`]).
+    Covariance(&'a DMatrix<f64>),
 }
 
-/// Draws the 2n_a + 1 sigma points of `[x; ν]`, ν ~ N(0, N Nᵀ) (N = `noise_sqrt`, absent for
+/// Draws the sigma points of `[x; ν]`, ν ~ N(0, N Nᵀ) (N = `noise_sqrt`, absent for
 /// additive noise), with covariance `blkdiag(P, N Nᵀ)`, into `ws.sig` and `ws.noise`, in
-/// filterpy's order: 0 the mean, k+1 the k-th positive offset, n_a+k+1 the k-th negative.
+/// filterpy's order. Symmetric families (Merwe, Julier): 0 the mean, k+1 the k-th positive
+/// offset, n_a+k+1 the k-th negative. Simplex: column j is `blkdiag(L, N) C[:, j]`. Given
+/// points: the model draws them from (x, P).
 pub(crate) fn draw<M: UkfModel + ?Sized>(
     model: &M,
-    pts: &MerweScaledSigmaPoints,
+    pts: &SigmaPoints,
     x: &DVector<f64>,
     offsets: Offsets<'_>,
     noise_sqrt: Option<&DMatrix<f64>>,
@@ -104,41 +108,99 @@ pub(crate) fn draw<M: UkfModel + ?Sized>(
     let q = noise_sqrt.map_or(0, |m| m.nrows());
     let na = pts.n();
     debug_assert_eq!(na, n + q);
-    let gamma = (na as f64 + pts.lambda()).sqrt();
-    // State offsets: column k+1 is +γLₖ, column na+k+1 is −γLₖ, all others zero.
-    let (src, scale) = match offsets {
-        Offsets::Factor(l) => (l, gamma),
-        Offsets::Scaled(a) => (a, 1.0),
+    let (src, scale) = match (offsets, pts.layout()) {
+        (Offsets::Covariance(p), Layout::Given) => {
+            return match model.draw_sigmas(x, p, &mut ws.sig) {
+                Some(r) => r.map_err(|e| at_step(e, step)),
+                None => Err(EstimateError::InvalidParameter {
+                    name: "points",
+                    value: n as f64,
+                    reason: "this model cannot draw sigma points of a given (external) family",
+                }),
+            };
+        }
+        (_, Layout::Given) | (Offsets::Covariance(_), _) => {
+            return Err(EstimateError::InvalidParameter {
+                name: "points",
+                value: n as f64,
+                reason: "given (external) sigma points need the standard filter with additive noise",
+            });
+        }
+        (Offsets::Factor(l), Layout::Symmetric(s)) => (l, s.sqrt()),
+        (Offsets::Factor(l), Layout::Simplex(_)) => (l, 1.0),
+        (Offsets::Scaled(a), _) => (a, 1.0),
     };
-    // Only the state-offset columns are written: the others (the mean, and the noise columns
-    // of an augmented state) stay zero from the workspace's creation.
-    {
-        let off = ws.off.as_mut_slice();
-        let src = &src.as_slice()[..n * n];
-        let (_, tail) = off.split_at_mut(n);
-        let (plus, rest) = tail.split_at_mut(n * n);
-        let minus = &mut rest[(na - n) * n..(na - n) * n + n * n];
-        for ((p, m), &v) in plus.iter_mut().zip(minus.iter_mut()).zip(src) {
-            *p = scale * v;
-            *m = -scale * v;
+    match pts.layout() {
+        Layout::Simplex(c) => {
+            // All columns are offsets: off = src C[:n], noise = N C[n:].
+            ws.off.gemm(scale, src, &c.rows(0, n), 0.0);
+            if let Some(ns) = noise_sqrt {
+                ws.noise.gemm(1.0, ns, &c.rows(n, q), 0.0);
+            }
+        }
+        _ => {
+            // State offsets: column k+1 is +γLₖ, column na+k+1 is −γLₖ, all others zero.
+            // Only the state-offset columns are written: the others (the mean, and the noise
+            // columns of an augmented state) stay zero from the workspace's creation.
+            {
+                let off = ws.off.as_mut_slice();
+                let src = &src.as_slice()[..n * n];
+                let (_, tail) = off.split_at_mut(n);
+                let (plus, rest) = tail.split_at_mut(n * n);
+                let minus = &mut rest[(na - n) * n..(na - n) * n + n * n];
+                for ((p, m), &v) in plus.iter_mut().zip(minus.iter_mut()).zip(src) {
+                    *p = scale * v;
+                    *m = -scale * v;
+                }
+            }
+            // Likewise only the noise-offset columns of `ws.noise` are written.
+            if let Some(ns) = noise_sqrt {
+                let gamma = pts.spread().sqrt();
+                for k in 0..q {
+                    for (sign, col) in [(1.0, n + k + 1), (-1.0, na + n + k + 1)] {
+                        let mut c = ws.noise.column_mut(col);
+                        c.copy_from(&ns.column(k));
+                        c *= sign * gamma;
+                    }
+                }
+            }
         }
     }
     // Sigma points and model outputs are checked for NaN/inf where they end up (the
     // deviations, see `diagnose`), which is one pass instead of three.
     model
         .sigma_points(x, &ws.off, &mut ws.sig)
-        .map_err(|e| at_step(e, step))?;
-    // Likewise only the noise-offset columns of `ws.noise` are written.
-    if let Some(ns) = noise_sqrt {
-        for k in 0..q {
-            for (sign, col) in [(1.0, n + k + 1), (-1.0, na + n + k + 1)] {
-                let mut c = ws.noise.column_mut(col);
-                c.copy_from(&ns.column(k));
-                c *= sign * gamma;
-            }
-        }
+        .map_err(|e| at_step(e, step))
+}
+
+/// [`draw`] from a covariance `p` (additive noise): the model's own draw for given points,
+/// its custom square root of `s·p` if it has one, else the Cholesky factor of `p`. A `p`
+/// that is not positive definite fails with [`EstimateError::NotPositiveDefinite`] at
+/// `step`.
+pub(crate) fn draw_cov<M: UkfModel + ?Sized>(
+    model: &M,
+    pts: &SigmaPoints,
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    ws: &mut Workspace,
+    step: usize,
+) -> Result<()> {
+    let n = x.len();
+    if let SigmaPoints::Given(_) = pts {
+        return draw(model, pts, x, Offsets::Covariance(p), None, ws, step);
     }
-    Ok(())
+    if let Some(a) = model.sqrt_cov(p, pts.spread()) {
+        let a = a.map_err(|e| at_step(e, step))?;
+        linalg::check_shape(&a, n, n, "custom matrix square root")?;
+        linalg::check_finite_at(a.as_slice(), || "custom matrix square root".into(), step)?;
+        return draw(model, pts, x, Offsets::Scaled(&a), None, ws, step);
+    }
+    let l = linalg::cholesky(p).ok_or_else(|| EstimateError::NotPositiveDefinite {
+        what: "covariance P of the sigma points".to_string(),
+        step,
+        min_eigenvalue: linalg::min_eigenvalue(p),
+    })?;
+    draw(model, pts, x, Offsets::Factor(&l), None, ws, step)
 }
 
 /// Fails with [`EstimateError::NonFinite`] naming the sigma point (column) of the first
