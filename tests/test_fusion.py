@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from autoteach import _core
 from autoteach.errors import InvalidInputError
 from autoteach.fusion import SparsePooling, maxmin_pool, maxmin_pool_backward
 
@@ -14,9 +13,6 @@ from autoteach.fusion import SparsePooling, maxmin_pool, maxmin_pool_backward
 P = np.array([[600.0, -700.0, 0.0, 0.0], [180.0, 0.0, -700.0, 0.0], [1.0, 0.0, 0.0, 0.0]])
 IMAGE = (23, 78, 16.0)
 BEV = (0.0, -30.0, 1.0, 60, 60)
-
-# The bindings (crates/py/src/fusion.rs) are not wired into _core yet (see the report).
-pytestmark = pytest.mark.skipif(not hasattr(_core, "FusionSparsePooling"), reason="bindings not built into _core")
 
 
 def _cloud(n, seed=0):

@@ -8,13 +8,9 @@ import numpy as np
 import pytest
 import shapely
 
-from autoteach import _core
 from autoteach import uncertainty as U
 from autoteach.cli import main
 from autoteach.errors import DegenerateGeometryError, InvalidInputError
-
-# The bindings (crates/py/src/uncertainty.rs) are not wired into _core yet (see the report).
-pytestmark = pytest.mark.skipif(not hasattr(_core, "uncertainty_iou"), reason="bindings not built into _core")
 
 
 def test_fig_8_6_covariance_and_the_four_standard_deviations():
@@ -78,8 +74,11 @@ def _cells(grid, box):
     return (np.abs(u) <= box[2] / 2) & (np.abs(v) <= box[3] / 2)
 
 
-def test_eq_8_5_bounds_hold_on_monte_carlo_cases():
+def test_eq_8_5_lower_bound_holds_on_monte_carlo_cases():
+    # The lower bound E[IoU] <= JIoU of eq. 8.5 holds on every case; the upper bound does not
+    # (a seed slip, see the next test): here it fails on 1 of these 60 cases.
     rng = np.random.default_rng(1)
+    above_upper = 0
     for _ in range(60):
         mean = np.array([0.0, 0.0, rng.uniform(3, 5), rng.uniform(1.5, 2.5), rng.uniform(-0.5, 0.5)])
         spread = rng.uniform(0.05, 0.6)
@@ -96,7 +95,35 @@ def test_eq_8_5_bounds_hold_on_monte_carlo_cases():
         ms = [_cells(grid, s) for s in samples]
         ious = [np.sum(m & mp) / np.sum(m | mp) for m in ms]
         upper = np.mean([np.sum(m & mp) for m in ms]) / np.mean([max(m.sum(), mp.sum()) for m in ms])
-        assert np.mean(ious) - 1e-12 <= j <= upper + 1e-12, (np.mean(ious), j, upper)
+        assert np.mean(ious) - 1e-12 <= j, (np.mean(ious), j)
+        above_upper += j > upper + 1e-12
+    assert above_upper == 1
+
+
+def _brute_jaccard(p1, p2):
+    """Eq. 8.4 on cells by its definition, O(N^2): an independent check of the sorted O(N log N) form."""
+    a, b = p1.ravel(), p2.ravel()
+    keep = (a > 0) | (b > 0)
+    a, b = a[keep], b[keep]
+    both = (a > 0) & (b > 0)
+    return sum(1.0 / np.sum(np.maximum(a / ua, b / ub)) for ua, ub in zip(a[both], b[both], strict=True))
+
+
+def test_seed_slip_eq_8_5_upper_bound_fails_for_nested_boxes():
+    # Label: two equally likely boxes, the small one (area 1) inside the large one (area 4); the
+    # prediction is the small box. Closed form: JIoU = (A_s + A_b) / (2 A_b) = 0.625 = E[IoU], while
+    # eq. 8.5's upper bound E[A(B n B^)] / E[max(A, A^)] = A_s / ((A_s + A_b) / 2) = 0.4.
+    grid = U.Grid(-1.5, -1.5, 0.05, 0.05, 60, 60)
+    small, big = [0.0, 0.0, 1.0, 1.0, 0.0], [0.0, 0.0, 2.0, 2.0, 0.0]
+    label = U.rasterize([small, big], [0.5, 0.5], grid)
+    pred = U.rasterize([small], [1.0], grid)
+    j = U.jiou_grid(label, pred)
+    assert j == pytest.approx(0.625, abs=1e-12)
+    assert _brute_jaccard(label, pred) == pytest.approx(j, abs=1e-12)
+    a_s, a_b = _cells(grid, np.array(small)).sum(), _cells(grid, np.array(big)).sum()
+    assert (a_s, a_b) == (400, 1600)
+    upper = a_s / ((a_s + a_b) / 2)
+    assert upper == pytest.approx(0.4) and j > upper
 
 
 def test_spatial_distributions_are_normalised_and_pdq_is_a_probability():
@@ -123,19 +150,25 @@ def test_sigma_is_recovered_by_eq_8_12_on_simulated_cars():
     for sigma in (0.1, 0.2, 0.3):
         labels, scans = U.simulate_cars(40, sigma=sigma, seed=3, min_points=20)
         est = U.estimate_noise(labels, scans, tolerance=1e-6)
-        assert abs(est["sigma"] / sigma - 1) < 0.05, (sigma, est["sigma"])
+        assert abs(est.sigma / sigma - 1) < 0.05, (sigma, est.sigma)
 
 
-def test_nearest_corner_has_less_variance_than_the_centre_in_95_percent_of_cars():
+def test_fig_8_9_nearest_corner_has_the_least_average_total_variance():
+    # Fig. 8.9 (average total variances over all cars): C1 < centre < C2 < C3 < C4 with corners
+    # sorted by distance to the scanner. Per car, C1 < centre holds in 71 of these 100 cars only:
+    # eq. 8.10 with phi fixed at the label pins each point to a unit-box coordinate, so dense
+    # visible sides also bound the length and width (docs/design/boxes-pooling.md).
     labels, scans = U.simulate_cars(100, sigma=0.2, seed=11, min_points=5)
     corners_v0 = np.array([[0.5, 0.5], [-0.5, 0.5], [-0.5, -0.5], [0.5, -0.5]])
-    better = 0
+    tvs = []
     for box, pts in zip(labels, scans, strict=True):
         post = U.label_uncertainty(box, pts, sigma=0.2, prior=1.0)
-        near = np.argmin(np.linalg.norm(U.corners(box), axis=1))
-        tv = U.total_variance(box, post.cov, np.vstack([corners_v0[near], [0.0, 0.0]]))
-        better += tv[0] < tv[1]
-    assert better >= 95
+        order = np.argsort(np.linalg.norm(U.corners(box), axis=1))
+        tvs.append(U.total_variance(box, post.cov, np.vstack([corners_v0[order], [0.0, 0.0]])))
+    tv = np.array(tvs)
+    c1, c2, c3, c4, centre = tv.mean(axis=0)
+    assert c1 < centre < c2 < c3 < c4
+    assert np.sum(tv[:, 0] < tv[:, 4]) == 71
 
 
 def test_prediction_readers(tmp_path):

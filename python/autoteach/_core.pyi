@@ -1530,7 +1530,7 @@ def uncertainty_label(
     prior_cov: F64Array | None = None,
     spacing: float = 0.5,
     estimate_heading: bool = True,
-) -> tuple[F64Array, F64Array]: ...
+) -> tuple[F64Array, F64Array, F64Array, float, int]: ...
 def uncertainty_label_correspondences(
     label: F64Array,
     points: F64Array,
@@ -1538,7 +1538,7 @@ def uncertainty_label_correspondences(
     sigma: float,
     prior_cov: F64Array | None = None,
     estimate_heading: bool = True,
-) -> tuple[F64Array, F64Array]: ...
+) -> tuple[F64Array, F64Array, F64Array, float, int]: ...
 def uncertainty_estimate_noise(
     labels: F64Array,
     points: F64Array,

@@ -69,7 +69,7 @@ def seed_prior(weight: float = 1.0) -> F64Array:
     return np.diag(np.square(SEED_PRIOR_STD)) / w
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Grid:
     """A regular BEV grid: cell ``(iy, ix)`` has centre ``(x0 + (ix+.5) dx, y0 + (iy+.5) dy)``."""
 
@@ -222,12 +222,38 @@ def total_variance(box: ArrayLike, cov: ArrayLike, v0: ArrayLike) -> F64Array:
     return np.trace(c, axis1=1, axis2=2)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class LabelPosterior:
-    """A Gaussian label posterior ``N(mean, cov)`` over ``[cx, cy, l, w, r]``."""
+    """A Gaussian label posterior ``N(mean, cov)`` over ``[cx, cy, l, w, r]`` (``detect::uncertainty::LabelPosterior``).
+
+    Attributes:
+        mean: Posterior mean ``(5,)``: the label itself (Sec. 8.1 only needs the spread).
+        cov: Posterior covariance ``(5, 5)`` (eq. 8.10).
+        precision: Its inverse ``(5, 5)``, prior plus data information.
+        sigma: The LiDAR noise standard deviation used, in metres.
+        points: Number of points that observed the box.
+    """
 
     mean: F64Array
     cov: F64Array
+    precision: F64Array
+    sigma: float
+    points: int
+
+
+@dataclass(frozen=True, slots=True)
+class NoiseEstimate:
+    """The EM noise estimate of eq. 8.12 (``detect::uncertainty::noise::NoiseEstimate``).
+
+    Attributes:
+        sigma: Estimated noise standard deviation, in metres.
+        iterations: EM iterations run.
+        history: ``sigma`` after each iteration.
+    """
+
+    sigma: float
+    iterations: int
+    history: F64Array
 
 
 def _prior(prior: float | ArrayLike | str | None) -> F64Array | None:
@@ -256,7 +282,7 @@ def label_uncertainty(
     ``"flat"``/``None``. ``spacing`` is the distance between rendered boundary points in units
     of ``sigma``. With ``estimate_heading=False`` the heading is fixed (zero row and column).
     """
-    mean, cov = _core.uncertainty_label(
+    out = _core.uncertainty_label(
         as_f64(box, "box"),
         as_f64(points, "points"),
         as_float(sigma, "sigma"),
@@ -264,7 +290,7 @@ def label_uncertainty(
         as_float(spacing, "spacing"),
         bool(estimate_heading),
     )
-    return LabelPosterior(mean, cov)
+    return LabelPosterior(*out)
 
 
 def posterior_with_correspondences(
@@ -277,7 +303,7 @@ def posterior_with_correspondences(
     estimate_heading: bool = True,
 ) -> LabelPosterior:
     """Label posterior when point ``k`` is known to come from unit-box point ``v0[k]`` (Fig. 8.6)."""
-    mean, cov = _core.uncertainty_label_correspondences(
+    out = _core.uncertainty_label_correspondences(
         as_f64(box, "box"),
         as_f64(points, "points"),
         as_f64(v0, "v0"),
@@ -285,7 +311,7 @@ def posterior_with_correspondences(
         _prior(prior),
         bool(estimate_heading),
     )
-    return LabelPosterior(mean, cov)
+    return LabelPosterior(*out)
 
 
 def estimate_noise(
@@ -295,11 +321,8 @@ def estimate_noise(
     sigma0: float = 0.5,
     tolerance: float = 1e-8,
     max_iterations: int = 200,
-) -> dict[str, Any]:
-    """EM estimate of the LiDAR noise (eq. 8.12, normalised by the point count) pooled over objects.
-
-    Returns ``{"sigma", "iterations", "history"}``.
-    """
+) -> NoiseEstimate:
+    """EM estimate of the LiDAR noise (eq. 8.12, normalised by the point count) pooled over objects."""
     b, _ = _boxes(labels, "labels")
     pts = [np.atleast_2d(as_f64(p, "scans")) for p in scans]
     counts = [p.shape[0] for p in pts]
@@ -312,7 +335,7 @@ def estimate_noise(
         as_float(tolerance, "tolerance"),
         as_int(max_iterations, "max_iterations"),
     )
-    return {"sigma": sigma, "iterations": iterations, "history": history}
+    return NoiseEstimate(float(sigma), int(iterations), history)
 
 
 def simulate_cars(
@@ -484,6 +507,7 @@ __all__ = [
     "SEED_PRIOR_STD",
     "Grid",
     "LabelPosterior",
+    "NoiseEstimate",
     "corners",
     "estimate_noise",
     "fig_8_5",

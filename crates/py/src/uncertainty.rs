@@ -323,14 +323,20 @@ fn prior(prior_cov: Option<&Bound<'_, PyAny>>) -> PyResult<Prior> {
     }
 }
 
-fn posterior_out<'py>(py: Python<'py>, p: LabelPosterior) -> PyResult<(PyArr<'py>, PyArr<'py>)> {
+/// The fields of a [`LabelPosterior`]: `(mean (5,), cov (5, 5), precision (5, 5), sigma, points)`.
+type PosteriorOut<'py> = (PyArr<'py>, PyArr<'py>, PyArr<'py>, f64, usize);
+
+fn posterior_out<'py>(py: Python<'py>, p: LabelPosterior) -> PyResult<PosteriorOut<'py>> {
     Ok((
         to_numpy(py, p.mean.to_vec(), &[5])?,
         to_numpy(py, p.cov.iter().flatten().copied().collect(), &[5, 5])?,
+        to_numpy(py, p.precision.iter().flatten().copied().collect(), &[5, 5])?,
+        p.sigma,
+        p.points,
     ))
 }
 
-/// Label posterior (eq. 8.10–8.11): `(mean (5,), cov (5, 5))`.
+/// Label posterior (eq. 8.10–8.11): the fields of `LabelPosterior` (see [`posterior_out`]).
 #[pyfunction]
 #[pyo3(signature = (label, points, sigma, prior_cov=None, spacing=0.5, estimate_heading=true))]
 fn uncertainty_label<'py>(
@@ -341,7 +347,7 @@ fn uncertainty_label<'py>(
     prior_cov: Option<&Bound<'py, PyAny>>,
     spacing: f64,
     estimate_heading: bool,
-) -> PyResult<(PyArr<'py>, PyArr<'py>)> {
+) -> PyResult<PosteriorOut<'py>> {
     let b = one_box(label, "label")?;
     let p = points2(points, "points")?;
     let opts = LabelOptions {
@@ -357,7 +363,7 @@ fn uncertainty_label<'py>(
     posterior_out(py, post)
 }
 
-/// Label posterior with known correspondences (Fig. 8.6): `(mean (5,), cov (5, 5))`.
+/// Label posterior with known correspondences (Fig. 8.6): the fields of `LabelPosterior`.
 #[pyfunction]
 #[pyo3(signature = (label, points, v0, sigma, prior_cov=None, estimate_heading=true))]
 fn uncertainty_label_correspondences<'py>(
@@ -368,7 +374,7 @@ fn uncertainty_label_correspondences<'py>(
     sigma: f64,
     prior_cov: Option<&Bound<'py, PyAny>>,
     estimate_heading: bool,
-) -> PyResult<(PyArr<'py>, PyArr<'py>)> {
+) -> PyResult<PosteriorOut<'py>> {
     let b = one_box(label, "label")?;
     let p = points2(points, "points")?;
     let v = points2(v0, "v0")?;
