@@ -74,6 +74,13 @@ fn slice<'a, T: Element + Feature>(
             "{name} must be C-contiguous (use numpy.ascontiguousarray)"
         ))
     })?;
+    // A branch-free pass per chunk (vectorised) first; the index is searched only on failure.
+    let finite = s
+        .chunks(4096)
+        .all(|c| c.iter().fold(true, |ok, v| ok & v.to_f64().is_finite()));
+    if finite {
+        return Ok(s);
+    }
     if let Some((i, v)) = s.iter().enumerate().find(|(_, v)| !v.to_f64().is_finite()) {
         return Err(errors::invalid_input(format!(
             "{name} contains a non-finite value {v:?} at flat index {i}"

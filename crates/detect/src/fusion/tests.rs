@@ -231,9 +231,16 @@ fn fig_7_6_three_poolings_keep_the_cluster_edges() {
     let b = maxmin_pool(&a, 4, 4, 2).unwrap();
     let c = maxmin_pool(&b, 2, 2, 4).unwrap();
     assert_eq!(c, vec![3.0, 1.0, 2.0, -1.0, -2.0, -9.0, -9.0, -9.0]);
-    // Zeros are undefined, and an all-zero window outputs 0.
-    let y = maxmin_pool(&[0.0, 5.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0], 2, 4, 1).unwrap();
-    assert_eq!(y, vec![5.0, 0.0, -1.0, 0.0]);
+    // Zeros are undefined (a window holding only 5 has max = min = 5, not min 0), and an
+    // all-zero window outputs 0. Output channels per window: [max, min].
+    let y = maxmin_pool(
+        &[0.0, 5.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        2,
+        6,
+        1,
+    )
+    .unwrap();
+    assert_eq!(y, vec![5.0, 5.0, -1.0, -1.0, 0.0, 0.0]);
 }
 
 #[test]

@@ -175,7 +175,7 @@ fn eq_8_12_normaliser_is_the_point_count_not_m() {
 }
 
 #[test]
-fn nearest_corner_has_less_variance_than_centre_fig_8_9() {
+fn nearest_corner_has_the_least_mean_total_variance_fig_8_9() {
     let opts = ScanOptions {
         sigma: 0.2,
         ..Default::default()
@@ -186,23 +186,26 @@ fn nearest_corner_has_less_variance_than_centre_fig_8_9() {
         prior: Prior::seed(1.0).unwrap(),
         ..Default::default()
     };
-    let mut better = 0;
+    // Fig. 8.9 reports averages over all cars: corners sorted by distance to the scanner, the
+    // nearest (C1) has the least mean total variance, below the centre's. (Per car this holds
+    // for most cars only: see docs/design/boxes-pooling.md, "Fig. 8.9".)
+    let unit = [[0.5, 0.5], [-0.5, 0.5], [-0.5, -0.5], [0.5, -0.5]];
+    let mut mean_tv = [0.0; 5];
     for (b, pts) in &cars {
         let post = label_uncertainty(b, pts, &lopts).unwrap();
         let mom = BoxMoments::new(b, &post.cov);
-        let corners = [[0.5, 0.5], [-0.5, 0.5], [-0.5, -0.5], [0.5, -0.5]];
-        let near = corners
-            .iter()
-            .min_by(|p, q| {
-                let (a, c) = (b.point(**p), b.point(**q));
-                a[0].hypot(a[1]).total_cmp(&c[0].hypot(c[1]))
-            })
-            .unwrap();
-        if mom.total_variance(*near) < mom.total_variance([0.0, 0.0]) {
-            better += 1;
+        let mut corners = unit;
+        corners.sort_by(|p, q| {
+            let (a, c) = (b.point(*p), b.point(*q));
+            a[0].hypot(a[1]).total_cmp(&c[0].hypot(c[1]))
+        });
+        for (k, v0) in corners.iter().enumerate() {
+            mean_tv[k] += mom.total_variance(*v0) / cars.len() as f64;
         }
+        mean_tv[4] += mom.total_variance([0.0, 0.0]) / cars.len() as f64;
     }
-    assert!(better >= 95, "nearest corner better in {better}/100 cars");
+    let [c1, c2, c3, c4, centre] = mean_tv;
+    assert!(c1 < centre && c1 < c2 && c2 < c3 && c3 < c4, "{mean_tv:?}");
 }
 
 #[test]

@@ -124,42 +124,61 @@ impl Grid2 {
     }
 }
 
+/// `⌈v⌉` as an integer without a libm call (`v` finite and well inside the `i64` range).
+fn ceil_i(v: f64) -> i64 {
+    let t = v as i64;
+    if (t as f64) < v { t + 1 } else { t }
+}
+
+/// `⌊v⌋` as an integer without a libm call (`v` finite and well inside the `i64` range).
+fn floor_i(v: f64) -> i64 {
+    let t = v as i64;
+    if (t as f64) > v { t - 1 } else { t }
+}
+
 /// For each grid row the inclusive range of cells whose centres lie inside `b`, appended to
 /// `spans` as `(row, first, last)`; returns the number of cells.
+///
+/// The box is `{p : |(p − c)·e₁| ≤ l/2, |(p − c)·e₂| ≤ w/2}` with `e₁ = (cos r, sin r)`,
+/// `e₂ = (−sin r, cos r)`. At a row's height `y` each slab with `e_x ≠ 0` is the x-interval
+/// `c_x − (y − c_y)·e_y/e_x ± h/|e_x|`; the row's span is the intersection of the two (a slab
+/// with `e_x = 0` only bounds y, which the row range already does). Two multiply-adds per row,
+/// no division and no branch on the edges.
 fn box_spans(b: &Box2, g: &Grid2, spans: &mut Vec<(u32, u32, u32)>) -> usize {
-    let c = b.corners();
-    let ymin = c.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
-    let ymax = c.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max);
+    let (s, c) = b.r.sin_cos();
+    // (e_y / e_x, h / |e_x|) of the two slabs; an unbounded slab contributes (0, ∞).
+    let slab = |ex: f64, ey: f64, h: f64| {
+        if ex.abs() > 1e-12 {
+            (ey / ex, h / ex.abs())
+        } else {
+            (0.0, f64::INFINITY)
+        }
+    };
+    let (k1, h1) = slab(c, s, 0.5 * b.l);
+    let (k2, h2) = slab(-s, c, 0.5 * b.w);
+    let half_y = 0.5 * (b.l * s.abs() + b.w * c.abs());
+    let (ymin, ymax) = (b.cy - half_y, b.cy + half_y);
     // Rows whose centre y lies in [ymin, ymax].
     let r0 = ((ymin - g.y0) / g.dy - 0.5).ceil().max(0.0);
     let r1 = ((ymax - g.y0) / g.dy - 0.5).floor().min(g.ny as f64 - 1.0);
     if r1 < r0 {
         return 0;
     }
+    let nx = g.nx as f64;
     let mut count = 0;
     for row in r0 as usize..=r1 as usize {
-        let y = g.y0 + (row as f64 + 0.5) * g.dy;
-        let (mut xl, mut xr) = (f64::INFINITY, f64::NEG_INFINITY);
-        for e in 0..4 {
-            let (p, q) = (c[e], c[(e + 1) % 4]);
-            let (ya, yb) = (p[1].min(q[1]), p[1].max(q[1]));
-            if y < ya || y > yb {
-                continue;
-            }
-            let x = if yb - ya > 0.0 {
-                p[0] + (y - p[1]) / (q[1] - p[1]) * (q[0] - p[0])
-            } else {
-                p[0].min(q[0])
-            };
-            let x2 = if yb - ya > 0.0 { x } else { p[0].max(q[0]) };
-            xl = xl.min(x.min(x2));
-            xr = xr.max(x.max(x2));
-        }
+        let t = g.y0 + (row as f64 + 0.5) * g.dy - b.cy;
+        let (m1, m2) = (b.cx - t * k1, b.cx - t * k2);
+        let xl = (m1 - h1).max(m2 - h2);
+        let xr = (m1 + h1).min(m2 + h2);
         if xr < xl {
             continue;
         }
-        let c0 = ((xl - g.x0) / g.dx - 0.5).ceil().max(0.0);
-        let c1 = ((xr - g.x0) / g.dx - 0.5).floor().min(g.nx as f64 - 1.0);
+        // Clamp before the integer conversion (the span may reach far outside the grid).
+        let s0 = ((xl - g.x0) / g.dx - 0.5).clamp(-1.0, nx);
+        let s1 = ((xr - g.x0) / g.dx - 0.5).clamp(-1.0, nx);
+        let c0 = ceil_i(s0).max(0);
+        let c1 = floor_i(s1).min(g.nx as i64 - 1);
         if c1 >= c0 {
             spans.push((row as u32, c0 as u32, c1 as u32));
             count += (c1 - c0) as usize + 1;
