@@ -89,6 +89,14 @@ fn slice<'a, T: Element + Feature>(
     Ok(s)
 }
 
+/// A kernel as NumPy CSR arrays: `(indptr, indices, data, (rows, cols))`.
+type CsrArrays<'py> = (
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
+    Bound<'py, PyArrayDyn<f64>>,
+    (usize, usize),
+);
+
 /// The SHPL operator for one point cloud.
 #[pyclass(name = "FusionSparsePooling", module = "autoteach._core", frozen)]
 pub struct PySparsePooling {
@@ -207,16 +215,7 @@ impl PySparsePooling {
     }
 
     /// The kernel of `direction` as CSR arrays `(indptr, indices, data, (rows, cols))`.
-    fn csr<'py>(
-        &self,
-        py: Python<'py>,
-        direction: &str,
-    ) -> PyResult<(
-        Bound<'py, PyAny>,
-        Bound<'py, PyAny>,
-        Bound<'py, PyArrayDyn<f64>>,
-        (usize, usize),
-    )> {
+    fn csr<'py>(&self, py: Python<'py>, direction: &str) -> PyResult<CsrArrays<'py>> {
         let k = self.inner.kernel(self::direction(direction)?);
         let ip: Vec<i64> = k.indptr.iter().map(|v| *v as i64).collect();
         let ix: Vec<i64> = k.indices.iter().map(|v| *v as i64).collect();

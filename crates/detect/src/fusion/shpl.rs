@@ -259,9 +259,8 @@ impl Csr {
             .for_each(|(r, row)| {
                 row.fill(T::ZERO);
                 let (a, b) = (self.indptr[r] as usize, self.indptr[r + 1] as usize);
-                for k in a..b {
-                    let w = weights[k];
-                    let c = self.indices[k] as usize;
+                for (&w, &c) in weights[a..b].iter().zip(&self.indices[a..b]) {
+                    let c = c as usize;
                     let src = &input[c * channels..(c + 1) * channels];
                     for (o, s) in row.iter_mut().zip(src) {
                         *o = *o + w * *s;
@@ -316,7 +315,7 @@ impl SparsePooling {
         if points.is_empty() {
             return Err(DetectError::TooFewPoints { got: 0, needed: 1 });
         }
-        if neighbourhood == 0 || neighbourhood % 2 == 0 {
+        if neighbourhood == 0 || neighbourhood.is_multiple_of(2) {
             return Err(DetectError::InvalidParameter {
                 what: "neighbourhood",
                 value: neighbourhood as f64,
