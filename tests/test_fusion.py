@@ -179,3 +179,6 @@ def test_bad_inputs_raise_clear_errors():
         op.forward(np.full((IMAGE[0] * IMAGE[1], 2), np.nan))
     with pytest.raises(InvalidInputError):
         maxmin_pool(np.zeros((4, 4)))
+    # Mismatched channel counts: 3 input channels pool to 6, not 4.
+    with pytest.raises(InvalidInputError, match=r"grad_out must have shape \(2, 2, 6\)"):
+        maxmin_pool_backward(np.ones((4, 4, 3)), np.ones((2, 2, 4)))
