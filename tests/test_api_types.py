@@ -30,6 +30,7 @@ from autoteach import (
     registration,
     segment,
     track,
+    uncertainty,
 )
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -99,6 +100,9 @@ DATACLASSES: list[tuple[type, str, str, dict[str, str]]] = [
         {"sections": "Rust returns the ControllerStructure beside the report"},
     ),
     (control.JointPlant, "estimate/src/control/plant.rs", "JointPlant", {}),
+    (uncertainty.LabelPosterior, "detect/src/uncertainty/mod.rs", "LabelPosterior", {}),
+    (uncertainty.NoiseEstimate, "detect/src/uncertainty/noise.rs", "NoiseEstimate", {}),
+    (uncertainty.Grid, "geometry/src/boxes/spatial.rs", "Grid2", {}),
 ]
 
 # Existing class pattern (a Python class holding the compiled object): every Rust field is a
@@ -370,3 +374,16 @@ def test_control_results() -> None:
     _check(fit, control.FitResult)
     _check(fit.model, control.TransferFunction)
     np.testing.assert_allclose(np.sort(fit.model.poles()), np.sort(g.poles()), rtol=1e-6)
+
+
+def test_uncertainty_results() -> None:
+    box = np.array([0.0, 0.0, 3.6, 1.8, 0.0])
+    pts = np.array([[1.8, 0.0], [1.8, 0.9], [0.0, 0.9]])
+    post = uncertainty.label_uncertainty(box, pts, sigma=0.2, prior=1.0)
+    _check(post, uncertainty.LabelPosterior)
+    np.testing.assert_allclose(post.cov @ post.precision, np.eye(5), atol=1e-8)
+    assert post.sigma == 0.2 and post.points == 3
+    labels, scans = uncertainty.simulate_cars(5, sigma=0.2, seed=1)
+    est = uncertainty.estimate_noise(labels, scans)
+    _check(est, uncertainty.NoiseEstimate)
+    assert est.iterations == len(est.history) and est.sigma == est.history[-1]

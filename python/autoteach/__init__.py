@@ -68,6 +68,7 @@ SUBMODULES = (
     "detect",
     "ellipse_detection",
     "estimate",
+    "fusion",
     "geometry",
     "io",
     "mapping",
@@ -80,6 +81,7 @@ SUBMODULES = (
     "sigma_points",
     "sim",
     "track",
+    "uncertainty",
 )
 
 #: Names re-exported from submodules, also imported on first access.
@@ -103,6 +105,7 @@ __all__ = [
     "detect",
     "ellipse_detection",
     "estimate",
+    "fusion",
     "geometry",
     "io",
     "mapping",
@@ -115,6 +118,7 @@ __all__ = [
     "sigma_points",
     "sim",
     "track",
+    "uncertainty",
 ]
 
 

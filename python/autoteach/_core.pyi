@@ -1492,3 +1492,99 @@ def control_demo(
 ) -> dict[str, _Any]: ...
 
 # --- end control ---
+
+# --- uncertainty (boxes, JIoU, label posterior) ---
+
+def uncertainty_iou(a: F64Array, b: F64Array) -> F64Array: ...
+def uncertainty_jiou(
+    a_mean: F64Array,
+    a_cov: F64Array,
+    b_mean: F64Array,
+    b_cov: F64Array,
+    grid: int = 30,
+    samples: int = 64,
+    seed: int = 0,
+    pdq: bool = False,
+) -> F64Array: ...
+def uncertainty_jiou_grid(p1: F64Array, p2: F64Array) -> float: ...
+def uncertainty_rasterize(
+    boxes_: F64Array, weights: F64Array, grid_: tuple[float, float, float, float, int, int], pdq: bool = False
+) -> tuple[F64Array, int]: ...
+def uncertainty_spatial_sampled(
+    mean: F64Array,
+    cov: F64Array,
+    grid_: tuple[float, float, float, float, int, int],
+    samples: int = 256,
+    seed: int = 0,
+    pdq: bool = False,
+) -> F64Array: ...
+def uncertainty_pg_moments(mean: F64Array, cov: F64Array, points: F64Array, lattice: int = 20) -> F64Array: ...
+def uncertainty_pdq_at(
+    mean: F64Array, cov: F64Array, points: F64Array, samples: int = 1024, seed: int = 0
+) -> F64Array: ...
+def uncertainty_point_moments(mean: F64Array, cov: F64Array, v0: F64Array) -> tuple[F64Array, F64Array]: ...
+def uncertainty_label(
+    label: F64Array,
+    points: F64Array,
+    sigma: float,
+    prior_cov: F64Array | None = None,
+    spacing: float = 0.5,
+    estimate_heading: bool = True,
+) -> tuple[F64Array, F64Array, F64Array, float, int]: ...
+def uncertainty_label_correspondences(
+    label: F64Array,
+    points: F64Array,
+    v0: F64Array,
+    sigma: float,
+    prior_cov: F64Array | None = None,
+    estimate_heading: bool = True,
+) -> tuple[F64Array, F64Array, F64Array, float, int]: ...
+def uncertainty_estimate_noise(
+    labels: F64Array,
+    points: F64Array,
+    counts: list[int],
+    sigma0: float = 0.5,
+    tolerance: float = 1e-8,
+    max_iterations: int = 200,
+) -> tuple[float, int, F64Array]: ...
+def uncertainty_simulate_cars(
+    n: int,
+    sigma: float = 0.2,
+    seed: int = 0,
+    occlusion: float = 0.3,
+    max_occluded: float = 0.5,
+    azimuth_step_deg: float = 0.2,
+    min_points: int = 10,
+    range: tuple[float, float] = (6.0, 30.0),
+) -> tuple[F64Array, F64Array, list[int]]: ...
+
+# --- end uncertainty ---
+
+# --- fusion (SHPL, max-min pooling) ---
+
+class FusionSparsePooling:
+    """The SHPL operator of one point cloud; see :class:`autoteach.fusion.SparsePooling`."""
+
+    @staticmethod
+    def build(
+        points: F64Array,
+        projection: F64Array,
+        image_grid: tuple[int, int, float],
+        bev_grid: tuple[float, float, float, int, int],
+        neighbourhood: int = 1,
+    ) -> FusionSparsePooling: ...
+    def forward(self, direction: str, features: NDArray[np.floating]) -> NDArray[np.floating]: ...
+    def backward(self, direction: str, grad: NDArray[np.floating]) -> NDArray[np.floating]: ...
+    def csr(self, direction: str) -> tuple[NDArray[np.int64], NDArray[np.int64], F64Array, tuple[int, int]]: ...
+    def dense(self, direction: str) -> F64Array: ...
+    @property
+    def kept(self) -> int: ...
+    @property
+    def dropped(self) -> dict[str, int]: ...
+    @property
+    def cells(self) -> tuple[int, int]: ...
+
+def fusion_maxmin_pool(x: NDArray[np.floating]) -> NDArray[np.floating]: ...
+def fusion_maxmin_pool_backward(x: NDArray[np.floating], grad_out: NDArray[np.floating]) -> NDArray[np.floating]: ...
+
+# --- end fusion ---

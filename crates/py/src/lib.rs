@@ -26,6 +26,9 @@ mod segment;
 mod sim;
 mod track;
 mod wafers;
+// issue 35: probabilistic boxes / JIoU and sparse pooling
+mod fusion;
+mod uncertainty;
 
 /// The compiled module `autoteach._core`.
 #[pymodule]
@@ -48,6 +51,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     mapping::register(m)?;
     segment::register(m)?;
     control::register(m)?;
+    uncertainty::register(m)?;
+    fusion::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

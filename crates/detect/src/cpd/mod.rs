@@ -59,7 +59,7 @@ mod tests;
 use nalgebra::{DMatrix, DVector};
 
 pub use estep::EStep;
-use estep::{EStepSums, EStepWork, posterior_matrix};
+pub(crate) use estep::{EStepSums, EStepWork, posterior_matrix};
 pub use global::{GlobalCpdOptions, GlobalHypothesis, global_cpd};
 
 use crate::{DetectError, Result};

@@ -1,0 +1,462 @@
+//! The sparse non-homogeneous pooling layer (SHPL, §7.5).
+//!
+//! LiDAR points `X_i` project to image pixels `(u_i, v_i)` by the camera–LiDAR matrix `P`
+//! (eq. 7.2). Instead of a kernel over the whole ray behind each pixel (eq. 7.3), the kernel is
+//! sparsified by the point cloud (eq. 7.4–7.5): only an image cell and a BEV cell that see the
+//! same point are paired. Points are equivalent when they fall in the same cell (eq. 7.7; here
+//! "round to the same cell" means `⌊·/cell⌋` in each grid's coordinates), and the kernel rows
+//! are normalised by the number of points in the output cell (eq. 7.8):
+//!
+//! ```text
+//! image → BEV:  K[b, m] = |{i : b_i = b}|⁻¹ · Σ_{i: b_i = b} 1[m = m_i],
+//! BEV → image:  K[m, b] = |{i : m_i = m}|⁻¹ · Σ_{i: m_i = m} 1[b = b_i].
+//! ```
+//!
+//! With `neighbourhood = k > 1` (odd) each point gathers the `k×k` source cells around the one it
+//! hits, each with weight `1/|window|` (clipped to the grid), the "gather a neighbourhood"
+//! variant of eq. 7.9/Fig. 7.12; every non-empty row still sums to 1 (the row-normalised
+//! variant the text describes after eq. 7.8). The three factors `Q·K·P` of eq. 7.9 collapse to
+//! one sparse matrix here (`K` is the identity: no learned convolution inside the layer).
+//!
+//! Both directions are held as CSR matrices together with their transposes, so forward
+//! (`out = K·in`) and backward (`grad_in = Kᵀ·grad_out`) are both row-parallel gathers. At most
+//! `N·k²` non-zeros, whatever the feature-map sizes. Points behind the camera (`w ≤ 0`) or
+//! outside either grid are dropped and counted, never written out of bounds.
+
+use rayon::prelude::*;
+
+use super::Feature;
+use crate::{DetectError, Result};
+
+/// The image feature map: `rows × cols` cells of `stride × stride` pixels; pixel `(u, v)` falls
+/// in cell `(⌊v/stride⌋, ⌊u/stride⌋)`, flat index `row·cols + col`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImageGrid {
+    /// Feature-map rows.
+    pub rows: usize,
+    /// Feature-map columns.
+    pub cols: usize,
+    /// Pixels per cell.
+    pub stride: f64,
+}
+
+impl ImageGrid {
+    /// A grid; fails for zero cells or a non-positive stride.
+    pub fn new(rows: usize, cols: usize, stride: f64) -> Result<Self> {
+        if rows == 0 || cols == 0 || !(stride.is_finite() && stride > 0.0) {
+            return Err(DetectError::InvalidParameter {
+                what: "image grid (rows, cols, stride)",
+                value: if rows == 0 || cols == 0 { 0.0 } else { stride },
+                reason: "need rows, cols ≥ 1 and a positive finite stride",
+            });
+        }
+        Ok(Self { rows, cols, stride })
+    }
+
+    /// Number of cells.
+    pub fn len(&self) -> usize {
+        self.rows * self.cols
+    }
+
+    /// Whether the grid has no cells (never for a grid from [`ImageGrid::new`]).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// The bird's-eye-view feature map: `nx × ny` square cells of side `cell` from `(x_min, y_min)`;
+/// point `(x, y, ·)` falls in `(⌊(x − x_min)/cell⌋, ⌊(y − y_min)/cell⌋)`, flat index `ix·ny + iy`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BevGrid {
+    /// Lower x edge.
+    pub x_min: f64,
+    /// Lower y edge.
+    pub y_min: f64,
+    /// Cell side.
+    pub cell: f64,
+    /// Cells along x.
+    pub nx: usize,
+    /// Cells along y.
+    pub ny: usize,
+}
+
+impl BevGrid {
+    /// A grid; fails for zero cells or a non-positive cell size.
+    pub fn new(x_min: f64, y_min: f64, cell: f64, nx: usize, ny: usize) -> Result<Self> {
+        if nx == 0
+            || ny == 0
+            || !(cell.is_finite() && cell > 0.0 && x_min.is_finite() && y_min.is_finite())
+        {
+            return Err(DetectError::InvalidParameter {
+                what: "BEV grid (x_min, y_min, cell, nx, ny)",
+                value: if nx == 0 || ny == 0 { 0.0 } else { cell },
+                reason: "need nx, ny ≥ 1, a positive cell size and finite edges",
+            });
+        }
+        Ok(Self {
+            x_min,
+            y_min,
+            cell,
+            nx,
+            ny,
+        })
+    }
+
+    /// Number of cells.
+    pub fn len(&self) -> usize {
+        self.nx * self.ny
+    }
+
+    /// Whether the grid has no cells (never for a grid from [`BevGrid::new`]).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Direction of the pooling.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Direction {
+    /// Image features → BEV cells.
+    ImageToBev,
+    /// BEV features → image cells.
+    BevToImage,
+}
+
+/// Points dropped while building the operator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Dropped {
+    /// Behind the camera (`w ≤ 0`).
+    pub behind: usize,
+    /// Projecting outside the image grid.
+    pub outside_image: usize,
+    /// Outside the BEV grid.
+    pub outside_bev: usize,
+}
+
+/// A compressed sparse row matrix with `f64` and `f32` copies of its weights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Csr {
+    /// Rows.
+    pub rows: usize,
+    /// Columns.
+    pub cols: usize,
+    /// Row pointers (`rows + 1`).
+    pub indptr: Vec<u32>,
+    /// Column indices, ascending within a row.
+    pub indices: Vec<u32>,
+    /// Weights.
+    pub data: Vec<f64>,
+    data32: Vec<f32>,
+}
+
+impl Csr {
+    /// From `(row, col, weight)` triplets; duplicates are summed.
+    fn from_triplets(rows: usize, cols: usize, trip: &[(u32, u32, f64)]) -> Self {
+        let mut count = vec![0u32; rows + 1];
+        for t in trip {
+            count[t.0 as usize + 1] += 1;
+        }
+        for r in 0..rows {
+            count[r + 1] += count[r];
+        }
+        let mut fill = count.clone();
+        let mut tmp = vec![(0u32, 0.0f64); trip.len()];
+        for t in trip {
+            let r = t.0 as usize;
+            tmp[fill[r] as usize] = (t.1, t.2);
+            fill[r] += 1;
+        }
+        let mut indptr = Vec::with_capacity(rows + 1);
+        let mut indices = Vec::with_capacity(trip.len());
+        let mut data = Vec::with_capacity(trip.len());
+        indptr.push(0u32);
+        for r in 0..rows {
+            let seg = &mut tmp[count[r] as usize..count[r + 1] as usize];
+            if seg.len() > 1 {
+                seg.sort_unstable_by_key(|e| e.0);
+            }
+            for &(c, w) in seg.iter() {
+                if indices.len() > *indptr.last().unwrap_or(&0) as usize
+                    && indices.last() == Some(&c)
+                {
+                    if let Some(last) = data.last_mut() {
+                        *last += w;
+                    }
+                } else {
+                    indices.push(c);
+                    data.push(w);
+                }
+            }
+            indptr.push(indices.len() as u32);
+        }
+        let data32 = data.iter().map(|v| *v as f32).collect();
+        Self {
+            rows,
+            cols,
+            indptr,
+            indices,
+            data,
+            data32,
+        }
+    }
+
+    /// Number of stored entries.
+    pub fn nnz(&self) -> usize {
+        self.indices.len()
+    }
+
+    /// The dense `rows × cols` matrix, row-major (for tests and small problems).
+    pub fn to_dense(&self) -> Vec<f64> {
+        let mut out = vec![0.0; self.rows * self.cols];
+        for r in 0..self.rows {
+            for k in self.indptr[r] as usize..self.indptr[r + 1] as usize {
+                out[r * self.cols + self.indices[k] as usize] += self.data[k];
+            }
+        }
+        out
+    }
+
+    /// The weights in the precision of `T` (no copy).
+    fn weights<T: Feature>(&self) -> &[T] {
+        T::pick(&self.data, &self.data32)
+    }
+
+    /// `out = self · input` for channels-last `input` (`cols × channels`) into `out`
+    /// (`rows × channels`), rows in parallel.
+    fn apply<T: Feature>(
+        &self,
+        input: &[T],
+        channels: usize,
+        out: &mut [T],
+        weights: &[T],
+    ) -> Result<()> {
+        if channels == 0 {
+            return Err(DetectError::InvalidParameter {
+                what: "channels",
+                value: 0.0,
+                reason: "need at least one channel",
+            });
+        }
+        if input.len() != self.cols * channels {
+            return Err(DetectError::WrongLength {
+                what: "input features (cells × channels)",
+                got: input.len(),
+                expected: self.cols * channels,
+            });
+        }
+        if out.len() != self.rows * channels {
+            return Err(DetectError::WrongLength {
+                what: "output features (cells × channels)",
+                got: out.len(),
+                expected: self.rows * channels,
+            });
+        }
+        // Rows are independent and each is summed in a fixed order: thread-count invariant.
+        let min_rows = (4096 / channels).max(1);
+        out.par_chunks_mut(channels)
+            .with_min_len(min_rows)
+            .enumerate()
+            .for_each(|(r, row)| {
+                row.fill(T::ZERO);
+                let (a, b) = (self.indptr[r] as usize, self.indptr[r + 1] as usize);
+                for (&w, &c) in weights[a..b].iter().zip(&self.indices[a..b]) {
+                    let c = c as usize;
+                    let src = &input[c * channels..(c + 1) * channels];
+                    for (o, s) in row.iter_mut().zip(src) {
+                        *o = *o + w * *s;
+                    }
+                }
+            });
+        Ok(())
+    }
+}
+
+/// The SHPL operator for one point cloud (both directions, with their transposes).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SparsePooling {
+    /// Image → BEV kernel (`bev cells × image cells`).
+    pub image_to_bev: Csr,
+    /// BEV → image kernel (`image cells × bev cells`).
+    pub bev_to_image: Csr,
+    image_to_bev_t: Csr,
+    bev_to_image_t: Csr,
+    /// Points kept.
+    pub kept: usize,
+    /// Points dropped, by reason.
+    pub dropped: Dropped,
+    /// The image grid.
+    pub image: ImageGrid,
+    /// The BEV grid.
+    pub bev: BevGrid,
+}
+
+/// Cells of a `k×k` window centred on `(a, b)` in an `na × nb` grid (clipped).
+fn window(a: usize, b: usize, na: usize, nb: usize, k: usize, out: &mut Vec<(usize, usize)>) {
+    out.clear();
+    let h = k / 2;
+    for i in a.saturating_sub(h)..(a + h + 1).min(na) {
+        for j in b.saturating_sub(h)..(b + h + 1).min(nb) {
+            out.push((i, j));
+        }
+    }
+}
+
+impl SparsePooling {
+    /// Builds the operator (eq. 7.4–7.8) for `points` (LiDAR frame, `N×3`), the `3×4`
+    /// camera–LiDAR projection `p` (eq. 7.2), the two grids and an odd `neighbourhood`
+    /// window size (1 = the cell hit only, eq. 7.8).
+    pub fn build(
+        points: &[[f64; 3]],
+        p: &[[f64; 4]; 3],
+        image: ImageGrid,
+        bev: BevGrid,
+        neighbourhood: usize,
+    ) -> Result<Self> {
+        if points.is_empty() {
+            return Err(DetectError::TooFewPoints { got: 0, needed: 1 });
+        }
+        if neighbourhood == 0 || neighbourhood.is_multiple_of(2) {
+            return Err(DetectError::InvalidParameter {
+                what: "neighbourhood",
+                value: neighbourhood as f64,
+                reason: "the window size must be odd (1, 3, 5, …)",
+            });
+        }
+        if let Some(&value) = p.iter().flatten().find(|v| !v.is_finite()) {
+            return Err(DetectError::NonFinite {
+                what: "projection matrix",
+                index: 0,
+                value,
+            });
+        }
+        if image.len() > u32::MAX as usize || bev.len() > u32::MAX as usize {
+            return Err(DetectError::InvalidParameter {
+                what: "grid cells",
+                value: image.len().max(bev.len()) as f64,
+                reason: "at most 2³² − 1 cells",
+            });
+        }
+        let mut dropped = Dropped::default();
+        // (image cell (row, col), bev cell (ix, iy)) of each kept point.
+        let mut hits: Vec<(u32, u32, u32, u32)> = Vec::with_capacity(points.len());
+        for (index, x) in points.iter().enumerate() {
+            if let Some(&value) = x.iter().find(|v| !v.is_finite()) {
+                return Err(DetectError::NonFinite {
+                    what: "points",
+                    index,
+                    value,
+                });
+            }
+            let pr = |r: &[f64; 4]| r[0] * x[0] + r[1] * x[1] + r[2] * x[2] + r[3];
+            let (uw, vw, w) = (pr(&p[0]), pr(&p[1]), pr(&p[2]));
+            if w.is_nan() || w <= 0.0 {
+                dropped.behind += 1;
+                continue;
+            }
+            let (c, r) = (
+                (uw / w / image.stride).floor(),
+                (vw / w / image.stride).floor(),
+            );
+            if !(c >= 0.0 && r >= 0.0 && c < image.cols as f64 && r < image.rows as f64) {
+                dropped.outside_image += 1;
+                continue;
+            }
+            let (ix, iy) = (
+                ((x[0] - bev.x_min) / bev.cell).floor(),
+                ((x[1] - bev.y_min) / bev.cell).floor(),
+            );
+            if !(ix >= 0.0 && iy >= 0.0 && ix < bev.nx as f64 && iy < bev.ny as f64) {
+                dropped.outside_bev += 1;
+                continue;
+            }
+            hits.push((r as u32, c as u32, ix as u32, iy as u32));
+        }
+        let n_img = image.len();
+        let n_bev = bev.len();
+        let img_idx = |r: usize, c: usize| (r * image.cols + c) as u32;
+        let bev_idx = |ix: usize, iy: usize| (ix * bev.ny + iy) as u32;
+        let mut per_bev = vec![0u32; n_bev];
+        let mut per_img = vec![0u32; n_img];
+        for h in &hits {
+            per_bev[bev_idx(h.2 as usize, h.3 as usize) as usize] += 1;
+            per_img[img_idx(h.0 as usize, h.1 as usize) as usize] += 1;
+        }
+        let k2 = neighbourhood * neighbourhood;
+        let mut ib = Vec::with_capacity(hits.len() * k2);
+        let mut bi = Vec::with_capacity(hits.len() * k2);
+        let mut win = Vec::with_capacity(k2);
+        for h in &hits {
+            let (r, c, ix, iy) = (h.0 as usize, h.1 as usize, h.2 as usize, h.3 as usize);
+            let (b, m) = (bev_idx(ix, iy), img_idx(r, c));
+            // image → BEV: row b gathers the image window around m.
+            window(r, c, image.rows, image.cols, neighbourhood, &mut win);
+            let w = 1.0 / (per_bev[b as usize] as f64 * win.len() as f64);
+            for &(i, j) in &win {
+                ib.push((b, img_idx(i, j), w));
+            }
+            // BEV → image: row m gathers the BEV window around b.
+            window(ix, iy, bev.nx, bev.ny, neighbourhood, &mut win);
+            let w = 1.0 / (per_img[m as usize] as f64 * win.len() as f64);
+            for &(i, j) in &win {
+                bi.push((m, bev_idx(i, j), w));
+            }
+        }
+        let image_to_bev = Csr::from_triplets(n_bev, n_img, &ib);
+        let bev_to_image = Csr::from_triplets(n_img, n_bev, &bi);
+        let swap = |t: &[(u32, u32, f64)]| t.iter().map(|e| (e.1, e.0, e.2)).collect::<Vec<_>>();
+        let image_to_bev_t = Csr::from_triplets(n_img, n_bev, &swap(&ib));
+        let bev_to_image_t = Csr::from_triplets(n_bev, n_img, &swap(&bi));
+        Ok(Self {
+            image_to_bev,
+            bev_to_image,
+            image_to_bev_t,
+            bev_to_image_t,
+            kept: hits.len(),
+            dropped,
+            image,
+            bev,
+        })
+    }
+
+    /// The kernel of a direction.
+    pub fn kernel(&self, dir: Direction) -> &Csr {
+        match dir {
+            Direction::ImageToBev => &self.image_to_bev,
+            Direction::BevToImage => &self.bev_to_image,
+        }
+    }
+
+    /// `(input cells, output cells)` of a direction.
+    pub fn shape(&self, dir: Direction) -> (usize, usize) {
+        let k = self.kernel(dir);
+        (k.cols, k.rows)
+    }
+
+    /// Forward pooling `out = K·input` (channels-last `input`: input cells × `channels`).
+    pub fn forward<T: Feature>(
+        &self,
+        dir: Direction,
+        input: &[T],
+        channels: usize,
+        out: &mut [T],
+    ) -> Result<()> {
+        let k = self.kernel(dir);
+        k.apply(input, channels, out, k.weights::<T>())
+    }
+
+    /// Backward pass `grad_in = Kᵀ·grad_out` (the gradient of any loss with respect to the
+    /// input features, given its gradient with respect to the output).
+    pub fn backward<T: Feature>(
+        &self,
+        dir: Direction,
+        grad_out: &[T],
+        channels: usize,
+        grad_in: &mut [T],
+    ) -> Result<()> {
+        let k = match dir {
+            Direction::ImageToBev => &self.image_to_bev_t,
+            Direction::BevToImage => &self.bev_to_image_t,
+        };
+        k.apply(grad_out, channels, grad_in, k.weights::<T>())
+    }
+}
