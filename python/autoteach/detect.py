@@ -198,7 +198,7 @@ class WaferEdge:
             the fit's statistical covariance (edge-point noise only); on the rendered benchmark
             the actual errors are larger, because the band model's small per-scene biases
             dominate: error / reported σ has a standard deviation of 3.2–4.4 for ``b`` and
-            2.2–3.5 for ``a`` (``docs/benchmarks.md``, wafer-rim detection). Scale it before
+            2.2–3.5 for ``a`` (``docs/changelog.md``, wafer-rim detection). Scale it before
             using it as a measurement covariance.
 
     """
