@@ -21,6 +21,7 @@
 //! ```
 
 pub mod bspline;
+pub mod dynamics;
 mod error;
 pub mod workspace;
 
