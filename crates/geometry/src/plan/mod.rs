@@ -20,6 +20,7 @@
 //! # Ok::<(), autoteach_geometry::plan::PlanError>(())
 //! ```
 
+pub mod astar;
 pub mod bspline;
 pub mod dynamics;
 mod error;

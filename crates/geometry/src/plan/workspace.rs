@@ -95,6 +95,9 @@ struct Posed {
     radius: f64,
 }
 
+/// Smallest conservative-advancement step (fraction of a segment) before giving up.
+const MIN_ADVANCE: f64 = 1e-3;
+
 /// Prediction distance of parry's contact query: distances beyond it are reported as it.
 const PREDICTION: f64 = 100.0;
 
@@ -360,7 +363,7 @@ impl PlanWorkspace {
     }
 
     /// `Some(lower bound on the clearance)` if `q` keeps `margin`, else `None` (no limit check).
-    fn free_distance(&self, q: &Joints, margin: f64) -> Option<f64> {
+    pub fn free_distance(&self, q: &Joints, margin: f64) -> Option<f64> {
         let links = self.posed(q);
         let mut best = f64::INFINITY;
         for l in &links {
@@ -392,8 +395,20 @@ impl PlanWorkspace {
     /// Whether the straight joint segment `a → b` keeps `margin` everywhere, certified by
     /// conservative advancement: from a point with clearance lower bound `d ≥ margin`, a step of
     /// `(d − margin) / L` (with `L` = [`Self::sweep_bound`] of the whole segment) stays above
-    /// `margin`. A segment whose steps shrink below 1e-6 of its length is reported not free.
+    /// `margin`. A segment whose steps shrink below 1/1000 of its length is reported not free
+    /// (conservative: at most 1000 checks per segment).
     pub fn segment_free(&self, a: &Joints, b: &Joints, margin: f64) -> bool {
+        self.segment_free_counted(a, b, margin, &mut 0)
+    }
+
+    /// [`Self::segment_free`], adding the number of configuration checks to `checks`.
+    pub fn segment_free_counted(
+        &self,
+        a: &Joints,
+        b: &Joints,
+        margin: f64,
+        checks: &mut u64,
+    ) -> bool {
         if !self.within_limits(a) || !self.within_limits(b) {
             return false;
         }
@@ -402,6 +417,7 @@ impl PlanWorkspace {
         let mut steps = 0usize;
         loop {
             let q = a + (b - a) * s;
+            *checks += 1;
             let Some(d) = self.free_distance(&q, margin) else {
                 return false;
             };
@@ -409,10 +425,11 @@ impl PlanWorkspace {
                 return true;
             }
             let ds = (d - margin) / l;
-            if ds < 1e-6 || steps > 1_000_000 {
+            if ds < MIN_ADVANCE || steps > 1000 {
                 return false;
             }
             if s + ds >= 1.0 {
+                *checks += 1;
                 return self.free_distance(b, margin).is_some();
             }
             s += ds;
