@@ -412,7 +412,7 @@ pub fn astar(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::plan::workspace::default_scene;
     use std::collections::BTreeMap;
