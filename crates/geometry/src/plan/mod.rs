@@ -24,6 +24,7 @@ pub mod astar;
 pub mod bspline;
 pub mod dynamics;
 mod error;
+pub mod limits;
 pub mod rrt_star;
 pub mod workspace;
 
