@@ -210,7 +210,7 @@ mod tests {
         let t = joint_time_bound(1e-3, 10.0, 100.0, 10.0);
         assert!((t - 4.0 * (1e-3 / 20.0f64).cbrt()).abs() < 1e-9);
         // Acceleration-limited without cruise: v_p² / a + v_p a / j = d.
-        let (d, a, j) = (1.0, 5.0, 100.0);
+        let (d, a, j) = (1.0f64, 5.0f64, 100.0f64);
         let vp = 0.5 * a * (-a / j + ((a / j).powi(2) + 4.0 * d / a).sqrt());
         let t = joint_time_bound(d, 100.0, a, j);
         assert!((t - 2.0 * (vp / a + a / j)).abs() < 1e-9, "{t}");
