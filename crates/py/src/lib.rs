@@ -19,6 +19,7 @@ mod gray;
 mod handeye;
 mod lsq;
 mod mapping;
+mod plan;
 mod polygon;
 mod radio;
 mod registration;
@@ -48,6 +49,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     mapping::register(m)?;
     segment::register(m)?;
     control::register(m)?;
+    plan::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

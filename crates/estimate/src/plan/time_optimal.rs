@@ -18,6 +18,10 @@
 //! 1 ms, stays at least `d_safe`; otherwise the trust region shrinks. Torque limits thus enter
 //! through the scaling, not the QP.
 
+// Control points, spans and basis values are indexed together by the same span and joint
+// indices, as in eqs. (2.12)–(2.14); index loops read closer to the equations than zips.
+#![allow(clippy::needless_range_loop)]
+
 use std::time::Instant;
 
 use autoteach_geometry::plan::PlanError;
@@ -690,5 +694,98 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("jerk limit of joint 1"), "{e}");
+    }
+}
+#[cfg(test)]
+mod exp {
+    use super::*;
+    use autoteach_geometry::collision::LinkDims;
+    use autoteach_geometry::plan::dynamics::DynamicsParams;
+    use autoteach_geometry::plan::rrt_star::{RrtStarConfig, rrt_star};
+    use autoteach_geometry::plan::workspace::{default_limits, default_scene};
+    use autoteach_geometry::robot::WaferRobot;
+    #[test]
+    #[ignore]
+    fn exp_table() {
+        let (lo, hi) = default_limits();
+        let ws = PlanWorkspace::new(
+            WaferRobot::default(),
+            LinkDims::default(),
+            None,
+            lo,
+            hi,
+            vec![],
+        )
+        .unwrap();
+        let dy = Dynamics::new(&ws.robot.params, &DynamicsParams::default(), None);
+        let limits = Limits::default();
+        let path = vec![
+            Joints::new(0.0, 0.5, 0.0, 0.0, 0.1),
+            Joints::new(1.5, 0.2, -0.3, 0.4, 0.15),
+        ];
+        for n in [10, 20, 30] {
+            let r = optimize_trajectory(
+                &ws,
+                &dy,
+                &path,
+                &limits,
+                &OptimizeConfig {
+                    n_ctrl: n,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            println!(
+                "free n={n}: T {:.4} init {:.4} bound {:.4} gap {:.4} it {} acc {} t {:.3} active {:?}",
+                r.duration,
+                r.initial_duration,
+                r.lower_bound,
+                r.gap,
+                r.iterations,
+                r.accepted,
+                r.time_s,
+                r.active
+            );
+        }
+        let (ws, poses) = default_scene().unwrap();
+        let dy = Dynamics::new(
+            &ws.robot.params,
+            &DynamicsParams::default(),
+            ws.wafer.as_ref(),
+        );
+        for (a, b) in [(0, 1), (0, 2), (0, 3), (1, 3), (2, 3)] {
+            let p = rrt_star(
+                &ws,
+                &poses[a].q,
+                &poses[b].q,
+                &RrtStarConfig {
+                    margin: 0.02,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let r = optimize_trajectory(
+                &ws,
+                &dy,
+                &p.result.path,
+                &limits,
+                &OptimizeConfig::default(),
+            )
+            .unwrap();
+            println!(
+                "traj{a}{b}: plan {:.3}s T {:.4} init {:.4} bound {:.4} gap {:.4} n {} it {} acc {} t {:.3} active {:?} ver {:?}",
+                p.result.time_s,
+                r.duration,
+                r.initial_duration,
+                r.lower_bound,
+                r.gap,
+                r.trajectory.control_points().len(),
+                r.iterations,
+                r.accepted,
+                r.time_s,
+                r.active,
+                r.verification
+            );
+        }
     }
 }
