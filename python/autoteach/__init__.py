@@ -72,6 +72,7 @@ SUBMODULES = (
     "io",
     "mapping",
     "pipeline",
+    "plan",
     "polygon",
     "radio",
     "registration",

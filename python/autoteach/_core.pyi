@@ -1492,3 +1492,41 @@ def control_demo(
 ) -> dict[str, _Any]: ...
 
 # --- end control ---
+
+# --- motion planning (issue 30): autoteach.plan ---
+
+class PlanWorkspace:
+    def __init__(self, obstacles: list[tuple[str, object, object]], wafer: bool = True) -> None: ...
+    def clearance(self, q: object) -> tuple[float, str, str] | None: ...
+    def distance_gradient(self, q: object) -> tuple[float, NDArray[np.float64]]: ...
+    def obstacles(self) -> list[tuple[str, list[list[float]], list[float]]]: ...
+    def joint_limits(self) -> tuple[list[float], list[float]]: ...
+    def link_centres(self, q: object) -> list[tuple[str, list[float]]]: ...
+
+def plan_default_scene() -> tuple[PlanWorkspace, list[tuple[str, list[float]]]]: ...
+def plan_path(
+    workspace: PlanWorkspace,
+    q_start: object,
+    q_goal: object,
+    method: str = "rrt*",
+    margin: float = 0.01,
+    max_iterations: int = 3000,
+    seed: int = 7,
+    step_deg: float = 5.0,
+    joints_planned: list[int] | None = None,
+) -> dict[str, object]: ...
+def plan_optimize(
+    workspace: PlanWorkspace,
+    path: object,
+    velocity: object,
+    acceleration: object,
+    jerk: object,
+    torque: object,
+    d_safe: float = 0.01,
+    n_ctrl: int = 0,
+    max_iterations: int = 40,
+) -> dict[str, object]: ...
+def plan_sample(
+    knots: object, control_points: object, times: object
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]: ...
+def plan_inverse_dynamics(q: object, dq: object, ddq: object, wafer: bool = True) -> NDArray[np.float64]: ...
