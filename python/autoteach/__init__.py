@@ -108,6 +108,7 @@ __all__ = [
     "io",
     "mapping",
     "pipeline",
+    "plan",
     "polygon",
     "radio",
     "registration",
