@@ -35,3 +35,5 @@ pub use error::EstimateError;
 /// Result type of this crate.
 pub type Result<T> = std::result::Result<T, EstimateError>;
 pub mod lidar_camera;
+/// Time-optimal B-spline trajectories of the wafer robot (issue 30).
+pub mod plan;

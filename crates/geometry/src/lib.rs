@@ -24,6 +24,7 @@ pub mod collision;
 pub mod conic;
 pub mod error;
 pub mod lie;
+pub mod plan;
 pub mod planar;
 pub mod render;
 pub mod robot;

@@ -19,6 +19,7 @@ mod gray;
 mod handeye;
 mod lsq;
 mod mapping;
+mod plan;
 mod polygon;
 mod radio;
 mod registration;
@@ -53,6 +54,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     control::register(m)?;
     uncertainty::register(m)?;
     fusion::register(m)?;
+    plan::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

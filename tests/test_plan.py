@@ -1,0 +1,71 @@
+"""Motion planning and time-optimal trajectories (issue 30), through the Python API."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from autoteach import plan
+from autoteach.errors import AutoteachError
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return plan.default_scene()
+
+
+def test_default_poses_are_free_and_clearance_names_the_pair(scene):
+    ws, poses = scene
+    for name, q in poses.items():
+        d, link, obstacle = plan.clearance(ws, q)
+        assert d > 0.005, name
+        assert isinstance(link, str) and isinstance(obstacle, str)
+
+
+def test_rrt_path_and_optimised_trajectory_verified_by_dense_sampling(scene):
+    ws, poses = scene
+    p = plan.plan_path(ws, poses["home"], poses["chamber"], method="rrt*", margin=0.02)
+    np.testing.assert_array_equal(p.path[0], poses["home"])
+    np.testing.assert_array_equal(p.path[-1], poses["chamber"])
+    limits = plan.Limits()
+    r = plan.optimize_trajectory(ws, p.path, limits)
+    assert r.duration <= r.initial_duration
+    assert r.duration >= r.lower_bound * (1 - 1e-9)
+    # Independent check in Python: sample every 1 ms, limits within 1e-9 relative, clearance.
+    t = np.arange(0.0, r.duration, 1e-3)
+    q, dq, ddq, dddq = r.trajectory.sample(t)
+    assert np.all(np.abs(dq) <= np.asarray(limits.velocity) * (1 + 1e-9))
+    assert np.all(np.abs(ddq) <= np.asarray(limits.acceleration) * (1 + 1e-9))
+    assert np.all(np.abs(dddq) <= np.asarray(limits.jerk) * (1 + 1e-9))
+    clear = min(plan.clearance(ws, qi)[0] for qi in q[::5])
+    assert clear >= limits.d_safe
+    tau = np.array(
+        [plan.inverse_dynamics(qi, dqi, ddqi) for qi, dqi, ddqi in zip(q[::5], dq[::5], ddq[::5], strict=True)]
+    )
+    assert np.all(np.abs(tau) <= np.asarray(limits.torque) * (1 + 1e-9))
+
+
+def test_trajectory_save_load_roundtrip(scene, tmp_path):
+    ws, poses = scene
+    r = plan.optimize_trajectory(ws, np.array([poses["home"], poses["home"] + [0.2, -0.1, 0.1, 0.0, 0.01]]))
+    f = tmp_path / "t.json"
+    r.trajectory.save(f)
+    back = plan.BSplineTrajectory.load(f)
+    np.testing.assert_array_equal(back.knots, r.trajectory.knots)
+    np.testing.assert_allclose(back.sample(0.3 * r.duration)[0], r.trajectory.sample(0.3 * r.duration)[0])
+
+
+def test_bad_inputs_raise_clear_errors(scene):
+    ws, poses = scene
+    bad = poses["carrier_a"] + np.array([0.0, -0.4, 0.2, 0.0, 0.0])
+    assert plan.clearance(ws, bad)[0] < 0
+    with pytest.raises(AutoteachError, match="goal configuration is not free"):
+        plan.plan_path(ws, poses["home"], bad)
+    with pytest.raises(AutoteachError, match="torque joint 4"):
+        plan.optimize_trajectory(ws, np.array([poses["home"], poses["chamber"]]), plan.Limits(torque=(1, 1, 1, 1, 10)))
+    with pytest.raises(AutoteachError, match="shape"):
+        plan.clearance(ws, [0.0, 1.0])
+    with pytest.raises(AutoteachError, match="non-finite"):
+        plan.clearance(ws, [np.nan, 0, 0, 0, 0])
+    with pytest.raises(AutoteachError, match="unknown method"):
+        plan.plan_path(ws, poses["home"], poses["chamber"], method="prm")
