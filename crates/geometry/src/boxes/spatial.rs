@@ -137,14 +137,14 @@ fn floor_i(v: f64) -> i64 {
 }
 
 /// For each grid row the inclusive range of cells whose centres lie inside `b`, appended to
-/// `spans` as `(row, first, last)`; returns the number of cells.
+/// `spans` as `(row, first, last)` (`last < first` for an empty row); returns the number of cells.
 ///
 /// The box is `{p : |(p − c)·e₁| ≤ l/2, |(p − c)·e₂| ≤ w/2}` with `e₁ = (cos r, sin r)`,
 /// `e₂ = (−sin r, cos r)`. At a row's height `y` each slab with `e_x ≠ 0` is the x-interval
 /// `c_x − (y − c_y)·e_y/e_x ± h/|e_x|`; the row's span is the intersection of the two (a slab
 /// with `e_x = 0` only bounds y, which the row range already does). Two multiply-adds per row,
 /// no division and no branch on the edges.
-fn box_spans(b: &Box2, g: &Grid2, spans: &mut Vec<(u32, u32, u32)>) -> usize {
+fn box_spans(b: &Box2, g: &Grid2, spans: &mut Vec<(u32, i32, i32)>) -> usize {
     let (s, c) = b.r.sin_cos();
     // (e_y / e_x, h / |e_x|) of the two slabs; an unbounded slab contributes (0, ∞).
     let slab = |ex: f64, ey: f64, h: f64| {
@@ -172,22 +172,35 @@ fn box_spans(b: &Box2, g: &Grid2, spans: &mut Vec<(u32, u32, u32)>) -> usize {
     let (hh1, hh2) = (h1 * inv_dx, h2 * inv_dx);
     let nx = g.nx as f64;
     let last = g.nx as i64 - 1;
+    let rows = r0 as usize..=r1 as usize;
+    spans.reserve(rows.clone().count());
     let mut count = 0;
-    for row in r0 as usize..=r1 as usize {
+    // Branch-free per row: empty rows are kept with `last < first` (the consumer skips them).
+    for row in rows {
         let t = g.y0 + (row as f64 + 0.5) * g.dy - b.cy;
         let (u1, u2) = (base - t * q1, base - t * q2);
         // Clamp before the integer conversion (the span may reach far outside the grid); an
         // empty span (`xr < xl`) gives `c1 < c0`.
-        let s0 = (u1 - hh1).max(u2 - hh2).clamp(-1.0, nx);
-        let s1 = (u1 + hh1).min(u2 + hh2).clamp(-1.0, nx);
+        let s0 = fmin(fmax(fmax(u1 - hh1, u2 - hh2), -1.0), nx);
+        let s1 = fmin(fmax(fmin(u1 + hh1, u2 + hh2), -1.0), nx);
         let c0 = ceil_i(s0).max(0);
         let c1 = floor_i(s1).min(last);
-        if c1 >= c0 {
-            spans.push((row as u32, c0 as u32, c1 as u32));
-            count += (c1 - c0) as usize + 1;
-        }
+        count += (c1 - c0 + 1).max(0);
+        spans.push((row as u32, c0 as i32, c1 as i32));
     }
-    count
+    count as usize
+}
+
+/// `max(a, b)` for non-NaN values (a single `maxsd`, without `f64::max`'s NaN handling).
+#[inline(always)]
+fn fmax(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// `min(a, b)` for non-NaN values.
+#[inline(always)]
+fn fmin(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
 }
 
 /// How each rasterised box is weighted.
@@ -230,7 +243,7 @@ pub fn rasterize(
 #[derive(Debug, Default)]
 pub(crate) struct RasterScratch {
     diff: Vec<f64>,
-    spans: Vec<(u32, u32, u32)>,
+    spans: Vec<(u32, i32, i32)>,
     /// The rasterised distribution, row-major.
     pub(crate) out: Vec<f64>,
 }
@@ -261,7 +274,7 @@ pub(crate) fn rasterize_into(
             Weighting::Density => w / n as f64,
             Weighting::Indicator => w,
         };
-        for &(row, a, z) in spans.iter() {
+        for &(row, a, z) in spans.iter().filter(|sp| sp.2 >= sp.1) {
             let base = row as usize * (nx + 1);
             diff[base + a as usize] += v;
             diff[base + z as usize + 1] -= v;
