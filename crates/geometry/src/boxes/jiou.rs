@@ -16,7 +16,9 @@
 
 use rayon::prelude::*;
 
-use super::spatial::{Grid2, RasterScratch, Weighting, normal_table, rasterize_into, sample_boxes_into};
+use super::spatial::{
+    Grid2, RasterScratch, Weighting, normal_table, rasterize_into, sample_boxes_into,
+};
 use super::{BEV_PARAMS, Box2, Cov5, check_covariance, is_deterministic};
 use crate::{GeometryError, Result};
 

@@ -235,7 +235,13 @@ pub fn rasterize(
         });
     }
     let mut scratch = RasterScratch::default();
-    let skipped = rasterize_into(boxes, weights.iter().copied(), grid, weighting, &mut scratch);
+    let skipped = rasterize_into(
+        boxes,
+        weights.iter().copied(),
+        grid,
+        weighting,
+        &mut scratch,
+    );
     Ok((scratch.out, skipped))
 }
 
