@@ -151,51 +151,106 @@ pub struct Csr {
 
 impl Csr {
     /// From `(row, col, weight)` triplets; duplicates are summed.
+    ///
+    /// Two counting passes and no comparison sort: the triplets are bucketed by column (a CSC
+    /// layout), and reading the columns in order while bucketing by row leaves every row's
+    /// entries in ascending column order, duplicates adjacent, so they are summed in one pass.
+    /// `O(nnz + rows + cols)`.
     fn from_triplets(rows: usize, cols: usize, trip: &[(u32, u32, f64)]) -> Self {
-        let mut count = vec![0u32; rows + 1];
+        // Column buckets.
+        let mut cptr = vec![0u32; cols + 1];
         for t in trip {
-            count[t.0 as usize + 1] += 1;
+            cptr[t.1 as usize + 1] += 1;
+        }
+        for c in 0..cols {
+            cptr[c + 1] += cptr[c];
+        }
+        let mut fill = cptr.clone();
+        let mut by_col = vec![(0u32, 0.0f64); trip.len()];
+        for t in trip {
+            let c = t.1 as usize;
+            by_col[fill[c] as usize] = (t.0, t.2);
+            fill[c] += 1;
+        }
+        // Row buckets, filled column by column.
+        let mut rptr = vec![0u32; rows + 1];
+        for t in trip {
+            rptr[t.0 as usize + 1] += 1;
         }
         for r in 0..rows {
-            count[r + 1] += count[r];
+            rptr[r + 1] += rptr[r];
         }
-        let mut fill = count.clone();
-        let mut tmp = vec![(0u32, 0.0f64); trip.len()];
-        for t in trip {
-            let r = t.0 as usize;
-            tmp[fill[r] as usize] = (t.1, t.2);
-            fill[r] += 1;
-        }
-        let mut indptr = Vec::with_capacity(rows + 1);
-        let mut indices = Vec::with_capacity(trip.len());
-        let mut data = Vec::with_capacity(trip.len());
-        indptr.push(0u32);
-        for r in 0..rows {
-            let seg = &mut tmp[count[r] as usize..count[r + 1] as usize];
-            if seg.len() > 1 {
-                seg.sort_unstable_by_key(|e| e.0);
+        let mut fill = rptr.clone();
+        let mut idx = vec![0u32; trip.len()];
+        let mut val = vec![0.0f64; trip.len()];
+        for c in 0..cols {
+            for &(r, w) in &by_col[cptr[c] as usize..cptr[c + 1] as usize] {
+                let k = fill[r as usize] as usize;
+                idx[k] = c as u32;
+                val[k] = w;
+                fill[r as usize] += 1;
             }
-            for &(c, w) in seg.iter() {
-                if indices.len() > *indptr.last().unwrap_or(&0) as usize
-                    && indices.last() == Some(&c)
-                {
-                    if let Some(last) = data.last_mut() {
-                        *last += w;
-                    }
+        }
+        // Sum the (adjacent) duplicates in place.
+        let mut indptr = Vec::with_capacity(rows + 1);
+        indptr.push(0u32);
+        let mut out = 0usize;
+        for r in 0..rows {
+            let (a, z) = (rptr[r] as usize, rptr[r + 1] as usize);
+            let row_start = out;
+            for k in a..z {
+                if out > row_start && idx[out - 1] == idx[k] {
+                    val[out - 1] += val[k];
                 } else {
-                    indices.push(c);
-                    data.push(w);
+                    idx[out] = idx[k];
+                    val[out] = val[k];
+                    out += 1;
                 }
             }
-            indptr.push(indices.len() as u32);
+            indptr.push(out as u32);
         }
-        let data32 = data.iter().map(|v| *v as f32).collect();
+        idx.truncate(out);
+        val.truncate(out);
+        let data32 = val.iter().map(|v| *v as f32).collect();
         Self {
             rows,
             cols,
             indptr,
-            indices,
-            data,
+            indices: idx,
+            data: val,
+            data32,
+        }
+    }
+
+    /// The transpose (`cols × rows`), by one counting pass; rows stay in ascending column order.
+    fn transpose(&self) -> Self {
+        let nnz = self.indices.len();
+        let mut ptr = vec![0u32; self.cols + 1];
+        for &c in &self.indices {
+            ptr[c as usize + 1] += 1;
+        }
+        for c in 0..self.cols {
+            ptr[c + 1] += ptr[c];
+        }
+        let mut fill = ptr.clone();
+        let mut idx = vec![0u32; nnz];
+        let mut val = vec![0.0f64; nnz];
+        for r in 0..self.rows {
+            let (a, z) = (self.indptr[r] as usize, self.indptr[r + 1] as usize);
+            for (&c, &w) in self.indices[a..z].iter().zip(&self.data[a..z]) {
+                let k = fill[c as usize] as usize;
+                idx[k] = r as u32;
+                val[k] = w;
+                fill[c as usize] += 1;
+            }
+        }
+        let data32 = val.iter().map(|v| *v as f32).collect();
+        Self {
+            rows: self.cols,
+            cols: self.rows,
+            indptr: ptr,
+            indices: idx,
+            data: val,
             data32,
         }
     }
@@ -403,9 +458,8 @@ impl SparsePooling {
         }
         let image_to_bev = Csr::from_triplets(n_bev, n_img, &ib);
         let bev_to_image = Csr::from_triplets(n_img, n_bev, &bi);
-        let swap = |t: &[(u32, u32, f64)]| t.iter().map(|e| (e.1, e.0, e.2)).collect::<Vec<_>>();
-        let image_to_bev_t = Csr::from_triplets(n_img, n_bev, &swap(&ib));
-        let bev_to_image_t = Csr::from_triplets(n_bev, n_img, &swap(&bi));
+        let image_to_bev_t = image_to_bev.transpose();
+        let bev_to_image_t = bev_to_image.transpose();
         Ok(Self {
             image_to_bev,
             bev_to_image,

@@ -16,7 +16,9 @@
 
 use rayon::prelude::*;
 
-use super::spatial::{Grid2, Weighting, normal_table, rasterize, sample_boxes};
+use super::spatial::{
+    Grid2, RasterScratch, Weighting, normal_table, rasterize_into, sample_boxes_into,
+};
 use super::{BEV_PARAMS, Box2, Cov5, check_covariance, is_deterministic};
 use crate::{GeometryError, Result};
 
@@ -66,7 +68,8 @@ fn jaccard_unchecked(p1: &[f64], p2: &[f64], buf: &mut Vec<(f64, f64, f64)>) -> 
     if buf.is_empty() {
         return 0.0;
     }
-    buf.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
+    // The ratios are positive and finite, so their bit patterns sort like the values.
+    buf.sort_unstable_by_key(|x| x.0.to_bits());
     // suffix sum of p₁ over positions ≥ k (plus the t = ∞ part), prefix of p₂ over < k (plus t = 0).
     let total1: f64 = buf.iter().map(|e| e.1).sum::<f64>() + only1;
     let mut prefix2 = only2;
@@ -128,18 +131,29 @@ struct Evaluator {
     opts: JiouOptions,
 }
 
+/// Per-thread buffers of [`Evaluator::pair`], reused across pairs.
+#[derive(Default)]
+struct PairScratch {
+    sa: Vec<Box2>,
+    sb: Vec<Box2>,
+    ra: RasterScratch,
+    rb: RasterScratch,
+    buf: Vec<(f64, f64, f64)>,
+}
+
 impl Evaluator {
-    fn pair(&self, a: &ProbBox, b: &ProbBox, buf: &mut Vec<(f64, f64, f64)>) -> Result<f64> {
+    fn pair(&self, a: &ProbBox, b: &ProbBox, s: &mut PairScratch) -> Result<f64> {
         if is_deterministic(&a.cov) && is_deterministic(&b.cov) {
             return Ok(super::iou::iou(&a.mean, &b.mean));
         }
-        let sa = sample_boxes(&a.mean, &a.cov, &self.table)?;
-        let sb = sample_boxes(&b.mean, &b.cov, &self.table)?;
-        let grid = Grid2::covering(sa.iter().chain(sb.iter()), self.opts.grid)?;
-        let wa = vec![1.0 / sa.len().max(1) as f64; sa.len()];
-        let wb = vec![1.0 / sb.len().max(1) as f64; sb.len()];
-        let (pa, _) = rasterize(&sa, &wa, &grid, self.opts.weighting)?;
-        let (pb, _) = rasterize(&sb, &wb, &grid, self.opts.weighting)?;
+        sample_boxes_into(&a.mean, &a.cov, &self.table, &mut s.sa)?;
+        sample_boxes_into(&b.mean, &b.cov, &self.table, &mut s.sb)?;
+        let grid = Grid2::covering(s.sa.iter().chain(s.sb.iter()), self.opts.grid)?;
+        let wa = std::iter::repeat(1.0 / s.sa.len().max(1) as f64);
+        let wb = std::iter::repeat(1.0 / s.sb.len().max(1) as f64);
+        rasterize_into(&s.sa, wa, &grid, self.opts.weighting, &mut s.ra);
+        rasterize_into(&s.sb, wb, &grid, self.opts.weighting, &mut s.rb);
+        let (pa, pb) = (&s.ra.out, &s.rb.out);
         if !pa.iter().any(|v| *v > 0.0) || !pb.iter().any(|v| *v > 0.0) {
             return Err(GeometryError::InvalidParameter {
                 what: "grid",
@@ -147,7 +161,7 @@ impl Evaluator {
                 reason: "a box covers no cell centre: use a finer grid",
             });
         }
-        Ok(jaccard_unchecked(&pa, &pb, buf))
+        Ok(jaccard_unchecked(pa, pb, &mut s.buf))
     }
 }
 
@@ -170,7 +184,7 @@ pub fn jiou(a: &ProbBox, b: &ProbBox, opts: &JiouOptions) -> Result<f64> {
         table: normal_table(opts.samples, opts.seed),
         opts: *opts,
     };
-    ev.pair(a, b, &mut Vec::new())
+    ev.pair(a, b, &mut PairScratch::default())
 }
 
 /// JIoU of many pairs `(a[i], b[i])`, in parallel (the same normal table for every box, so the
@@ -191,8 +205,8 @@ pub fn jiou_batch(a: &[ProbBox], b: &[ProbBox], opts: &JiouOptions) -> Result<Ve
     a.par_iter()
         .zip(b.par_iter())
         .enumerate()
-        .map_init(Vec::new, |buf, (i, (x, y))| {
-            ev.pair(x, y, buf).map_err(|e| GeometryError::AtIndex {
+        .map_init(PairScratch::default, |scratch, (i, (x, y))| {
+            ev.pair(x, y, scratch).map_err(|e| GeometryError::AtIndex {
                 index: i,
                 source: Box::new(e),
             })

@@ -137,14 +137,14 @@ fn floor_i(v: f64) -> i64 {
 }
 
 /// For each grid row the inclusive range of cells whose centres lie inside `b`, appended to
-/// `spans` as `(row, first, last)`; returns the number of cells.
+/// `spans` as `(row, first, last)` (`last < first` for an empty row); returns the number of cells.
 ///
 /// The box is `{p : |(p − c)·e₁| ≤ l/2, |(p − c)·e₂| ≤ w/2}` with `e₁ = (cos r, sin r)`,
 /// `e₂ = (−sin r, cos r)`. At a row's height `y` each slab with `e_x ≠ 0` is the x-interval
 /// `c_x − (y − c_y)·e_y/e_x ± h/|e_x|`; the row's span is the intersection of the two (a slab
 /// with `e_x = 0` only bounds y, which the row range already does). Two multiply-adds per row,
 /// no division and no branch on the edges.
-fn box_spans(b: &Box2, g: &Grid2, spans: &mut Vec<(u32, u32, u32)>) -> usize {
+fn box_spans(b: &Box2, g: &Grid2, spans: &mut Vec<(u32, i32, i32)>) -> usize {
     let (s, c) = b.r.sin_cos();
     // (e_y / e_x, h / |e_x|) of the two slabs; an unbounded slab contributes (0, ∞).
     let slab = |ex: f64, ey: f64, h: f64| {
@@ -164,27 +164,43 @@ fn box_spans(b: &Box2, g: &Grid2, spans: &mut Vec<(u32, u32, u32)>) -> usize {
     if r1 < r0 {
         return 0;
     }
+    // Everything per row in grid units (`(x − x₀)/dx − ½`, so a cell index is an integer):
+    // one multiply-add per slab and row, and no division in the loop.
+    let inv_dx = 1.0 / g.dx;
+    let base = (b.cx - g.x0) * inv_dx - 0.5;
+    let (q1, q2) = (k1 * inv_dx, k2 * inv_dx);
+    let (hh1, hh2) = (h1 * inv_dx, h2 * inv_dx);
     let nx = g.nx as f64;
+    let last = g.nx as i64 - 1;
+    let rows = r0 as usize..=r1 as usize;
+    spans.reserve(rows.clone().count());
     let mut count = 0;
-    for row in r0 as usize..=r1 as usize {
+    // Branch-free per row: empty rows are kept with `last < first` (the consumer skips them).
+    for row in rows {
         let t = g.y0 + (row as f64 + 0.5) * g.dy - b.cy;
-        let (m1, m2) = (b.cx - t * k1, b.cx - t * k2);
-        let xl = (m1 - h1).max(m2 - h2);
-        let xr = (m1 + h1).min(m2 + h2);
-        if xr < xl {
-            continue;
-        }
-        // Clamp before the integer conversion (the span may reach far outside the grid).
-        let s0 = ((xl - g.x0) / g.dx - 0.5).clamp(-1.0, nx);
-        let s1 = ((xr - g.x0) / g.dx - 0.5).clamp(-1.0, nx);
+        let (u1, u2) = (base - t * q1, base - t * q2);
+        // Clamp before the integer conversion (the span may reach far outside the grid); an
+        // empty span (`xr < xl`) gives `c1 < c0`.
+        let s0 = fmin(fmax(fmax(u1 - hh1, u2 - hh2), -1.0), nx);
+        let s1 = fmin(fmax(fmin(u1 + hh1, u2 + hh2), -1.0), nx);
         let c0 = ceil_i(s0).max(0);
-        let c1 = floor_i(s1).min(g.nx as i64 - 1);
-        if c1 >= c0 {
-            spans.push((row as u32, c0 as u32, c1 as u32));
-            count += (c1 - c0) as usize + 1;
-        }
+        let c1 = floor_i(s1).min(last);
+        count += (c1 - c0 + 1).max(0);
+        spans.push((row as u32, c0 as i32, c1 as i32));
     }
-    count
+    count as usize
+}
+
+/// `max(a, b)` for non-NaN values (a single `maxsd`, without `f64::max`'s NaN handling).
+#[inline(always)]
+fn fmax(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// `min(a, b)` for non-NaN values.
+#[inline(always)]
+fn fmin(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
 }
 
 /// How each rasterised box is weighted.
@@ -218,14 +234,44 @@ pub fn rasterize(
             reason: "weights must be finite and non-negative",
         });
     }
+    let mut scratch = RasterScratch::default();
+    let skipped = rasterize_into(
+        boxes,
+        weights.iter().copied(),
+        grid,
+        weighting,
+        &mut scratch,
+    );
+    Ok((scratch.out, skipped))
+}
+
+/// Buffers reused by [`rasterize_into`] (one per thread in batch evaluations).
+#[derive(Debug, Default)]
+pub(crate) struct RasterScratch {
+    diff: Vec<f64>,
+    spans: Vec<(u32, i32, i32)>,
+    /// The rasterised distribution, row-major.
+    pub(crate) out: Vec<f64>,
+}
+
+/// [`rasterize`] without validation into `scratch.out`; returns the number of skipped boxes.
+pub(crate) fn rasterize_into(
+    boxes: &[Box2],
+    weights: impl Iterator<Item = f64>,
+    grid: &Grid2,
+    weighting: Weighting,
+    scratch: &mut RasterScratch,
+) -> usize {
     let (nx, ny) = (grid.nx, grid.ny);
     // Difference array: one extra column per row.
-    let mut diff = vec![0.0; ny * (nx + 1)];
-    let mut spans = Vec::with_capacity(grid.ny);
+    let diff = &mut scratch.diff;
+    diff.clear();
+    diff.resize(ny * (nx + 1), 0.0);
+    let spans = &mut scratch.spans;
     let mut skipped = 0;
-    for (b, &w) in boxes.iter().zip(weights) {
+    for (b, w) in boxes.iter().zip(weights) {
         spans.clear();
-        let n = box_spans(b, grid, &mut spans);
+        let n = box_spans(b, grid, spans);
         if n == 0 {
             skipped += 1;
             continue;
@@ -234,26 +280,28 @@ pub fn rasterize(
             Weighting::Density => w / n as f64,
             Weighting::Indicator => w,
         };
-        for &(row, a, z) in &spans {
+        for &(row, a, z) in spans.iter().filter(|sp| sp.2 >= sp.1) {
             let base = row as usize * (nx + 1);
             diff[base + a as usize] += v;
             diff[base + z as usize + 1] -= v;
         }
     }
-    let mut out = vec![0.0; nx * ny];
+    let out = &mut scratch.out;
+    out.clear();
+    out.reserve(nx * ny);
     for row in 0..ny {
         let mut acc = 0.0;
-        for ix in 0..nx {
-            acc += diff[row * (nx + 1) + ix];
+        for &d in &diff[row * (nx + 1)..row * (nx + 1) + nx] {
+            acc += d;
             // Cancellation can leave −1e−17 where the density is zero.
-            out[row * nx + ix] = if acc.abs() < 1e-14 * (1.0 + acc.abs()) {
+            out.push(if acc.abs() < 1e-14 * (1.0 + acc.abs()) {
                 0.0
             } else {
                 acc.max(0.0)
-            };
+            });
         }
     }
-    Ok((out, skipped))
+    skipped
 }
 
 /// `S` standard normal vectors in ℝ⁵: `S/2` drawn from `Pcg64(seed)` and their negatives
@@ -283,9 +331,25 @@ pub fn sample_boxes(mean: &Box2, cov: &Cov5, table: &[[f64; BEV_PARAMS]]) -> Res
     if super::is_deterministic(cov) {
         return Ok(vec![*mean]);
     }
+    let mut out = Vec::with_capacity(table.len());
+    sample_boxes_into(mean, cov, table, &mut out)?;
+    Ok(out)
+}
+
+/// [`sample_boxes`] appending to `out` (cleared first).
+pub(crate) fn sample_boxes_into(
+    mean: &Box2,
+    cov: &Cov5,
+    table: &[[f64; BEV_PARAMS]],
+    out: &mut Vec<Box2>,
+) -> Result<()> {
+    out.clear();
+    if super::is_deterministic(cov) {
+        out.push(*mean);
+        return Ok(());
+    }
     let l = check_covariance(cov)?;
     let mu = mean.params();
-    let mut out = Vec::with_capacity(table.len());
     for z in table {
         let mut y = mu;
         for i in 0..BEV_PARAMS {
@@ -303,7 +367,7 @@ pub fn sample_boxes(mean: &Box2, cov: &Cov5, table: &[[f64; BEV_PARAMS]]) -> Res
             });
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 /// Sampled `p_G` (or `P_PDQ`) of the Gaussian box on `grid` (see the module docs).
