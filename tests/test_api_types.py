@@ -25,6 +25,7 @@ from autoteach import (
     detect,
     estimate,
     geometry,
+    plan,
     polygon,
     radio,
     registration,
@@ -103,6 +104,15 @@ DATACLASSES: list[tuple[type, str, str, dict[str, str]]] = [
     (uncertainty.LabelPosterior, "detect/src/uncertainty/mod.rs", "LabelPosterior", {}),
     (uncertainty.NoiseEstimate, "detect/src/uncertainty/noise.rs", "NoiseEstimate", {}),
     (uncertainty.Grid, "geometry/src/boxes/spatial.rs", "Grid2", {}),
+    (
+        plan.PathResult,
+        "geometry/src/plan/astar.rs",
+        "PathResult",
+        {"extra": "RrtStarResult's own figures (tree cost, first solution, nodes): both planners return one type"},
+    ),
+    (plan.Limits, "geometry/src/plan/limits.rs", "Limits", {}),
+    (plan.Verification, "geometry/src/plan/limits.rs", "Verification", {}),
+    (plan.OptimizeResult, "estimate/src/plan/time_optimal.rs", "OptimizeResult", {}),
 ]
 
 # Existing class pattern (a Python class holding the compiled object): every Rust field is a
