@@ -149,6 +149,19 @@ pub struct Csr {
     data32: Vec<f32>,
 }
 
+/// Start offsets of `n` counting-sort buckets for `keys` (each `< n`): bucket `k` occupies
+/// `[out[k], out[k + 1])`.
+fn bucket_offsets(n: usize, keys: impl Iterator<Item = u32>) -> Vec<u32> {
+    let mut ptr = vec![0u32; n + 1];
+    for k in keys {
+        ptr[k as usize + 1] += 1;
+    }
+    for k in 0..n {
+        ptr[k + 1] += ptr[k];
+    }
+    ptr
+}
+
 impl Csr {
     /// From `(row, col, weight)` triplets; duplicates are summed.
     ///
@@ -158,13 +171,7 @@ impl Csr {
     /// `O(nnz + rows + cols)`.
     fn from_triplets(rows: usize, cols: usize, trip: &[(u32, u32, f64)]) -> Self {
         // Column buckets.
-        let mut cptr = vec![0u32; cols + 1];
-        for t in trip {
-            cptr[t.1 as usize + 1] += 1;
-        }
-        for c in 0..cols {
-            cptr[c + 1] += cptr[c];
-        }
+        let cptr = bucket_offsets(cols, trip.iter().map(|t| t.1));
         let mut fill = cptr.clone();
         let mut by_col = vec![(0u32, 0.0f64); trip.len()];
         for t in trip {
@@ -173,13 +180,7 @@ impl Csr {
             fill[c] += 1;
         }
         // Row buckets, filled column by column.
-        let mut rptr = vec![0u32; rows + 1];
-        for t in trip {
-            rptr[t.0 as usize + 1] += 1;
-        }
-        for r in 0..rows {
-            rptr[r + 1] += rptr[r];
-        }
+        let rptr = bucket_offsets(rows, trip.iter().map(|t| t.0));
         let mut fill = rptr.clone();
         let mut idx = vec![0u32; trip.len()];
         let mut val = vec![0.0f64; trip.len()];
@@ -225,13 +226,7 @@ impl Csr {
     /// The transpose (`cols × rows`), by one counting pass; rows stay in ascending column order.
     fn transpose(&self) -> Self {
         let nnz = self.indices.len();
-        let mut ptr = vec![0u32; self.cols + 1];
-        for &c in &self.indices {
-            ptr[c as usize + 1] += 1;
-        }
-        for c in 0..self.cols {
-            ptr[c + 1] += ptr[c];
-        }
+        let ptr = bucket_offsets(self.cols, self.indices.iter().copied());
         let mut fill = ptr.clone();
         let mut idx = vec![0u32; nnz];
         let mut val = vec![0.0f64; nnz];

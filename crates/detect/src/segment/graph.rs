@@ -199,7 +199,7 @@ pub fn knn_graph(points: &[[f64; 3]], k: usize, edge_cut: f64) -> Result<Graph> 
 }
 
 /// Fails with `NonFinite` at the first NaN/inf coordinate.
-pub fn check_points_finite(points: &[[f64; 3]]) -> Result<()> {
+pub fn check_points_finite<const N: usize>(points: &[[f64; N]]) -> Result<()> {
     for (index, p) in points.iter().enumerate() {
         if let Some(&value) = p.iter().find(|v| !v.is_finite()) {
             return Err(DetectError::NonFinite {

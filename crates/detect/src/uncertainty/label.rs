@@ -39,16 +39,7 @@ pub(crate) fn check_points(points: &[[f64; 2]]) -> Result<()> {
     if points.is_empty() {
         return Err(DetectError::TooFewPoints { got: 0, needed: 1 });
     }
-    for (index, p) in points.iter().enumerate() {
-        if let Some(&value) = p.iter().find(|v| !v.is_finite()) {
-            return Err(DetectError::NonFinite {
-                what: "points",
-                index,
-                value,
-            });
-        }
-    }
-    Ok(())
+    crate::segment::graph::check_points_finite(points)
 }
 
 pub(crate) fn check_sigma(sigma: f64) -> Result<()> {

@@ -782,17 +782,22 @@ pub fn evaluate(
     })
 }
 
+/// `ln(|P(jω)| ω²)` on `grid`: the response relative to a rigid body, whose local maxima are the
+/// resonances.
+fn rigid_relative_log(p: &TransferFunction, grid: &[f64]) -> Vec<f64> {
+    let f = Factored::new(p);
+    grid.iter()
+        .map(|&w| (f.resp(w).norm() * w * w).ln())
+        .collect()
+}
+
 /// Detected resonance frequencies of a plant set on a grid: local maxima of `|P(jω)| ω²` (the
 /// response relative to a rigid body), strongest first, merged across plants by the geometric
 /// mean of each rank.
 pub fn resonances(plants: &[TransferFunction], grid: &[f64], count: usize) -> Vec<f64> {
     let mut per_rank: Vec<Vec<f64>> = vec![Vec::new(); count];
     for p in plants {
-        let f = Factored::new(p);
-        let v: Vec<f64> = grid
-            .iter()
-            .map(|&w| (f.resp(w).norm() * w * w).ln())
-            .collect();
+        let v = rigid_relative_log(p, grid);
         let mut peaks: Vec<(f64, f64)> = (1..grid.len() - 1)
             .filter(|&k| v[k] > v[k - 1] && v[k] >= v[k + 1])
             .map(|k| (grid[k], v[k] - 0.5 * (v[k - 1] + v[k + 1])))
@@ -822,11 +827,7 @@ pub fn first_resonance(plants: &[TransferFunction], grid: &[f64]) -> Option<f64>
     let min_prominence = 0.5 * 2f64.ln(); // 3 dB in ln|·|
     let mut logs = Vec::new();
     for p in plants {
-        let f = Factored::new(p);
-        let v: Vec<f64> = grid
-            .iter()
-            .map(|&w| (f.resp(w).norm() * w * w).ln())
-            .collect();
+        let v = rigid_relative_log(p, grid);
         let n = v.len();
         let prominence = |k: usize| {
             let mut left = v[k];
@@ -904,6 +905,25 @@ pub fn initial_design(
     loop_shape(st, &theta, &band, &p_band, &target, &bounds, 100)
 }
 
+/// When `theta` still violates a constraint and `ρ` is below [`MAX_RHO`]: `ρ ← 10 ρ`, the trust
+/// region reset and the merit re-evaluated; returns whether it did.
+fn raise_rho(
+    prob: &Problem<'_>,
+    theta: &[f64],
+    rho: &mut f64,
+    radius: &mut f64,
+    merit: &mut f64,
+) -> Result<bool> {
+    let (m, f) = prob.merit(theta, *rho)?;
+    if (m - f) / *rho > 1e-9 && *rho < MAX_RHO {
+        *rho *= 10.0;
+        *radius = 0.5;
+        *merit = prob.merit(theta, *rho)?.0;
+        return Ok(true);
+    }
+    Ok(false)
+}
+
 /// Tunes the controller structure `st` over all `plants` (eq. 2.19), from `theta0` or, if
 /// `None`, from [`initial_design`].
 pub fn tune(
@@ -957,11 +977,7 @@ pub fn tune(
         if predicted < 1e-7 {
             // Converged for this ρ. An ℓ₁ penalty is exact only above the multipliers' size:
             // while a constraint is still violated, raise ρ and go on from here.
-            let (m, f) = prob.merit(&theta, rho)?;
-            if (m - f) / rho > 1e-9 && rho < MAX_RHO {
-                rho *= 10.0;
-                radius = 0.5;
-                merit = prob.merit(&theta, rho)?.0;
+            if raise_rho(&prob, &theta, &mut rho, &mut radius, &mut merit)? {
                 continue;
             }
             break;
@@ -978,11 +994,7 @@ pub fn tune(
         } else {
             radius *= 0.3;
             if radius < 1e-5 {
-                let (m, f) = prob.merit(&theta, rho)?;
-                if (m - f) / rho > 1e-9 && rho < MAX_RHO {
-                    rho *= 10.0;
-                    radius = 0.5;
-                    merit = prob.merit(&theta, rho)?.0;
+                if raise_rho(&prob, &theta, &mut rho, &mut radius, &mut merit)? {
                     continue;
                 }
                 break;

@@ -668,31 +668,32 @@ mod tests {
             &DynamicsParams::default(),
             ws.wafer.as_ref(),
         );
-        let limits = Limits {
-            torque: Joints::new(200.0, 100.0, 20.0, 20.0, 100.0),
-            ..Limits::default()
-        };
-        let e = optimize_trajectory(
-            &ws,
-            &dy,
-            &[poses[0].q, poses[3].q],
-            &limits,
-            &OptimizeConfig::default(),
-        )
-        .unwrap_err();
-        assert!(e.to_string().contains("torque joint 4"), "{e}");
-        let limits = Limits {
-            jerk: Joints::new(100.0, 0.0, 1.0, 1.0, 1.0),
-            ..Limits::default()
-        };
-        let e = optimize_trajectory(
-            &ws,
-            &dy,
-            &[poses[0].q, poses[3].q],
-            &limits,
-            &OptimizeConfig::default(),
-        )
-        .unwrap_err();
-        assert!(e.to_string().contains("jerk limit of joint 1"), "{e}");
+        let cases = [
+            (
+                Limits {
+                    torque: Joints::new(200.0, 100.0, 20.0, 20.0, 100.0),
+                    ..Limits::default()
+                },
+                "torque joint 4",
+            ),
+            (
+                Limits {
+                    jerk: Joints::new(100.0, 0.0, 1.0, 1.0, 1.0),
+                    ..Limits::default()
+                },
+                "jerk limit of joint 1",
+            ),
+        ];
+        for (limits, named) in cases {
+            let e = optimize_trajectory(
+                &ws,
+                &dy,
+                &[poses[0].q, poses[3].q],
+                &limits,
+                &OptimizeConfig::default(),
+            )
+            .unwrap_err();
+            assert!(e.to_string().contains(named), "{e}");
+        }
     }
 }
