@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 from autoteach._core import __version__
 from autoteach.errors import (
+    AllocationError,
     AutoteachError,
     ConvergenceError,
     DegenerateGeometryError,
@@ -89,6 +90,7 @@ SUBMODULES = (
 _LAZY_NAMES = {"AutoTeachResult": "pipeline", "autoteach": "pipeline"}
 
 __all__ = [
+    "AllocationError",
     "AutoTeachResult",
     "AutoteachError",
     "ConvergenceError",

@@ -56,11 +56,26 @@ def as_float(value: Any, name: str) -> float:
     return out
 
 
-def as_int(value: Any, name: str) -> int:
-    """Convert an integer (Python or NumPy, not bool) to ``int``."""
+def as_int(value: Any, name: str, *, signed: bool = False) -> int:
+    """Convert an integer (Python or NumPy, not bool) to ``int``; negative only if ``signed``.
+
+    Counts, sizes, iteration limits and seeds are unsigned in the compiled module, which would
+    raise a bare ``OverflowError`` for a negative value; this names the argument instead.
+    """
     if isinstance(value, (bool, np.bool_)):
         raise InvalidInputError(f"{name} must be an integer, got {value!r}")
     try:
-        return operator.index(value)
+        out = operator.index(value)
     except TypeError:
-        raise InvalidInputError(f"{name} must be an integer, got {type(value).__name__} {value!r}") from None
+        raise InvalidInputError(f"{name} must be an integer, got {type(value).__name__} {_short(value)}") from None
+    if out < 0 and not signed:
+        raise InvalidInputError(f"{name} must be a non-negative integer, got {_short(out)}")
+    if not -(2**63) <= out < 2**64:
+        raise InvalidInputError(f"{name} must fit in 64 bits, got {_short(out)}")
+    return out
+
+
+def _short(value: Any) -> str:
+    """``repr(value)``, elided in the middle when longer than 40 characters (a 300-digit number)."""
+    r = repr(value)
+    return r if len(r) <= 40 else f"{r[:18]}...{r[-18:]} ({len(r)} characters)"

@@ -33,6 +33,9 @@ class UnreachablePoseError(AutoteachError, ValueError):
 class ConvergenceError(AutoteachError, RuntimeError):
     """An iterative computation did not converge."""
 
+class AllocationError(AutoteachError, MemoryError):
+    """An input asks for a buffer larger than memory (a huge sample count or dimension)."""
+
 class InternalError(AutoteachError, RuntimeError):
     """A bug inside autoteach (a Rust panic caught at the Python boundary)."""
 

@@ -528,6 +528,10 @@ def suggest_next_view(
         grid_margin: outer ring of the test grid, fraction of the image size inside the border
             (default :data:`GRID_MARGIN`).
     """
+    if not isinstance(calibration, Calibration):
+        raise InvalidInputError(
+            f"calibration must be a Calibration (from calibrate()), got {type(calibration).__name__}"
+        )
     tgt = calibration.target() if target is None else as_f64(target, "target")
     cand = None if candidates is None else as_f64(candidates, "candidates").reshape(-1, 4, 4)
     d = calibration._core.suggest_next_view(

@@ -2,12 +2,14 @@
 
 Every error autoteach raises derives from :class:`AutoteachError`, and also from the built-in
 exception a caller would naturally catch (``ValueError`` for bad input, ``RuntimeError`` for a
-computation that failed, ``OSError`` for a log that cannot be read).
+computation that failed, ``MemoryError`` for an input that asks for more memory than exists,
+``OSError`` for a log that cannot be read).
 """
 
 from __future__ import annotations
 
 from autoteach._core import (
+    AllocationError,
     AutoteachError,
     ConvergenceError,
     DegenerateGeometryError,
@@ -22,6 +24,7 @@ class LogReadError(AutoteachError, OSError):
 
 
 __all__ = [
+    "AllocationError",
     "AutoteachError",
     "ConvergenceError",
     "DegenerateGeometryError",

@@ -56,6 +56,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
 from autoteach._convert import as_f64, as_float, as_int
+from autoteach._sync import serialized
 from autoteach.errors import InvalidInputError
 from autoteach.geometry import so3_exp, so3_log
 from autoteach.sigma_points import (
@@ -156,7 +157,7 @@ class ConstantVelocityModel:
 
     def __init__(self, dim: int, dt: float = 1.0) -> None:
         self.dim = int(dim)
-        self.dt = float(dt)
+        self.dt = as_float(dt, "dt")
         self._inner = _core.UkfConstantVelocityModel(self.dim)
 
     @property
@@ -200,10 +201,7 @@ def _noise(v: ArrayLike, d: int, name: str) -> F64Array:
 
     A scalar (or 1-element array) is broadcast to every entry, as filterpy's ``P += noise_cov`` does.
     """
-    try:
-        m = np.asarray(v, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise InvalidInputError(f"{name} must be a real matrix: {e}") from None
+    m = as_f64(v, name)
     if m.ndim < 2 and m.size == 1:
         return np.full((d, d), float(m.reshape(-1)[0]))
     return _matrix(m, name)
@@ -288,6 +286,7 @@ def _log_gauss(y: F64Array, S: F64Array) -> float:  # noqa: N803
     return -0.5 * (maha + float(np.sum(np.log(w[keep]))) + int(keep.sum()) * math.log(2.0 * math.pi))
 
 
+@serialized
 class UnscentedKalmanFilter:
     """Unscented Kalman filter with filterpy's interface (``filterpy.kalman.UnscentedKalmanFilter``).
 
@@ -332,7 +331,7 @@ class UnscentedKalmanFilter:
 
     # The compiled filter and the sync bookkeeping live in slots, outside ``__dict__``, so that
     # tools that deep-copy ``__dict__`` (filterpy's ``Saver``) see only filterpy's attributes.
-    __slots__ = ("__dict__", "_inner", "_synced")
+    __slots__ = ("__dict__", "_inner", "_lock", "_synced")
 
     def __init__(
         self,
@@ -418,7 +417,7 @@ class UnscentedKalmanFilter:
             )
         self._dim_x = int(dim_x)
         self._dim_z = int(dim_z)
-        self._dt = float(dt)
+        self._dt = as_float(dt, "dt")
         self.points_fn = points
         self._num_sigmas = int(points.num_sigmas())
         self.fx = fx
@@ -581,7 +580,7 @@ class UnscentedKalmanFilter:
         self, dt: float | None = None, fx: Callable[..., ArrayLike] | None = None, **fx_args: Any
     ) -> None:
         """``sigmas_f[i] = fx(sigma_i, dt, **fx_args)`` for the sigma points of the current (x, P), as filterpy."""
-        dt = self._dt if dt is None else float(dt)
+        dt = self._dt if dt is None else as_float(dt, "dt")
         f = self._fx(fx)
         sigmas = self.points_fn.sigma_points(self.x, self.P)
         out = np.zeros((self._num_sigmas, self._dim_x))
@@ -616,7 +615,7 @@ class UnscentedKalmanFilter:
         With a built-in model, ``u=`` is the control input. ``UT(sigmas, Wm, Wc, Q, x_mean_fn,
         residual_x)`` replaces the unscented transform (then the step follows filterpy in Python).
         """
-        dt = self._dt if dt is None else float(dt)
+        dt = self._dt if dt is None else as_float(dt, "dt")
         if UT is not None:
             self._predict_python(dt, UT, fx, fx_args)
             return
@@ -667,7 +666,7 @@ class UnscentedKalmanFilter:
             self._inner.skip_update()
             return
         if R is not None:
-            R = np.eye(self._dim_z) * float(R) if np.ndim(R) == 0 else _matrix(R, "R")  # type: ignore[arg-type]  # noqa: N806
+            R = np.eye(self._dim_z) * as_float(R, "R") if np.ndim(R) == 0 else _matrix(R, "R")  # noqa: N806
         if self._model is not None and (hx is not None or hx_args) and not self._custom(UT):
             raise InvalidInputError("a built-in model takes no hx override or arguments in update()")
         if self._custom(UT):
@@ -728,12 +727,12 @@ class UnscentedKalmanFilter:
         Z, mask = self._measurements(zs, n)  # noqa: N806
         if us is not None and self._model is None:
             raise InvalidInputError("us is only for built-in models; pass inputs to callbacks via predict(**fx_args)")
-        u_arr = None if us is None else np.asarray(us, dtype=np.float64)
+        u_arr = None if us is None else as_f64(us, "us")
         if u_arr is not None and u_arr.ndim == 1:
             u_arr = u_arr[:, None]
         dt_arr = None
         if dts is not None:
-            dt_arr = np.full(n, float(dts)) if np.ndim(dts) == 0 else np.asarray(dts, dtype=np.float64)  # type: ignore[arg-type]
+            dt_arr = np.full(n, as_float(dts, "dts")) if np.ndim(dts) == 0 else as_f64(dts, "dts")
         r_arr = None if Rs is None else self._rs(Rs, n)
         self._push()
         try:
@@ -755,7 +754,7 @@ class UnscentedKalmanFilter:
     def _rs(self, Rs: Any, n: int) -> F64Array:  # noqa: N803
         """Per-epoch measurement noises as ``(n, dim_z, dim_z)``: ``None`` is ``self.R``, a scalar ``r * I``."""
         if isinstance(Rs, np.ndarray) and Rs.ndim == 3:
-            return np.asarray(Rs, dtype=np.float64)
+            return as_f64(Rs, "Rs")
         items = list(Rs)
         if len(items) != n:
             raise InvalidInputError(f"Rs must have one entry per measurement ({n}), got {len(items)}")
@@ -765,7 +764,7 @@ class UnscentedKalmanFilter:
             if r is None:
                 out[i] = _noise(self.R, m, "R")
             elif np.ndim(r) == 0:
-                out[i] = np.eye(m) * float(r)
+                out[i] = np.eye(m) * as_float(r, f"Rs[{i}]")
             else:
                 out[i] = _matrix(r, f"Rs[{i}]")
         return out
@@ -774,8 +773,10 @@ class UnscentedKalmanFilter:
         """``zs`` as an ``(n, dim_z)`` array and the mask of present measurements."""
         if isinstance(zs, np.ndarray) or not any(z is None for z in zs):
             try:
-                Z = np.asarray(zs, dtype=np.float64)  # noqa: N806
-            except (TypeError, ValueError):
+                Z = as_f64(zs, "zs")  # noqa: N806
+            except InvalidInputError:
+                if isinstance(zs, np.ndarray):
+                    raise
                 Z = None  # noqa: N806 (ragged: reported per element below)
             if Z is not None and Z.size == n * self._dim_z and Z.shape[:1] == (n,):
                 return Z.reshape(n, self._dim_z), [True] * n
@@ -784,7 +785,7 @@ class UnscentedKalmanFilter:
         for i, z in enumerate(zs):
             if z is None:
                 continue
-            zi = np.asarray(z, dtype=np.float64).reshape(-1)
+            zi = as_f64(z, f"zs[{i}]").reshape(-1)
             if zi.size != self._dim_z:
                 raise InvalidInputError(f"zs[{i}] must have {self._dim_z} values, got shape {np.shape(z)}")
             Z[i] = zi
@@ -850,10 +851,10 @@ class UnscentedKalmanFilter:
         filterpy's Python formulation. The equations are in
         :func:`autoteach_estimate::ukf::rts_smoother` (Rust docs).
         """
-        xs = np.asarray(Xs, dtype=np.float64)
+        xs = as_f64(Xs, "Xs")
         if xs.ndim == 3 and xs.shape[2] == 1:
             xs = xs[:, :, 0]
-        ps = np.asarray(Ps, dtype=np.float64)
+        ps = as_f64(Ps, "Ps")
         if xs.ndim != 2 or xs.shape[1] != self._dim_x:
             raise InvalidInputError(f"Xs must have shape (n, {self._dim_x}), got {xs.shape}")
         n = xs.shape[0]
@@ -862,7 +863,7 @@ class UnscentedKalmanFilter:
         dt_arr = (
             np.full(n, self._dt)
             if dts is None
-            else (np.full(n, float(dts)) if np.ndim(dts) == 0 else np.asarray(dts, dtype=np.float64))
+            else (np.full(n, as_float(dts, "dts")) if np.ndim(dts) == 0 else as_f64(dts, "dts"))
         )  # type: ignore[arg-type]
         if Qs is None:
             q_arr = _noise(self.Q, self._dim_x, "Q")
@@ -873,7 +874,7 @@ class UnscentedKalmanFilter:
             raise InvalidInputError("the RTS smoother needs additive noise")
         if self._custom(UT) or Fs is not None:
             return self._rts_python(xs, ps, q_arr, dt_arr, UT or unscented_transform, Fs)
-        u_arr = None if us is None else np.asarray(us, dtype=np.float64)
+        u_arr = None if us is None else as_f64(us, "us")
         if u_arr is not None and u_arr.ndim == 1:
             u_arr = u_arr[:, None]
         if u_arr is not None and self._model is None:
@@ -1200,6 +1201,7 @@ def bundle_adjust(
     )
 
 
+@serialized
 class LeastSquaresProblem:
     """A nonlinear least-squares problem on manifolds, stated from NumPy.
 
@@ -1251,27 +1253,27 @@ class LeastSquaresProblem:
 
     def set_fixed(self, block: int, fixed: bool = True) -> None:
         """Hold a block constant (or release it)."""
-        self._inner.set_fixed(int(block), bool(fixed))
+        self._inner.set_fixed(as_int(block, "block"), bool(fixed))
 
     def set_eliminate(self, block: int, eliminate: bool | None = None) -> None:
         """Mark a block for Schur elimination (``None``: automatic, 3-vectors tied to poses)."""
-        self._inner.set_eliminate(int(block), eliminate)
+        self._inner.set_eliminate(as_int(block, "block"), eliminate)
 
     def values(self, block: int) -> F64Array:
         """The stored values of a block."""
-        return np.asarray(self._inner.values(int(block)))
+        return np.asarray(self._inner.values(as_int(block, "block")))
 
     def set_values(self, block: int, values: ArrayLike) -> None:
         """Overwrite the stored values of a block."""
-        self._inner.set_values(int(block), _vector(values, "values"))
+        self._inner.set_values(as_int(block, "block"), _vector(values, "values"))
 
     def pose(self, block: int) -> F64Array:
         """The 4×4 transform of an SE(3) block."""
-        return np.asarray(self._inner.pose(int(block)))
+        return np.asarray(self._inner.pose(as_int(block, "block")))
 
     def rotation(self, block: int) -> F64Array:
         """The 3×3 rotation matrix of an SO(3) block."""
-        if self._inner.manifold(int(block)) != "so3":
+        if self._inner.manifold(as_int(block, "block")) != "so3":
             raise InvalidInputError(f"block {block} is not an SO(3) block")
         return self.values(block).reshape(3, 3, order="F")
 
@@ -1298,19 +1300,19 @@ class LeastSquaresProblem:
                 _index_array(point_blocks, "point_blocks"),
                 float(sigma),
                 loss,
-                float(f_scale),
+                as_float(f_scale, "f_scale"),
             )
         )
 
     def add_prior(self, block: int, mean: ArrayLike, covariance: ArrayLike) -> int:
         """Add a Gaussian prior: whitened ``x ⊖ mean`` (mean in the stored layout, or 4×4 for SE(3))."""
-        m = np.asarray(mean, dtype=np.float64)
+        m = as_f64(mean, "mean")
         if m.shape == (4, 4):
             tmp = _core.LsqProblem()
             m = np.asarray(tmp.values(tmp.add_pose(m)))
         elif m.shape == (3, 3):
             m = m.reshape(-1, order="F")
-        return int(self._inner.add_prior(int(block), _vector(m, "mean"), _matrix(covariance, "covariance")))
+        return int(self._inner.add_prior(as_int(block, "block"), _vector(m, "mean"), _matrix(covariance, "covariance")))
 
     def add_relative_pose(
         self,
@@ -1324,7 +1326,12 @@ class LeastSquaresProblem:
         """Add the relative-pose residual ``Log(T_ab⁻¹ A⁻¹ B)`` (whitened by ``covariance``, 6×6)."""
         return int(
             self._inner.add_relative_pose(
-                int(a), int(b), _matrix(T_ab, "T_ab"), _matrix(covariance, "covariance"), loss, float(f_scale)
+                as_int(a, "a"),
+                as_int(b, "b"),
+                _matrix(T_ab, "T_ab"),
+                _matrix(covariance, "covariance"),
+                loss,
+                as_float(f_scale, "f_scale"),
             )
         )
 
@@ -1343,13 +1350,13 @@ class LeastSquaresProblem:
         return list(
             self._inner.add_point_to_conic(
                 _matrix(K, "K"),
-                float(radius),
+                as_float(radius, "radius"),
                 _matrix(observations, "observations"),
-                int(camera_block),
-                int(object_block),
-                float(weight),
+                as_int(camera_block, "camera_block"),
+                as_int(object_block, "object_block"),
+                as_float(weight, "weight"),
                 loss,
-                float(f_scale),
+                as_float(f_scale, "f_scale"),
             )
         )
 
@@ -1374,4 +1381,4 @@ class LeastSquaresProblem:
             DegenerateGeometryError: the information matrix is rank deficient (the message names the
                 unconstrained blocks and directions).
         """
-        return np.asarray(self._inner.marginal_covariance([int(b) for b in blocks]))
+        return np.asarray(self._inner.marginal_covariance([as_int(b, "blocks") for b in blocks]))

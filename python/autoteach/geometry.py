@@ -84,7 +84,7 @@ DistanceKind = Literal["orthogonal", "sampson", "algebraic"]
 
 def _as_blade(blade: Any) -> int:
     """Validate a blade number (1 or 2)."""
-    number = as_int(blade, "blade")
+    number = as_int(blade, "blade", signed=True)
     if number not in (1, 2):
         raise InvalidInputError(f"blade must be 1 or 2, got {number}")
     return number

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from autoteach import _core
+from autoteach._convert import as_f64
 
 __all__ = [
     "BSplineTrajectory",
@@ -40,7 +41,8 @@ __all__ = [
 
 
 def _joints(q: Any, name: str) -> np.ndarray:
-    return np.asarray(q, dtype=np.float64).reshape(-1) if np.ndim(q) == 1 else np.asarray(q, dtype=np.float64)
+    arr = as_f64(q, name)
+    return arr.reshape(-1) if arr.ndim == 1 else arr
 
 
 class Workspace:

@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
-from autoteach._convert import as_f64
+from autoteach._convert import as_f64, as_int
 from autoteach.errors import InvalidInputError
 
 __all__ = [
@@ -100,6 +100,13 @@ def _voting_options(**kw: Any) -> dict[str, Any]:
     count = kw.get("count", "y")
     if count not in ("y", "pairs"):
         raise InvalidInputError(f"count must be 'y' or 'pairs', got {count!r}")
+    # Counts are unsigned in the compiled options: name a negative one here (the user's `k`
+    # is the options' `top_k`).
+    names = {"top_k": "k", "neighbours": "neighbours", "min_votes": "min_votes"}
+    names |= {"max_points": "max_points", "max_pairs": "max_pairs"}
+    for key, name in names.items():
+        if key in kw:
+            kw[key] = as_int(kw[key], name)
     return {k: v for k, v in kw.items() if v is not None}
 
 

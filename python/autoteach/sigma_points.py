@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
+from autoteach._convert import as_f64, as_float
 from autoteach.errors import InvalidInputError
 
 __all__ = [
@@ -59,7 +60,7 @@ def _is_default_subtract(f: Any) -> bool:
 
 
 def _state(x: ArrayLike, n: int) -> F64Array:
-    xv = np.atleast_1d(np.asarray(x, dtype=np.float64)).reshape(-1)
+    xv = np.atleast_1d(as_f64(x, "x")).reshape(-1)
     if xv.size != n:
         raise InvalidInputError(f"expected size(x) {n}, but size is {xv.size}")
     return xv
@@ -67,8 +68,8 @@ def _state(x: ArrayLike, n: int) -> F64Array:
 
 def _covariance(P: ArrayLike, n: int) -> F64Array:  # noqa: N803 (filterpy's name)
     if np.isscalar(P) or np.ndim(P) == 0:
-        return np.eye(n) * float(P)  # type: ignore[arg-type]
-    return np.atleast_2d(np.asarray(P, dtype=np.float64))
+        return np.eye(n) * as_float(P, "P")
+    return np.atleast_2d(as_f64(P, "P"))
 
 
 class _SigmaPoints:
@@ -249,17 +250,34 @@ def unscented_transform(
     000_3b1454b2b2194811.txt §5.2): the default ``UT`` of
     :class:`~autoteach.estimate.UnscentedKalmanFilter`'s ``predict``/``update``/``rts_smoother``.
     """
-    s = np.atleast_2d(np.asarray(sigmas, dtype=np.float64))
-    wm = np.asarray(Wm, dtype=np.float64)
-    wc = np.asarray(Wc, dtype=np.float64)
-    if s.shape[0] != wm.size or wm.size != wc.size:
-        raise InvalidInputError(f"{s.shape[0]} sigma points but {wm.size} mean and {wc.size} covariance weights")
-    x = wm @ s if mean_fn is None else np.asarray(mean_fn(s, wm), dtype=np.float64)
-    if residual_fn is None or residual_fn is np.subtract:
-        d = s - x[np.newaxis, :]
-    else:
-        d = np.array([np.asarray(residual_fn(si, x), dtype=np.float64).reshape(-1) for si in s])
-    P = (d.T * wc) @ d  # noqa: N806
-    if noise_cov is not None:
-        P = P + noise_cov  # noqa: N806
+    s = np.atleast_2d(_finite(sigmas, "sigmas"))
+    wm = _finite(Wm, "Wm").reshape(-1)
+    wc = _finite(Wc, "Wc").reshape(-1)
+    if s.ndim != 2 or s.shape[0] != wm.size or wm.size != wc.size:
+        raise InvalidInputError(
+            f"sigmas of shape {s.shape} need one mean and one covariance weight per row, got {wm.size} and {wc.size}"
+        )
+    n = s.shape[1]
+    noise = None if noise_cov is None else _finite(noise_cov, "noise_cov")
+    if noise is not None and noise.shape not in ((), (1,), (n, n), (1, 1)):
+        raise InvalidInputError(f"noise_cov must be a scalar or ({n}, {n}), got shape {noise.shape}")
+    with np.errstate(over="ignore", invalid="ignore"):
+        x = wm @ s if mean_fn is None else np.asarray(mean_fn(s, wm), dtype=np.float64)
+        if residual_fn is None or residual_fn is np.subtract:
+            d = s - x[np.newaxis, :]
+        else:
+            d = np.array([np.asarray(residual_fn(si, x), dtype=np.float64).reshape(-1) for si in s])
+        P = (d.T * wc) @ d  # noqa: N806
+        if noise is not None:
+            P = P + noise  # noqa: N806
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+        raise InvalidInputError("the sigma points are too large: their mean or covariance overflows float64")
     return x, P
+
+
+def _finite(value: ArrayLike, name: str) -> F64Array:
+    """``value`` as a float64 array of real, finite numbers."""
+    arr = as_f64(value, name)
+    if not np.all(np.isfinite(arr)):
+        raise InvalidInputError(f"{name} must be finite, got {arr[~np.isfinite(arr)].ravel()[0]}")
+    return arr

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
+from autoteach._sync import serialized
 from autoteach.errors import InvalidInputError
 from autoteach.geometry import Ellipse
 
@@ -183,6 +184,7 @@ def _edge_tuple(edge: Any, i: int) -> tuple[NDArray[np.float64], NDArray[np.floa
     return ell, pts.reshape(-1, 2), _kind(_get(edge, "kind"), i), wid, float(res if res is not None else 0.0)
 
 
+@serialized
 class WaferTracker:
     """Multi-wafer tracker (000_3b1454b2b2194811.txt Algorithms 4–5).
 

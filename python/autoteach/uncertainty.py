@@ -43,6 +43,8 @@ def _boxes(value: ArrayLike, name: str) -> tuple[F64Array, bool]:
     arr = as_f64(value, name)
     if arr.ndim == 1:
         return arr.reshape(1, -1), True
+    if arr.ndim != 2:
+        raise InvalidInputError(f"{name} must be one box (5,) or boxes (n, 5), got shape {arr.shape}")
     return arr, False
 
 

@@ -410,10 +410,18 @@ struct Problem {
     y_sub: Vec<usize>,
     fx: Vec<Option<Frame>>,
     fy: Vec<Option<Frame>>,
+    /// X in the voting frame, `(x/unit − x_mean)/scale`.
     x: DMatrix<f64>,
-    /// Y centred on its centroid.
+    /// Y in the voting frame, `(y/unit − centroid)/scale`.
     yc: DMatrix<f64>,
+    /// Centroid of `y/unit`.
     centroid: Vector3<f64>,
+    /// Centroid of `x/unit`.
+    x_mean: Vector3<f64>,
+    /// Largest absolute input coordinate.
+    unit: f64,
+    /// Largest absolute coordinate after centring `x/unit` and `y/unit`.
+    scale: f64,
     angle_bin: f64,
     translation_bin: f64,
 }
@@ -446,23 +454,49 @@ fn prepare(x: &DMatrix<f64>, y: &DMatrix<f64>, o: &VotingOptions) -> Result<Prob
     }
     let d = x.ncols();
     validate_options(o, d)?;
-    let centroid = (0..y.nrows()).fold(Vector3::zeros(), |a, r| a + row3(y, r)) / y.nrows() as f64;
-    let yc = DMatrix::from_fn(y.nrows(), d, |r, c| y[(r, c)] - centroid[c]);
-    let rms = ((0..y.nrows())
-        .map(|r| row3(&yc, r).norm_squared())
+    // Votes are binned in f32 and frames from squared distances, so both sets are moved to a
+    // common frame of unit extent first: x̃ = (x/m − x̄)/s, ỹ = (y/m − ȳ)/s. A rigid transform
+    // keeps its rotation and maps back through `hypothesis`; coordinates of 1e-300 or 1e300 then
+    // vote exactly as coordinates of 1 do.
+    let m = x.amax().max(y.amax());
+    let centroid_of = |p: &DMatrix<f64>| {
+        (0..p.nrows()).fold(Vector3::zeros(), |a, r| a + row3(p, r) / m) / p.nrows() as f64
+    };
+    let (x_mean, centroid) = (centroid_of(x), centroid_of(y));
+    let centred = |p: &DMatrix<f64>, c: &Vector3<f64>| {
+        DMatrix::from_fn(p.nrows(), d, |r, k| p[(r, k)] / m - c[k])
+    };
+    let (xc, yc) = (centred(x, &x_mean), centred(y, &centroid));
+    let s = xc.amax().max(yc.amax());
+    let (xn, yn) = (xc / s, yc / s);
+    let rms = ((0..yn.nrows())
+        .map(|r| row3(&yn, r).norm_squared())
         .sum::<f64>()
-        / y.nrows() as f64)
+        / yn.nrows() as f64)
         .sqrt();
-    let translation_bin = o.translation_bin.unwrap_or(o.angle_bin * rms);
+    let translation_bin = match o.translation_bin {
+        Some(t) => t / m / s,
+        None => o.angle_bin * rms,
+    };
+    if !(translation_bin.is_finite() && translation_bin > 0.0) {
+        return Err(DetectError::InvalidParameter {
+            what: "translation_bin",
+            value: o.translation_bin.unwrap_or(f64::NAN),
+            reason: "out of range for the extent of the data",
+        });
+    }
     Ok(Problem {
         d,
         x_sub: subsample(x.nrows(), o.max_points),
         y_sub: subsample(y.nrows(), o.max_points),
-        fx: frames(x, o.neighbours)?,
-        fy: frames(y, o.neighbours)?,
-        x: x.clone(),
-        yc,
+        fx: frames(&xn, o.neighbours)?,
+        fy: frames(&yn, o.neighbours)?,
+        x: xn,
+        yc: yn,
         centroid,
+        x_mean,
+        unit: m,
+        scale: s,
         angle_bin: o.angle_bin,
         translation_bin,
     })
@@ -789,7 +823,8 @@ fn scored_cells(p: &Problem, pairs: &Pairs, o: &VotingOptions) -> Result<Vec<Cel
 
 fn hypothesis(p: &Problem, r: &Matrix3<f64>, tc: &Vector3<f64>, cell: &Cell) -> RigidHypothesis {
     let d = p.d;
-    let t = tc - r * p.centroid;
+    // x/u = R·(y/u − ȳ) + s·t̃ + x̄ in the voting frame, so t = u·(s·t̃ + x̄ − R·ȳ).
+    let t = p.unit * (p.scale * tc + p.x_mean - r * p.centroid);
     RigidHypothesis {
         rotation: DMatrix::from_fn(d, d, |a, b| r[(a, b)]),
         translation: DVector::from_fn(d, |a, _| t[a]),
@@ -1097,6 +1132,31 @@ mod tests {
         assert_eq!(a, b);
     }
 
+    /// Voting is invariant to the units: the same scene in units 1e±150 (where squared
+    /// distances and f32 votes would overflow or underflow) gives the same rotation and the
+    /// translation scaled by the unit.
+    #[test]
+    fn huge_and_tiny_coordinates_give_the_scaled_answer() {
+        let y = model2(0.05);
+        let rot = Rotation2::new(0.7);
+        let t = Vector2::new(3.0, -1.0);
+        let x: Vec<Vector2<f64>> = y.iter().map(|p| rot * p + t).collect();
+        let o = VotingOptions::default();
+        let base = global_voting(&to_mat2(&x), &to_mat2(&y), &o).unwrap();
+        for unit in [1e-150, 1e40, 1e155, 1e300] {
+            let xs = to_mat2(&x) * unit;
+            let ys = to_mat2(&y) * unit;
+            let h = global_voting(&xs, &ys, &o).unwrap();
+            assert_eq!(h.len(), base.len(), "unit {unit}");
+            assert!(
+                (&h[0].rotation - &base[0].rotation).amax() < 1e-9,
+                "unit {unit}"
+            );
+            let tr = &h[0].translation / unit;
+            assert!((tr - &base[0].translation).amax() < 1e-6, "unit {unit}");
+            assert!((angle(&h[0].rotation) - 0.7).abs() < 0.05);
+        }
+    }
     #[test]
     fn bad_inputs_are_errors() {
         let y = to_mat2(&model2(0.1));

@@ -662,13 +662,7 @@ impl Ellipse {
         }
         let step = (t1 - t0) / (n - 1) as f64;
         // A fallible reservation: a huge n is an error, not a capacity-overflow panic or an abort.
-        let mut out = Vec::new();
-        out.try_reserve_exact(n)
-            .map_err(|_| GeometryError::InvalidParameter {
-                what: "n",
-                value: n as f64,
-                reason: "too many sample points to hold in memory",
-            })?;
+        let mut out = crate::alloc::try_with_capacity("ellipse sample points", n)?;
         out.extend((0..n).map(|i| {
             let t = if i + 1 == n { t1 } else { t0 + step * i as f64 };
             self.point_at(t)

@@ -100,6 +100,19 @@ pub enum GeometryError {
         /// Why.
         reason: &'static str,
     },
+    /// An allocation the input asks for cannot be made (its size overflows, or the allocator
+    /// refuses it): reported instead of aborting the process.
+    #[error(
+        "cannot allocate {what}: {elements} elements of {bytes_each} bytes do not fit in memory"
+    )]
+    OutOfMemory {
+        /// What was being allocated.
+        what: &'static str,
+        /// Number of elements asked for (saturated at `usize::MAX` when the count overflows).
+        elements: usize,
+        /// Size of one element in bytes.
+        bytes_each: usize,
+    },
     /// An element of a batch failed; `source` is the error of that element.
     #[error("element {index}: {source}")]
     AtIndex {

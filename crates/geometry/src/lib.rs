@@ -18,6 +18,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod alloc;
 pub mod boxes;
 pub mod camera;
 pub mod collision;

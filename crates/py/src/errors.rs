@@ -7,6 +7,7 @@
 //! ├── DegenerateGeometryError(AutoteachError, ValueError) degenerate conic, collinear points
 //! ├── UnreachablePoseError(AutoteachError, ValueError)    inverse kinematics has no solution
 //! ├── ConvergenceError(AutoteachError, RuntimeError)      an iteration did not converge
+//! ├── AllocationError(AutoteachError, MemoryError)        an input asks for more memory than exists
 //! └── InternalError(AutoteachError, RuntimeError)         a bug: a Rust panic caught at the boundary
 //! ```
 //! The classes are built at module initialisation (so they can derive from both
@@ -37,6 +38,11 @@ const CLASSES: &[(&str, Option<&str>, &str)] = &[
         "ConvergenceError",
         Some("RuntimeError"),
         "An iterative computation did not converge.",
+    ),
+    (
+        "AllocationError",
+        Some("MemoryError"),
+        "An input asks for a buffer larger than memory (a huge sample count or dimension).",
     ),
     (
         "InternalError",
@@ -114,6 +120,7 @@ fn geometry_class(err: &GeometryError) -> &'static str {
         GeometryError::Unreachable { .. } => "UnreachablePoseError",
         GeometryError::DegenerateConic { .. } => "DegenerateGeometryError",
         GeometryError::NoConvergence { .. } => "ConvergenceError",
+        GeometryError::OutOfMemory { .. } => "AllocationError",
         GeometryError::AtIndex { source, .. } => geometry_class(source),
     }
 }

@@ -355,6 +355,15 @@ fn plan_inverse_dynamics<'py>(
         wafer.then_some(&w),
     );
     let t = dy.torques(&joints(q, "q")?, &joints(dq, "dq")?, &joints(ddq, "ddq")?);
+    // Finite inputs can still overflow (q̇² of 1e155 rad/s): say so instead of returning inf.
+    if let Some(k) = t.iter().position(|v| !v.is_finite()) {
+        return Err(errors::invalid_input(format!(
+            "the generalised force of joint {} is {}: q, dq and ddq are too large for the dynamics \
+             (|dq| and |ddq| must keep q̇², q̈ within the f64 range)",
+            k + 1,
+            t[k]
+        )));
+    }
     convert::to_numpy(py, t.iter().copied().collect(), &[5])
 }
 

@@ -20,7 +20,7 @@
 //! is [`exp_neg`] (relative error below 1e−14 on both paths).
 //!
 //! Three evaluation strategies give the same sums (the last two to a stated accuracy):
-//! - dense: every pair, rows split over the rayon pool in fixed blocks, one set of
+//! - dense: every pair, rows split into a fixed number of blocks, one set of
 //!   `(P1, PX)` accumulators per block, summed in a fixed order (deterministic);
 //! - grid truncation ("tiles"): a uniform cell grid over the moved source points with cell
 //!   size `h = σ·√(4L)`, `L = ln(1/ε)`, `ε = 1e−8`; the sources are sorted by cell and the
@@ -196,9 +196,9 @@ struct RowCtx {
 impl<const D: usize> EStepWork<D> {
     /// Workspace for N target and M source points.
     pub fn new(n: usize, m: usize, mode: EStep) -> Self {
-        let workers = rayon::current_num_threads().max(1);
-        // A few blocks per worker for load balance, none smaller than 64 rows.
-        let nblocks = (workers * 2).min(n.div_ceil(64)).max(1);
+        // A fixed number of blocks (not per thread: the sums must not depend on the thread
+        // count), none smaller than 64 rows.
+        let nblocks = super::REDUCTION_BLOCKS.min(n.div_ceil(64)).max(1);
         let blocks = (0..nblocks)
             .map(|_| Block {
                 buf: vec![0.0; m],

@@ -392,10 +392,8 @@ impl<const D: usize> Plan<D> {
         arch: pulp::Arch,
     ) -> Vec<f64> {
         let nn = self.nodes();
-        let chunk = pts
-            .len()
-            .div_ceil(rayon::current_num_threads().max(1) * 2)
-            .max(256);
+        // Partial grids over a fixed number of chunks, summed in order: thread-count independent.
+        let chunk = pts.len().div_ceil(super::REDUCTION_BLOCKS).max(256);
         let parts: Vec<Vec<f64>> = pts
             .par_chunks(chunk)
             .enumerate()
@@ -501,10 +499,8 @@ impl<const D: usize> Plan<D> {
         arch: pulp::Arch,
     ) -> Vec<[f64; K]> {
         let mut out = vec![[0.0; K]; pts.len()];
-        let chunk = pts
-            .len()
-            .div_ceil(rayon::current_num_threads().max(1) * 2)
-            .max(256);
+        // Each output depends on its own point only, so any chunking gives the same values.
+        let chunk = pts.len().div_ceil(super::REDUCTION_BLOCKS).max(256);
         out.par_chunks_mut(chunk)
             .zip(pts.par_chunks(chunk))
             .for_each(|(o, p)| {

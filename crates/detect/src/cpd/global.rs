@@ -106,14 +106,17 @@ fn move_points(y: &DMatrix<f64>, h: &RigidHypothesis) -> DMatrix<f64> {
 /// (a per-coordinate variance), floored at 1e−12 of the squared extent of `y`.
 fn nearest_sigma2(x: &DMatrix<f64>, y: &DMatrix<f64>) -> Result<f64> {
     let d = y.ncols();
-    let total: f64 = (0..y.nrows())
+    // Nearest distances in parallel, summed in row order: rayon's `sum` splits by the thread
+    // count, and the total must be bit-identical for any number of threads.
+    let nearest: Vec<f64> = (0..y.nrows())
         .into_par_iter()
         .map(|i| {
             (0..x.nrows())
                 .map(|j| (0..d).map(|c| (x[(j, c)] - y[(i, c)]).powi(2)).sum::<f64>())
                 .fold(f64::INFINITY, f64::min)
         })
-        .sum();
+        .collect();
+    let total: f64 = nearest.iter().sum();
     let s2 = total / (y.nrows() * d) as f64;
     let extent = (0..d)
         .map(|c| {

@@ -150,6 +150,11 @@ impl Default for NonrigidOptions {
     }
 }
 
+/// Number of blocks whose partial sums the parallel reductions (the E-step's `(P1, PX)`, the
+/// fast Gauss transform's spread) add in a fixed order. It is a constant, not the thread count,
+/// so every result is bit-identical for any `RAYON_NUM_THREADS`; 8 keeps up to 4 threads busy.
+pub(crate) const REDUCTION_BLOCKS: usize = 8;
+
 /// Full-rank non-rigid CPD refuses sets larger than this (`G` alone would need M²·8 bytes).
 pub const MAX_FULL_RANK_POINTS: usize = 12_000;
 
@@ -728,11 +733,12 @@ pub fn nonrigid(
             });
         }
         None if y.nrows() > MAX_FULL_RANK_POINTS => {
+            // The message names the limit literally; `full_rank_limit_is_named` keeps the two equal.
             return Err(DetectError::InvalidParameter {
-                what: "low_rank",
-                value: f64::NAN,
-                reason: "full-rank non-rigid CPD is limited to MAX_FULL_RANK_POINTS source \
-                         points (M × M kernel); pass low_rank = Some(K)",
+                what: "number of source points M",
+                value: y.nrows() as f64,
+                reason: "full-rank non-rigid CPD holds the M × M kernel and is limited to \
+                         12000 source points; set low_rank to K eigenpairs (for example 100)",
             });
         }
         _ => {}

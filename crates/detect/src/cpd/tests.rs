@@ -276,6 +276,15 @@ fn bad_input_is_rejected() {
             ..
         })
     ));
+    // Above the full-rank limit the message names the limit and the low-rank option.
+    let big = DMatrix::from_fn(MAX_FULL_RANK_POINTS + 1, 2, |i, d| (i * (d + 1)) as f64);
+    let e = nonrigid(&big, &big, &NonrigidOptions::default()).unwrap_err();
+    assert!(
+        e.to_string().contains(&format!(
+            "limited to {MAX_FULL_RANK_POINTS} source points; set low_rank"
+        )),
+        "{e}"
+    );
     // Collinear Y: the affine map is undetermined.
     let line = DMatrix::from_fn(10, 2, |i, d| if d == 0 { i as f64 } else { 2.0 * i as f64 });
     assert!(matches!(

@@ -76,6 +76,14 @@ fn solve(
             }
         }
     }
+    if let Some(&value) = lam.iter().find(|v| !v.is_finite()) {
+        // Finite inputs whose products overflow (a box of 1e154 m): no posterior to report.
+        return Err(DetectError::InvalidParameter {
+            what: "label box size / sigma",
+            value,
+            reason: "the posterior precision overflows f64: the box is too large for sigma",
+        });
+    }
     let free = if heading { 5 } else { 4 };
     let sub = lam.view((0, 0), (free, free)).clone_owned();
     // Scale-free rank test: an eigenvalue below 1e−12 of the largest is an undetermined direction.

@@ -662,6 +662,15 @@ impl Problem {
                             });
                         }
                         let s: f64 = buf_r.iter().map(|v| v * v).sum();
+                        if !s.is_finite() {
+                            // Finite components whose squares overflow: no cost to minimise.
+                            return Err(EstimateError::NonFiniteResidual {
+                                residual: i,
+                                index: 0,
+                                value: s,
+                                context: " (its squared norm overflows f64)".into(),
+                            });
+                        }
                         let [rho_i, d1] = res.loss.evaluate(s);
                         rhoc[i - i0] = rho_i;
                         if jac {

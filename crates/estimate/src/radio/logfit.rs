@@ -36,7 +36,8 @@ impl LogFit {
             sxy += x * y;
         }
         let det = s1 * sxx - sx * sx;
-        if det <= 1e-12 * s1 * sxx.max(1.0) {
+        // Written so that NaN (sums that overflowed) fails the test too.
+        if det.partial_cmp(&(1e-12 * s1 * sxx.max(1.0))) != Some(std::cmp::Ordering::Greater) {
             return Err(EstimateError::RankDeficient {
                 what: "log-distance fit (every link has the same length)".into(),
                 directions: "path-loss exponent a".into(),

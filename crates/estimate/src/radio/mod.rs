@@ -65,7 +65,8 @@ pub struct Link {
 impl Link {
     /// Transmitter–receiver distance ‖r − t‖.
     pub fn length(&self) -> f64 {
-        ((self.rx[0] - self.tx[0]).powi(2) + (self.rx[1] - self.tx[1]).powi(2)).sqrt()
+        // hypot: no overflow of the squares for coordinates beyond 1e154.
+        (self.rx[0] - self.tx[0]).hypot(self.rx[1] - self.tx[1])
     }
 
     /// The path-loss regressor `log10(max(‖r − t‖, 1 m))` of eq. 3.1.

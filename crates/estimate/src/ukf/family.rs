@@ -10,6 +10,17 @@ use super::simplex::SimplexSigmaPoints;
 use super::transform::{self, Workspace};
 use crate::{EstimateError, Result};
 
+/// `count` weights equal to `value`, where `count` (a multiple of the state dimension given by
+/// the caller) may overflow or exceed memory: an `OutOfMemory` error, never an abort.
+pub(crate) fn filled_weights(count: Option<usize>, value: f64) -> Result<DVector<f64>> {
+    let n = count.unwrap_or(usize::MAX);
+    Ok(DVector::from_vec(autoteach_geometry::alloc::try_filled(
+        "sigma-point weights",
+        n,
+        value,
+    )?))
+}
+
 /// A sigma-point family with its weights: van der Merwe's scaled points, Julier's symmetric
 /// points, the spherical simplex, or points drawn by the model itself with given weights
 /// ([`SigmaPoints::Given`], for sigma-point objects defined outside this crate).

@@ -2,6 +2,7 @@
 
 use nalgebra::DVector;
 
+use super::family::filled_weights;
 use crate::{EstimateError, Result};
 
 /// Julier & Uhlmann's symmetric sigma points for an `n`-dimensional Gaussian (the unscented
@@ -44,7 +45,8 @@ impl JulierSigmaPoints {
                 reason: "n + kappa must be positive (the sigma-point spread)",
             });
         }
-        let mut wm = DVector::from_element(2 * n + 1, 0.5 / (nf + kappa));
+        let count = n.checked_mul(2).and_then(|m| m.checked_add(1));
+        let mut wm = filled_weights(count, 0.5 / (nf + kappa))?;
         wm[0] = kappa / (nf + kappa);
         Ok(Self { n, kappa, wm })
     }

@@ -2,6 +2,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::family::filled_weights;
 use super::linalg;
 use crate::{EstimateError, Result};
 
@@ -63,8 +64,9 @@ impl MerweScaledSigmaPoints {
             });
         }
         let c = 0.5 / (nf + lambda);
-        let mut wm = DVector::from_element(2 * n + 1, c);
-        let mut wc = DVector::from_element(2 * n + 1, c);
+        let count = n.checked_mul(2).and_then(|m| m.checked_add(1));
+        let mut wm = filled_weights(count, c)?;
+        let mut wc = filled_weights(count, c)?;
         wm[0] = lambda / (nf + lambda);
         wc[0] = lambda / (nf + lambda) + (1.0 - alpha * alpha + beta);
         Ok(Self {

@@ -2,6 +2,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::family::filled_weights;
 use crate::{EstimateError, Result};
 
 /// The spherical simplex sigma points of Julier (2003) for an `n`-dimensional Gaussian (the
@@ -31,7 +32,13 @@ impl SimplexSigmaPoints {
         }
         let nf = n as f64;
         let lambda = nf / (nf + 1.0);
-        let mut unit = DMatrix::zeros(n, n + 1);
+        // The n × (n + 1) unit simplex: n comes from the caller, so the buffer is fallible.
+        let cells = n
+            .checked_add(1)
+            .and_then(|m| m.checked_mul(n))
+            .unwrap_or(usize::MAX);
+        let zeros = autoteach_geometry::alloc::try_filled("simplex sigma points", cells, 0.0)?;
+        let mut unit = DMatrix::from_vec(n, n + 1, zeros);
         let a = 1.0 / (2.0 * lambda).sqrt();
         unit[(0, 0)] = -a;
         unit[(0, 1)] = a;
@@ -46,7 +53,7 @@ impl SimplexSigmaPoints {
         unit *= nf.sqrt();
         Ok(Self {
             n,
-            w: DVector::from_element(n + 1, 1.0 / (nf + 1.0)),
+            w: filled_weights(n.checked_add(1), 1.0 / (nf + 1.0))?,
             unit,
         })
     }

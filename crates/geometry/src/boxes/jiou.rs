@@ -173,6 +173,11 @@ fn check_opts(opts: &JiouOptions) -> Result<()> {
             reason: "need at least 2 cells per axis and 2 samples",
         });
     }
+    // Both sizes come from the caller: the grid² rasters, the sampled boxes and the normal
+    // table must fit in memory, or the allocation would abort the process.
+    let cells = crate::alloc::checked_count("JIoU grid cells", opts.grid, opts.grid)?;
+    crate::alloc::ensure_fits::<(f64, f64, f64)>("JIoU grid cells", cells)?;
+    crate::alloc::ensure_fits::<[f64; BEV_PARAMS]>("JIoU samples", opts.samples)?;
     Ok(())
 }
 
