@@ -121,13 +121,15 @@ def mrgp_vs_sklearn(n: int) -> dict:
     return out
 
 
-def solves(quick: bool, cg_maxiter: int = 20000, spsolve_max: int = 20000) -> list[dict]:
+def solves(quick: bool, cg_maxiter: int = 20000, spsolve_max: int = 20000, model: str | None = None) -> list[dict]:
     sim = radio.simulate("campus", duration=240.0, seed=0)
     occ = sim.occupancy_at(float(sim.times[-1]))
     rows = []
     cases = [("MRT", 1.6), ("MRT", 0.9155), ("MRT", 160 / 300), ("MATTE", 2.0), ("MATTE", 1.27)]
     if quick:
         cases = cases[:1] + cases[3:4]
+    if model is not None:
+        cases = [c for c in cases if c[0] == model]
     for kind, cell in cases:
         if kind == "MRT":
             m = radio.MRT(cell=cell, bounds=(0.0, 0.0, 160.0, 160.0 if cell < 0.6 else 100.0))
@@ -181,13 +183,14 @@ def main() -> None:
         "--only", action="append", choices=["solves", "mrgp", "accuracy"], help="run only these parts (repeatable)"
     )
     ap.add_argument("--cg-maxiter", type=int, default=20000, help="iteration cap of scipy's cg")
+    ap.add_argument("--model", choices=["MRT", "MATTE"], default=None, help="solves of this model only")
     ap.add_argument("--spsolve-max", type=int, default=20000, help="largest system given to scipy's spsolve")
     args = ap.parse_args()
     parts = set(args.only or ["solves", "mrgp", "accuracy"])
     out = {"solves": [], "mrgp": None, "accuracy": None}
     if "solves" in parts:
         print("== tomographic solves (campus mission, 14 400 links) ==")
-        out["solves"] = solves(args.quick, args.cg_maxiter, args.spsolve_max)
+        out["solves"] = solves(args.quick, args.cg_maxiter, args.spsolve_max, args.model)
     if "mrgp" in parts:
         out["mrgp"] = mrgp_vs_sklearn(2000 if args.quick else 6000)
     if "accuracy" in parts:
