@@ -11,14 +11,16 @@
 //!    ends), so nearly parallel, overlapping links — consecutive samples of one robot pair
 //!    at 20 Hz — come together;
 //! 2. runs of up to [`WINDOW_ROWS`] such rows share one dense accumulator on the union of
-//!    their unknowns (at most [`WINDOW_UNION`], or one longer row alone), whose lower triangle is emitted once as
-//!    triplets `(row, col, value)`, skipping pairs no row of the window couples;
+//!    their unknowns (at most [`WINDOW_UNION`], or one longer row alone), whose lower
+//!    triangle is emitted once as triplets `(row, col, value)`, skipping pairs no row of the
+//!    window couples;
 //! 3. the triplets (and the regularisation's) are sorted by a two-pass counting sort (by
 //!    row, then stably by column) and duplicates summed: `O(triplets + n)`, no comparison
 //!    sort.
 //!
-//! The result is the same matrix as the column-by-column product, to rounding (a test
-//! compares them).
+//! The result is the same matrix, to rounding, as the dense product of the stacked system
+//! (test `blocked_normal_assembly_equals_the_dense_product`). Measured effect and the
+//! alternatives weighed: docs/design/radio.md.
 
 use super::sparse::LowerCsc;
 use super::tomo::{Regularization, TomoRows};

@@ -16,6 +16,9 @@
 //! on the 2×2 border: factor `S` once (AMD), solve `S Z = [B | b_v]`, then
 //! `(P − BᵀZ_B) p = b_p − BᵀZ_b` and `v = Z_b − Z_B p`. This is the exact solution of the
 //! full normal equations, not an approximation.
+//!
+//! `S` is assembled by [`super::normal::gram_lower`]; its symbolic analysis is kept in a
+//! [`FactorCache`] and reused while the pattern does not grow ([`TomoRows::solve_cached`]).
 
 use super::normal::gram_lower;
 use super::sparse::{FactorError, LowerCsc, SparseLlt};
