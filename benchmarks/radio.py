@@ -6,9 +6,11 @@
    Cholesky; the same kernel as a vectorised NumPy callable, fixed hyper-parameters, ``optimizer=None``)
    on the same data; predictions compared.
 3. MRT and MATTE solves from 10 000 to 90 000 unknowns (300 x 300 MRT grid) beside scipy
-   ``spsolve`` (SuperLU, COLAMD) and ``cg`` (rtol 1e-10) on the same normal equations.
+   ``spsolve`` (SuperLU, COLAMD) and ``cg`` (rtol 1e-10) on the same normal equations; ours cold (symbolic
+   analysis included) and with the cached analysis of the previous solve (as in an incremental update).
 
-Usage: ``PYTHONPATH=python python benchmarks/radio.py [--stride 2] [--quick]`` (``RAYON_NUM_THREADS=1``).
+Usage: ``PYTHONPATH=python python benchmarks/radio.py [--stride 2] [--quick] [--only accuracy]``
+(``RAYON_NUM_THREADS=1``).
 """
 
 from __future__ import annotations
@@ -119,19 +121,22 @@ def mrgp_vs_sklearn(n: int) -> dict:
     return out
 
 
-def solves(quick: bool) -> list[dict]:
+def solves(quick: bool, cg_maxiter: int = 20000, spsolve_max: int = 20000, model: str | None = None) -> list[dict]:
     sim = radio.simulate("campus", duration=240.0, seed=0)
     occ = sim.occupancy_at(float(sim.times[-1]))
     rows = []
     cases = [("MRT", 1.6), ("MRT", 0.9155), ("MRT", 160 / 300), ("MATTE", 2.0), ("MATTE", 1.27)]
     if quick:
         cases = cases[:1] + cases[3:4]
+    if model is not None:
+        cases = [c for c in cases if c[0] == model]
     for kind, cell in cases:
         if kind == "MRT":
             m = radio.MRT(cell=cell, bounds=(0.0, 0.0, 160.0, 160.0 if cell < 0.6 else 100.0))
         else:
             m = radio.MATTE(cell=cell)
         m.fit(sim.tx, sim.rx, sim.rss, occupancy=occ)
+        t_cold, _ = timed(lambda m=m: m._need().solve(cold=True))
         t_ours, _ = timed(lambda m=m: m._need().solve())
         sol = m.solution()
         l0, a, vals = sol.l0, sol.exponent, sol.values
@@ -140,13 +145,20 @@ def solves(quick: bool) -> list[dict]:
         normal = (amat.T @ amat).tocsc()
         b = amat.T @ rhs
         n = normal.shape[0]
-        row = {"model": kind, "cell": cell, "unknowns": n, "ours_s": t_ours, "factor_nnz": m._need().factor_nnz}
+        row = {
+            "model": kind,
+            "cell": cell,
+            "unknowns": n,
+            "ours_cold_s": t_cold,
+            "ours_s": t_ours,
+            "factor_nnz": m._need().factor_nnz,
+        }
         t0 = time.perf_counter()
-        x_cg, info = splinalg.cg(normal, b, rtol=1e-10, maxiter=20000)
+        x_cg, info = splinalg.cg(normal, b, rtol=1e-10, maxiter=cg_maxiter)
         row["cg_s"] = time.perf_counter() - t0
         row["cg_info"] = int(info)
         row["cg_rel_diff"] = float(np.linalg.norm(x_cg - ours) / np.linalg.norm(ours))
-        if n <= 20000:
+        if n <= spsolve_max:
             t0 = time.perf_counter()
             x_sp = splinalg.spsolve(normal, b)
             row["spsolve_s"] = time.perf_counter() - t0
@@ -154,7 +166,8 @@ def solves(quick: bool) -> list[dict]:
         rows.append(row)
         sp = f"spsolve {row['spsolve_s']:.2f} s (rel diff {row['spsolve_rel_diff']:.1e})" if "spsolve_s" in row else ""
         print(
-            f"{kind:<6} cell {cell:.3f} m: {n:>6} unknowns  ours {t_ours * 1e3:7.1f} ms  "
+            f"{kind:<6} cell {cell:.3f} m: {n:>6} unknowns  ours cold {t_cold * 1e3:7.1f} ms, "
+            f"analysis reused {t_ours * 1e3:7.1f} ms (L nnz {row['factor_nnz']})  "
             f"cg {row['cg_s']:.2f} s (rel diff {row['cg_rel_diff']:.1e})  {sp}"
         )
     return rows
@@ -166,12 +179,22 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=240.0)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--json", type=str, default=None)
+    ap.add_argument(
+        "--only", action="append", choices=["solves", "mrgp", "accuracy"], help="run only these parts (repeatable)"
+    )
+    ap.add_argument("--cg-maxiter", type=int, default=20000, help="iteration cap of scipy's cg")
+    ap.add_argument("--model", choices=["MRT", "MATTE"], default=None, help="solves of this model only")
+    ap.add_argument("--spsolve-max", type=int, default=20000, help="largest system given to scipy's spsolve")
     args = ap.parse_args()
+    parts = set(args.only or ["solves", "mrgp", "accuracy"])
     out = {"solves": [], "mrgp": None, "accuracy": None}
-    print("== tomographic solves (campus mission, 14 400 links) ==")
-    out["solves"] = solves(args.quick)
-    out["mrgp"] = mrgp_vs_sklearn(2000 if args.quick else 6000)
-    out["accuracy"] = accuracy(args.stride, args.duration)
+    if "solves" in parts:
+        print("== tomographic solves (campus mission, 14 400 links) ==")
+        out["solves"] = solves(args.quick, args.cg_maxiter, args.spsolve_max, args.model)
+    if "mrgp" in parts:
+        out["mrgp"] = mrgp_vs_sklearn(2000 if args.quick else 6000)
+    if "accuracy" in parts:
+        out["accuracy"] = accuracy(args.stride, args.duration)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1, default=float)

@@ -178,7 +178,13 @@ def test_direct_solve_equals_dense_and_scipy(model):
     scale = np.abs(dense).max()
     np.testing.assert_allclose(got, dense, atol=1e-7 * scale)
     np.testing.assert_allclose(via_spsolve, dense, atol=1e-7 * scale)
+    assert np.linalg.norm(got - dense) <= 1e-9 * np.linalg.norm(dense)
     assert sparse.issparse(a)
+    # A re-solve reusing the cached symbolic analysis and a cold one give the same solution.
+    m._need().solve()
+    warm = m.solution().values.copy()
+    m._need().solve(cold=True)
+    np.testing.assert_allclose(m.solution().values, warm, rtol=0, atol=1e-12 * np.abs(warm).max())
 
 
 def test_incremental_update_equals_single_fit():

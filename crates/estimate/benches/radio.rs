@@ -2,7 +2,8 @@
 //! simulated 240 s mission of three robots in the campus environment (14 400 links): the
 //! log fit, the MRGP fit on 6 000 links (sparse Cholesky), the MRT solve on a 1 m grid
 //! (160 × 100 = 16 000 unknowns) and the MATTE solve on a 2 m grid (3 × 80 × 50 = 12 000
-//! unknowns).
+//! unknowns); the solves with the symbolic analysis of the previous solve reused (as in an
+//! incremental update whose links couple no new cells) and cold (`_cold`).
 
 use autoteach_estimate::radio::kernel::{KernelParams, LinkKernel};
 use autoteach_estimate::radio::logfit::LogFit;
@@ -51,6 +52,12 @@ fn bench(c: &mut Criterion) {
     g.bench_function("radio_mrt_solve_16000_unknowns", |b| {
         b.iter(|| mrt.solve().expect("solve").l0)
     });
+    g.bench_function("radio_mrt_solve_16000_unknowns_cold", |b| {
+        b.iter(|| {
+            mrt.clear_factor_cache();
+            mrt.solve().expect("solve").l0
+        })
+    });
     let mut matte = Matte::new(
         map,
         MatteOptions {
@@ -62,6 +69,12 @@ fn bench(c: &mut Criterion) {
     matte.add(links, rss).expect("add");
     g.bench_function("radio_matte_solve_12000_unknowns", |b| {
         b.iter(|| matte.solve().expect("solve").l0)
+    });
+    g.bench_function("radio_matte_solve_12000_unknowns_cold", |b| {
+        b.iter(|| {
+            matte.clear_factor_cache();
+            matte.solve().expect("solve").l0
+        })
     });
     g.finish();
 }

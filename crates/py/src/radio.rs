@@ -330,11 +330,16 @@ impl PyMrt {
         self.inner.add(&links, &y).map_err(errors::estimate)
     }
 
-    /// Solves eq. 3.5 (GIL released); returns the seconds spent.
-    fn solve(&mut self, py: Python<'_>) -> PyResult<f64> {
+    /// Solves eq. 3.5 (GIL released); returns the seconds spent. `cold` forgets
+    /// the cached symbolic analysis first.
+    #[pyo3(signature = (cold=false))]
+    fn solve(&mut self, py: Python<'_>, cold: bool) -> PyResult<f64> {
         let inner = &mut self.inner;
         convert::detached(py, || {
             let t = std::time::Instant::now();
+            if cold {
+                inner.clear_factor_cache();
+            }
             inner.solve().map_err(errors::estimate)?;
             Ok(t.elapsed().as_secs_f64())
         })
@@ -472,11 +477,16 @@ impl PyMatte {
         self.inner.add(&links, &y).map_err(errors::estimate)
     }
 
-    /// Solves (Algorithm 3.1; GIL released); returns the seconds spent.
-    fn solve(&mut self, py: Python<'_>) -> PyResult<f64> {
+    /// Solves (Algorithm 3.1; GIL released); returns the seconds spent. `cold` forgets
+    /// the cached symbolic analysis first.
+    #[pyo3(signature = (cold=false))]
+    fn solve(&mut self, py: Python<'_>, cold: bool) -> PyResult<f64> {
         let inner = &mut self.inner;
         convert::detached(py, || {
             let t = std::time::Instant::now();
+            if cold {
+                inner.clear_factor_cache();
+            }
             inner.solve().map_err(errors::estimate)?;
             Ok(t.elapsed().as_secs_f64())
         })

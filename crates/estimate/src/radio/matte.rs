@@ -19,7 +19,7 @@
 //!   the row model of Algorithm 3.1 line 3.
 
 use super::grid::{CLASSES, ClassGrid, FREE, GridGeometry, STRUCTURE, UNKNOWN};
-use super::tomo::{Regularization, TomoRows, TomoSolution, grid_pairs};
+use super::tomo::{FactorCache, Regularization, TomoRows, TomoSolution, grid_pairs};
 use super::{Link, check_links, check_links_inside, check_training};
 use crate::{EstimateError, Result};
 
@@ -75,6 +75,7 @@ pub struct Matte {
     lookup: Vec<u32>,
     rows: TomoRows,
     solution: Option<TomoSolution>,
+    cache: FactorCache,
 }
 
 impl Matte {
@@ -112,6 +113,7 @@ impl Matte {
             options,
             lookup,
             solution: None,
+            cache: FactorCache::default(),
         })
     }
 
@@ -168,10 +170,23 @@ impl Matte {
         }
     }
 
-    /// Solves (Algorithm 3.1 lines 11–13) on every measurement added so far.
+    /// Solves (Algorithm 3.1 lines 11–13) on every measurement added so far, exactly; the
+    /// symbolic analysis of the last solve is reused when the couplings have not grown
+    /// ([`TomoRows::solve_cached`]).
     pub fn solve(&mut self) -> Result<&TomoSolution> {
-        let sol = self.rows.solve(&self.regularization())?;
+        let reg = self.regularization();
+        let sol = self.rows.solve_cached(&reg, &mut self.cache)?;
         Ok(self.solution.insert(sol))
+    }
+
+    /// Forgets the cached symbolic analysis (the next solve starts cold).
+    pub fn clear_factor_cache(&mut self) {
+        self.cache.clear();
+    }
+
+    /// Number of symbolic analyses done so far (solves that could not reuse the last one).
+    pub fn analyses(&self) -> usize {
+        self.cache.analyses
     }
 
     /// Adds measurements and re-solves.

@@ -7,6 +7,8 @@
 //! * [`logfit`]: the log-distance path-loss fit of eq. 3.1 (the baseline).
 //! * [`kernel`], [`mrgp`]: the multi-robot Gaussian process (§3.2.1, eqs. 3.3–3.4) on a
 //!   compactly supported, symmetric link kernel, solved by sparse Cholesky.
+//! * [`normal`]: fast assembly of the tomographic normal matrix (dense blocks, counting
+//!   sort).
 //! * [`tomo`]: the bordered sparse least-squares solver shared by the tomographic models.
 //! * [`mrt`]: multi-robot tomography (§3.2.2, eqs. 3.2, 3.5).
 //! * [`matte`]: MATTE (§3.2.3, Algorithms 3.1–3.2): per-class attenuation on a coarse grid
@@ -37,6 +39,7 @@ pub mod logfit;
 pub mod matte;
 pub mod mrgp;
 pub mod mrt;
+pub mod normal;
 pub mod sim;
 pub mod sparse;
 pub mod tomo;

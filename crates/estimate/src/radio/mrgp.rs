@@ -47,13 +47,16 @@ fn hash_links(links: &[Link], size: f64) -> HashMap<(i64, i64), Vec<u32>> {
     h
 }
 
-/// Indices of links (in `hash`) that may couple with `q` (a superset of the kernel's
-/// support), in no particular order; `mark`/`stamp` deduplicate.
+/// Indices `≥ first` of links (in `hash`) that may couple with `q` (a superset of the
+/// kernel's support), in no particular order; `mark`/`stamp` deduplicate. The fit asks for
+/// `first = j` (the lower triangle), so the distances of the upper one are never computed.
+#[allow(clippy::too_many_arguments)]
 fn candidates(
     q: &Link,
     links: &[Link],
     hash: &HashMap<(i64, i64), Vec<u32>>,
     theta: f64,
+    first: usize,
     mark: &mut [u32],
     stamp: u32,
     out: &mut Vec<(usize, PairDistances)>,
@@ -66,7 +69,7 @@ fn candidates(
                 if let Some(list) = hash.get(&(ci + di, cj + dj)) {
                     for &j in list {
                         let j = j as usize;
-                        if mark[j] == stamp {
+                        if j < first || mark[j] == stamp {
                             continue;
                         }
                         let d = PairDistances::new(q, &links[j]);
@@ -136,11 +139,11 @@ impl Mrgp {
                 links,
                 &hash,
                 params.theta,
+                j,
                 &mut mark,
                 j as u32,
                 &mut cand,
             );
-            cand.retain(|(i, _)| *i >= j);
             cand.sort_unstable_by_key(|(i, _)| *i);
             for (i, d) in &cand {
                 row_idx.push(*i);
@@ -339,6 +342,7 @@ impl Mrgp {
                 &self.links,
                 &self.hash,
                 theta,
+                0,
                 &mut mark,
                 qi as u32,
                 &mut cand,

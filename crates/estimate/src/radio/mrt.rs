@@ -5,7 +5,7 @@
 //! Cholesky.
 
 use super::grid::GridGeometry;
-use super::tomo::{Regularization, TomoRows, TomoSolution, grid_pairs};
+use super::tomo::{FactorCache, Regularization, TomoRows, TomoSolution, grid_pairs};
 use super::{Link, check_links, check_links_inside, check_training};
 use crate::{EstimateError, Result};
 
@@ -36,6 +36,7 @@ pub struct Mrt {
     pub options: MrtOptions,
     rows: TomoRows,
     solution: Option<TomoSolution>,
+    cache: FactorCache,
 }
 
 impl Mrt {
@@ -63,6 +64,7 @@ impl Mrt {
             grid,
             options,
             solution: None,
+            cache: FactorCache::default(),
         })
     }
 
@@ -80,16 +82,23 @@ impl Mrt {
         Ok(())
     }
 
-    /// Solves eq. 3.5 on every measurement added so far.
+    /// Solves eq. 3.5 on every measurement added so far, exactly; the symbolic analysis of
+    /// the last solve is reused when the couplings have not grown
+    /// ([`TomoRows::solve_cached`]).
     pub fn solve(&mut self) -> Result<&TomoSolution> {
-        let reg = Regularization {
-            pairs: grid_pairs(self.grid.rows, self.grid.cols, 0),
-            lambda: self.options.lambda,
-            phi: 0.0,
-            prior: Vec::new(),
-        };
-        let sol = self.rows.solve(&reg)?;
+        let reg = self.regularization();
+        let sol = self.rows.solve_cached(&reg, &mut self.cache)?;
         Ok(self.solution.insert(sol))
+    }
+
+    /// Forgets the cached symbolic analysis (the next solve starts cold).
+    pub fn clear_factor_cache(&mut self) {
+        self.cache.clear();
+    }
+
+    /// Number of symbolic analyses done so far (solves that could not reuse the last one).
+    pub fn analyses(&self) -> usize {
+        self.cache.analyses
     }
 
     /// Adds measurements and re-solves (the incremental update of §3.3's replay).

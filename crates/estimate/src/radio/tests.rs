@@ -503,3 +503,118 @@ fn simulated_robots_stay_in_free_space_and_measure_every_pair() {
         assert!(sd > 2.0 && sd < 6.0, "{kind:?}: {sd}");
     }
 }
+
+/// Dense `A_vᵀA_v + λ²ΓᵀΓ + φ²I` from the stacked system (independent of the blocked
+/// assembly): the spatial columns of `[A; λΓ; φI]`, squared.
+fn dense_normal(rows: &TomoRows, reg: &Regularization) -> DMatrix<f64> {
+    let (trip, rhs) = rows.stacked(reg);
+    let mut a = DMatrix::<f64>::zeros(rhs.len(), rows.n);
+    for (r, c, v) in trip {
+        if c >= 2 {
+            a[(r, c - 2)] += v;
+        }
+    }
+    a.transpose() * a
+}
+
+fn assert_lower_equals_dense(s: &super::sparse::LowerCsc, want: &DMatrix<f64>) {
+    let got = DMatrix::from_column_slice(s.n, s.n, &s.to_dense());
+    let scale = want.amax();
+    let err = (&got - want).amax();
+    assert!(
+        err <= 1e-12 * scale,
+        "max |S − dense| = {err:e} (scale {scale})"
+    );
+    for c in 0..s.n {
+        let col = &s.row_idx[s.col_ptr[c]..s.col_ptr[c + 1]];
+        assert!(col.windows(2).all(|w| w[0] < w[1]) && col.first() == Some(&c));
+    }
+}
+
+#[test]
+fn blocked_normal_assembly_equals_the_dense_product() {
+    let (map, links, rss) = small_world();
+    let mrt = Mrt::fit([0.0, 0.0, 30.0, 20.0], &links, &rss, MrtOptions::default()).unwrap();
+    let reg = mrt.regularization();
+    let s = super::normal::gram_lower(mrt.rows(), &reg);
+    assert_lower_equals_dense(&s, &dense_normal(mrt.rows(), &reg));
+    for weights in [MatteWeights::Length, MatteWeights::Indicator] {
+        let opts = MatteOptions {
+            weights,
+            cell: 1.5,
+            ..MatteOptions::default()
+        };
+        let matte = Matte::fit(map.clone(), &links, &rss, opts).unwrap();
+        let reg = matte.regularization();
+        let s = super::normal::gram_lower(matte.rows(), &reg);
+        assert_lower_equals_dense(&s, &dense_normal(matte.rows(), &reg));
+    }
+    // Rows longer than a block's union cap, unsorted and repeated entries, an empty row.
+    let n = super::normal::WINDOW_UNION + 300;
+    let mut rows = TomoRows::new(n);
+    let mut rng = Pcg64::seed_from_u64(11);
+    for r in 0..40 {
+        let len = if r % 7 == 0 {
+            n - 50
+        } else {
+            rng.random_range(0..60)
+        };
+        let first = rng.random_range(0..n - len.min(n - 1));
+        let entries: Vec<(usize, f64)> = (0..len)
+            .rev()
+            .map(|k| ((first + k).min(n - 1), rng.random_range(0.1..2.0)))
+            .collect();
+        rows.push(1.0, &entries, -50.0);
+    }
+    let reg = Regularization {
+        pairs: (0..n - 1).map(|k| (k + 1, k)).collect(),
+        lambda: 0.3,
+        phi: 0.1,
+        prior: vec![-0.2; n],
+    };
+    let s = super::normal::gram_lower(&rows, &reg);
+    assert_lower_equals_dense(&s, &dense_normal(&rows, &reg));
+}
+
+#[test]
+fn fast_solve_equals_a_dense_solve_to_1e9_relative() {
+    let (map, links, rss) = small_world();
+    let rel = |sol: &super::tomo::TomoSolution, want: &DVector<f64>| {
+        let mut got = vec![sol.l0, -sol.exponent];
+        got.extend_from_slice(&sol.values);
+        (DVector::from_vec(got) - want).norm() / want.norm()
+    };
+    let mrt = Mrt::fit([0.0, 0.0, 30.0, 20.0], &links, &rss, MrtOptions::default()).unwrap();
+    let want = dense_solve(mrt.rows(), &mrt.regularization());
+    let e = rel(mrt.solution().unwrap(), &want);
+    assert!(e <= 1e-9, "MRT relative difference {e:e}");
+    let matte = Matte::fit(map, &links, &rss, MatteOptions::default()).unwrap();
+    let want = dense_solve(matte.rows(), &matte.regularization());
+    let e = rel(matte.solution().unwrap(), &want);
+    assert!(e <= 1e-9, "MATTE relative difference {e:e}");
+}
+
+#[test]
+fn reused_symbolic_analysis_gives_the_cold_solution() {
+    let (map, links, rss) = small_world();
+    let mut m = Matte::new(map, MatteOptions::default()).unwrap();
+    m.update(&links[..150], &rss[..150]).unwrap();
+    assert_eq!(m.analyses(), 1);
+    // New links cross new cells: the pattern grows and is analysed anew.
+    m.update(&links[150..], &rss[150..]).unwrap();
+    assert_eq!(m.analyses(), 2);
+    // Repeated links (other RSS) add no coupling: the analysis is reused.
+    let again: Vec<f64> = rss[..50].iter().map(|y| y + 1.0).collect();
+    m.update(&links[..50], &again).unwrap();
+    assert_eq!(m.analyses(), 2);
+    let warm = m.solution().unwrap().clone();
+    let cold = m.rows().solve(&m.regularization()).unwrap();
+    assert!((warm.l0 - cold.l0).abs() <= 1e-12 * cold.l0.abs());
+    let scale = cold.values.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    for (x, y) in warm.values.iter().zip(&cold.values) {
+        assert!((x - y).abs() <= 1e-12 * scale);
+    }
+    m.clear_factor_cache();
+    m.solve().unwrap();
+    assert_eq!(m.analyses(), 3);
+}

@@ -16,7 +16,11 @@
 //! on the 2×2 border: factor `S` once (AMD), solve `S Z = [B | b_v]`, then
 //! `(P − BᵀZ_B) p = b_p − BᵀZ_b` and `v = Z_b − Z_B p`. This is the exact solution of the
 //! full normal equations, not an approximation.
+//!
+//! `S` is assembled by [`super::normal::gram_lower`]; its symbolic analysis is kept in a
+//! [`FactorCache`] and reused while the pattern does not grow ([`TomoRows::solve_cached`]).
 
+use super::normal::gram_lower;
 use super::sparse::{FactorError, LowerCsc, SparseLlt};
 use crate::{EstimateError, Result};
 
@@ -49,6 +53,64 @@ pub struct Regularization {
     pub phi: f64,
     /// Prior values ρ_k (length n; ignored when φ = 0).
     pub prior: Vec<f64>,
+}
+
+/// The symbolic analysis of the last factored pattern of `S`, kept between solves (see
+/// [`TomoRows::solve_cached`]). Cloning gives an empty cache: it only saves time.
+#[derive(Default)]
+pub struct FactorCache {
+    pattern: Option<LowerCsc>,
+    llt: Option<SparseLlt>,
+    /// Number of symbolic analyses done through this cache.
+    pub analyses: usize,
+}
+
+impl Clone for FactorCache {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl std::fmt::Debug for FactorCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FactorCache")
+            .field("pattern_nnz", &self.pattern.as_ref().map(LowerCsc::nnz))
+            .field("analyses", &self.analyses)
+            .finish()
+    }
+}
+
+impl FactorCache {
+    /// Forgets the analysed pattern (the next solve analyses anew).
+    pub fn clear(&mut self) {
+        self.pattern = None;
+        self.llt = None;
+    }
+
+    /// `s`'s values laid out on the cached pattern (zeros where `s` has no entry), or `None`
+    /// when there is no cached pattern or `s` has an entry outside it.
+    fn refill(&self, s: &LowerCsc) -> Option<Vec<f64>> {
+        let pat = self.pattern.as_ref()?;
+        if pat.n != s.n || self.llt.is_none() {
+            return None;
+        }
+        let mut values = vec![0.0; pat.nnz()];
+        for c in 0..s.n {
+            let mut q = pat.col_ptr[c];
+            let q_end = pat.col_ptr[c + 1];
+            for p in s.col_ptr[c]..s.col_ptr[c + 1] {
+                let r = s.row_idx[p];
+                while q < q_end && pat.row_idx[q] < r {
+                    q += 1;
+                }
+                if q == q_end || pat.row_idx[q] != r {
+                    return None;
+                }
+                values[q] = s.values[p];
+            }
+        }
+        Some(values)
+    }
 }
 
 /// The solution of a tomographic problem.
@@ -105,104 +167,27 @@ impl TomoRows {
         self.y.push(y);
     }
 
-    /// `S = A_vᵀA_v + λ²ΓᵀΓ + φ²I` (lower CSC) and `b_v = A_vᵀy + φ²ρ`, `B = A_vᵀA_p`
-    /// (column-major n × 2).
+    /// `S = A_vᵀA_v + λ²ΓᵀΓ + φ²I` (lower CSC, by [`super::normal::gram_lower`]) and
+    /// `b_v = A_vᵀy + φ²ρ`, `B = A_vᵀA_p` (column-major n × 2).
     pub fn assemble(&self, reg: &Regularization) -> (LowerCsc, Vec<f64>, Vec<f64>) {
         let n = self.n;
-        // Transpose the CSR rows into CSC (rows of each unknown).
-        let mut cnt = vec![0usize; n + 1];
-        for &c in &self.col_idx {
-            cnt[c + 1] += 1;
-        }
-        for c in 0..n {
-            cnt[c + 1] += cnt[c];
-        }
-        let mut fill = cnt.clone();
-        let mut csc_row = vec![0usize; self.col_idx.len()];
-        let mut csc_val = vec![0.0; self.col_idx.len()];
         let mut b = vec![0.0; 2 * n];
         let mut bv = vec![0.0; n];
         for r in 0..self.len() {
             for p in self.row_ptr[r]..self.row_ptr[r + 1] {
                 let (c, w) = (self.col_idx[p], self.weights[p]);
-                csc_row[fill[c]] = r;
-                csc_val[fill[c]] = w;
-                fill[c] += 1;
                 b[c] += w * self.path[r][0];
                 b[n + c] += w * self.path[r][1];
                 bv[c] += w * self.y[r];
             }
         }
-        // Regularisation: neighbours above each column and diagonal additions.
-        let l2 = reg.lambda * reg.lambda;
-        let mut upper: Vec<Vec<usize>> = vec![Vec::new(); n];
-        let mut diag = vec![0.0; n];
-        if l2 > 0.0 {
-            for &(i, j) in &reg.pairs {
-                if i == j {
-                    continue;
-                }
-                let (lo, hi) = if i < j { (i, j) } else { (j, i) };
-                upper[lo].push(hi);
-                diag[i] += l2;
-                diag[j] += l2;
-            }
-        }
         let p2 = reg.phi * reg.phi;
         if p2 > 0.0 {
-            for k in 0..n {
-                diag[k] += p2;
-                bv[k] += p2 * reg.prior[k];
+            for (k, v) in bv.iter_mut().enumerate() {
+                *v += p2 * reg.prior[k];
             }
         }
-        // Gustavson: column j of A_vᵀA_v = Σ_{rows r ∋ j} a_rj · (row r), kept for k ≥ j.
-        let mut acc = vec![0.0; n];
-        let mut mark = vec![usize::MAX; n];
-        let mut touched: Vec<usize> = Vec::new();
-        let mut col_ptr = Vec::with_capacity(n + 1);
-        let mut row_idx = Vec::new();
-        let mut values = Vec::new();
-        col_ptr.push(0);
-        for j in 0..n {
-            touched.clear();
-            let mut add = |k: usize, v: f64, touched: &mut Vec<usize>| {
-                if mark[k] != j {
-                    mark[k] = j;
-                    acc[k] = 0.0;
-                    touched.push(k);
-                }
-                acc[k] += v;
-            };
-            add(j, diag[j], &mut touched);
-            for q in cnt[j]..cnt[j + 1] {
-                let (r, arj) = (csc_row[q], csc_val[q]);
-                for p in self.row_ptr[r]..self.row_ptr[r + 1] {
-                    let k = self.col_idx[p];
-                    if k >= j {
-                        add(k, arj * self.weights[p], &mut touched);
-                    }
-                }
-            }
-            for &k in &upper[j] {
-                add(k, -l2, &mut touched);
-            }
-            touched.sort_unstable();
-            for &k in &touched {
-                row_idx.push(k);
-                values.push(acc[k]);
-            }
-            col_ptr.push(row_idx.len());
-        }
-        (
-            LowerCsc {
-                n,
-                col_ptr,
-                row_idx,
-                values,
-            },
-            bv,
-            b,
-        )
+        (gram_lower(self, reg), bv, b)
     }
 
     /// `P = A_pᵀA_p` (row-major 2×2) and `b_p = A_pᵀy`.
@@ -225,13 +210,39 @@ impl TomoRows {
     /// Schur complement is singular (e.g. no regularisation and unvisited cells, or every
     /// link of the same length).
     pub fn solve(&self, reg: &Regularization) -> Result<TomoSolution> {
+        self.solve_cached(reg, &mut FactorCache::default())
+    }
+
+    /// [`TomoRows::solve`], reusing `cache`'s symbolic analysis (AMD ordering, elimination
+    /// tree, supernodes) when the pattern of `S` is contained in the analysed one — the case
+    /// of an incremental update whose new links cross only already coupled cells, and of a
+    /// repeated solve. Otherwise the pattern is analysed anew and kept in `cache`. The
+    /// numeric factorisation is always redone: the solution is exact either way.
+    pub fn solve_cached(
+        &self,
+        reg: &Regularization,
+        cache: &mut FactorCache,
+    ) -> Result<TomoSolution> {
         if self.is_empty() {
             return Err(EstimateError::EmptyInput("the training set".into()));
         }
         let n = self.n;
         let (s, bv, b) = self.assemble(reg);
-        let mut llt = SparseLlt::analyse(&s)?;
-        llt.factor(&s.values)
+        let values = match cache.refill(&s) {
+            Some(v) => v,
+            None => {
+                cache.llt = Some(SparseLlt::analyse(&s)?);
+                cache.analyses += 1;
+                let values = s.values.clone();
+                cache.pattern = Some(s);
+                values
+            }
+        };
+        let llt = cache
+            .llt
+            .as_mut()
+            .ok_or_else(|| EstimateError::LinearSolver("factor cache without analysis".into()))?;
+        llt.factor(&values)
             .map_err(
                 |FactorError::NotPositiveDefinite(col)| EstimateError::RankDeficient {
                     what: "tomographic normal equations (A_vᵀA_v + λ²ΓᵀΓ + φ²I)".into(),
