@@ -49,23 +49,28 @@ pub fn counting_sort_by_key<T: Copy>(
     let digit = bits.div_ceil(passes);
     let radix = 1usize << digit;
     let mask = (radix - 1) as u32;
-    let mut src = items;
-    let mut dst = src.clone();
-    let mut start = vec![0usize; radix];
-    for pass in 0..passes {
-        let shift = pass * digit;
-        start.iter_mut().for_each(|c| *c = 0);
-        for it in &src {
-            start[((key(it) >> shift) & mask) as usize] += 1;
+    // One read pass counts every digit; each pass then only scatters.
+    let mut start = vec![0usize; radix * passes as usize];
+    for it in &items {
+        let k = key(it);
+        for pass in 0..passes {
+            start[pass as usize * radix + ((k >> (pass * digit)) & mask) as usize] += 1;
         }
+    }
+    for counts in start.chunks_exact_mut(radix) {
         let mut sum = 0usize;
-        for c in start.iter_mut() {
+        for c in counts.iter_mut() {
             let k = *c;
             *c = sum;
             sum += k;
         }
+    }
+    let mut src = items;
+    let mut dst = src.clone();
+    for (pass, slots) in start.chunks_exact_mut(radix).enumerate() {
+        let shift = pass as u32 * digit;
         for it in &src {
-            let slot = &mut start[((key(it) >> shift) & mask) as usize];
+            let slot = &mut slots[((key(it) >> shift) & mask) as usize];
             dst[*slot] = *it;
             *slot += 1;
         }

@@ -20,7 +20,7 @@
 //! post-processing).
 
 use super::counting_sort::counting_sort_by_key;
-use super::union_find::UnionFind;
+use super::union_find::{MAX_VERTICES, UnionFind};
 use crate::{DetectError, Result};
 
 /// Largest squared RGB distance between 8-bit colours, 3·255²: the colour keys run over
@@ -149,11 +149,11 @@ pub fn segment_graph(
             });
         }
     };
-    if u32::try_from(n).is_err() {
+    if n > MAX_VERTICES {
         return Err(DetectError::InvalidParameter {
             what: "number of points",
             value: n as f64,
-            reason: "at most u32::MAX points",
+            reason: "at most 2^31 - 1 points",
         });
     }
     if let Some(e) = edges
@@ -201,12 +201,15 @@ pub fn segment_graph(
     };
 
     // Lines 5–13. A singleton's threshold is K / 1 (its internal weight is 0). Each root keeps
-    // its two internal weights `Int` beside its parent and size (one record, one cache line).
+    // its two internal weights `Int` as the union–find payload.
     let use_rgb = params.criteria != Criteria::NormalOnly;
     let use_norm = params.criteria != Criteria::ColorOnly;
     let mut uf = UnionFind::with_data(n, Internal::default());
     let mut unions = 0usize;
-    for e in &sorted {
+    for (k, e) in sorted.iter().enumerate() {
+        if let Some(ahead) = sorted.get(k + LOOKAHEAD) {
+            std::hint::black_box(uf.entry_of(ahead.i) ^ uf.entry_of(ahead.j));
+        }
         let a = uf.find(e.i);
         let b = uf.find(e.j);
         if a == b {
@@ -258,6 +261,9 @@ pub fn segment_graph(
         threshold_unions: unions,
     })
 }
+
+/// How many edges ahead the merge loop loads the endpoints' union–find entries.
+const LOOKAHEAD: usize = 16;
 
 /// Largest normal sort key: π quantised to [`NORMAL_KEY_QUANTUM`].
 fn normal_key_max() -> u32 {
