@@ -194,14 +194,8 @@ fn majority(labels: &[u32], truth: &[u32], object: u32) -> u32 {
         .unwrap_or(UNLABELLED)
 }
 
-/// Fig. 4.4c–e on the simulated hallway (truth colours, organised scan): colour alone merges
-/// the grey bin with the floor, normals alone merge the blue bin with the wall, both together
-/// separate both pairs.
-#[test]
-#[ignore = "Fig. 4.4 not reproduced yet (issue 34): in a debug build normals alone give the blue \
-            bin segment 15 and the wall 5, and both criteria merge the grey bin with the floor \
-            (4 and 4); the same figure is a strict xfail in tests/test_segment.py"]
-fn fig_4_4_hallway() {
+/// Labels of the simulated hallway at Table 4.1's 0.75° (truth colours, organised scan).
+fn hallway_labels(criteria: Criteria, k_rgb: f64, k_norm: f64) -> (Vec<u32>, Vec<u32>) {
     let sc = scene::preset("hallway").unwrap();
     let scanner = Scanner {
         beam_step_deg: 0.75,
@@ -209,47 +203,71 @@ fn fig_4_4_hallway() {
         ..Scanner::hokuyo()
     };
     let s = scene::scan(&sc, &scanner, 3.0, 2).unwrap();
-    let run = |criteria: Criteria, k_rgb: f64, k_norm: f64| {
-        let params = SegmentParams {
-            fh: fh(k_rgb, k_norm, 100, criteria),
-            edge_cut: 0.25,
-            graph: GraphKind::Scan {
-                lines: s.lines,
-                beams: s.beams,
-            },
-            viewpoint: [0.0; 3],
-        };
-        segment_cloud(&s.points, &s.true_colors, None, &params)
-            .unwrap()
-            .labels
+    let params = SegmentParams {
+        fh: fh(k_rgb, k_norm, 100, criteria),
+        edge_cut: 0.25,
+        graph: GraphKind::Scan {
+            lines: s.lines,
+            beams: s.beams,
+        },
+        viewpoint: [0.0; 3],
     };
-    let (floor, wall, grey_bin, blue_bin) = (1, 2, 6, 7);
-    let color = run(Criteria::ColorOnly, 1000.0, 0.0);
+    let labels = segment_cloud(&s.points, &s.true_colors, None, &params)
+        .unwrap()
+        .labels;
+    (labels, s.labels)
+}
+
+const FLOOR: u32 = 1;
+const WALL: u32 = 2;
+const GREY_BIN: u32 = 6;
+const BLUE_BIN: u32 = 7;
+
+/// Fig. 4.4c and 4.4e on the simulated hallway (Table 4.1 constants): colour alone merges the
+/// grey bin with the floor and separates the blue bin from the wall; both criteria separate
+/// both pairs. The normal threshold follows eq. (4.3) with the accepted edge's own normal
+/// weight (Algorithm 4.1 line 12); with `Int_norm` kept as a running maximum instead, one early
+/// union across the bin's crease (singletons accept any angle, K_norm = 10 > π) raised the
+/// threshold past 90° for good and both criteria merged the grey bin with the floor.
+#[test]
+fn fig_4_4_colour_alone_and_both_criteria() {
+    let (color, truth) = hallway_labels(Criteria::ColorOnly, 1000.0, 0.0);
     assert_eq!(
-        majority(&color, &s.labels, grey_bin),
-        majority(&color, &s.labels, floor)
+        majority(&color, &truth, GREY_BIN),
+        majority(&color, &truth, FLOOR)
     );
     assert_ne!(
-        majority(&color, &s.labels, blue_bin),
-        majority(&color, &s.labels, wall)
+        majority(&color, &truth, BLUE_BIN),
+        majority(&color, &truth, WALL)
     );
-    let normal = run(Criteria::NormalOnly, 0.0, 9.0);
+    let (both, truth) = hallway_labels(Criteria::Both, 9000.0, 10.0);
     assert_ne!(
-        majority(&normal, &s.labels, grey_bin),
-        majority(&normal, &s.labels, floor)
+        majority(&both, &truth, GREY_BIN),
+        majority(&both, &truth, FLOOR)
+    );
+    assert_ne!(
+        majority(&both, &truth, BLUE_BIN),
+        majority(&both, &truth, WALL)
+    );
+}
+
+/// Fig. 4.4d on the simulated hallway: normals alone separate the grey bin from the floor
+/// and should merge the blue bin with the wall. The simulated blue bin is a sharp-edged box
+/// 16 cm deep: the PCA normals along its outline turn by tens of degrees, a crease no
+/// segment's normal threshold crosses (see docs/design/segmentation.md).
+#[test]
+#[ignore = "scene property (issue 34): normals alone keep the simulated blue bin (segment 15) \
+            apart from the wall (segment 5); the same figure is a strict xfail in \
+            tests/test_segment.py"]
+fn fig_4_4_normals_alone() {
+    let (normal, truth) = hallway_labels(Criteria::NormalOnly, 0.0, 9.0);
+    assert_ne!(
+        majority(&normal, &truth, GREY_BIN),
+        majority(&normal, &truth, FLOOR)
     );
     assert_eq!(
-        majority(&normal, &s.labels, blue_bin),
-        majority(&normal, &s.labels, wall)
-    );
-    let both = run(Criteria::Both, 9000.0, 10.0);
-    assert_ne!(
-        majority(&both, &s.labels, grey_bin),
-        majority(&both, &s.labels, floor)
-    );
-    assert_ne!(
-        majority(&both, &s.labels, blue_bin),
-        majority(&both, &s.labels, wall)
+        majority(&normal, &truth, BLUE_BIN),
+        majority(&normal, &truth, WALL)
     );
 }
 
@@ -437,8 +455,8 @@ fn reference_segment_graph(
             continue;
         }
         let r = uf.union_roots(a, b) as usize;
-        int_rgb[r] = int_rgb[ai].max(int_rgb[bi]).max(wr);
-        int_norm[r] = int_norm[ai].max(int_norm[bi]).max(wn);
+        int_rgb[r] = wr;
+        int_norm[r] = wn;
     }
     if params.min_size > 1 {
         let min = params.min_size as u32;
