@@ -235,7 +235,10 @@ pub fn segment_graph(
             continue;
         }
         let r = uf.union_roots(a, b);
-        *uf.data_mut(r) = Internal { rgb: wr, norm: wn };
+        *uf.data_mut(r) = Internal {
+            rgb: da.rgb.max(db.rgb).max(wr),
+            norm: da.norm.max(db.norm).max(wn),
+        };
         unions += 1;
     }
 
