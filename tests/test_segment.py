@@ -37,27 +37,41 @@ def _are(truth: np.ndarray, labels: np.ndarray) -> float:
 
 
 @pytest.mark.xfail(
-    reason="open (issue 34): first build of the branch -- normals alone split the blue bin from the wall "
-    "(majority segments 4 vs 1); Fig. 4.4 not yet reproduced",
+    reason="open (issue 34, docs/design/segmentation.md 'The unsorted threshold'): both criteria merge the grey "
+    "bin with the floor (majority segments 4 and 4); the seed's literal eq. 4.3 for the normal weight does not "
+    "separate them on this scan either",
     strict=True,
 )
-def test_fig_4_4_colour_and_normals_separate_what_each_alone_merges(hallway):
+def test_fig_4_4_colour_alone_and_both_criteria(hallway):
     points, colors = hallway.cloud()
     truth = hallway.labels
     color = segment.segment_colored_cloud(points, colors, criteria="color", k_rgb=1000, min_size=100)
-    normal = segment.segment_colored_cloud(points, colors, criteria="normal", k_norm=9, min_size=100)
     both = segment.segment_colored_cloud(points, colors, k_rgb=9000, k_norm=10, min_size=100)
-    # Fig. 4.4c: colour alone merges the grey bin with the grey floor.
+    # Fig. 4.4c: colour alone merges the grey bin with the grey floor, keeps the blue bin apart.
     assert _majority(color, truth, GREY_BIN) == _majority(color, truth, FLOOR)
     assert _majority(color, truth, BLUE_BIN) != _majority(color, truth, WALL)
-    # Fig. 4.4d: normals alone merge the blue bin with the wall.
-    assert _majority(normal, truth, BLUE_BIN) == _majority(normal, truth, WALL)
-    assert _majority(normal, truth, GREY_BIN) != _majority(normal, truth, FLOOR)
     # Fig. 4.4e: both together separate both pairs, and the segmentation matches the truth.
     assert _majority(both, truth, GREY_BIN) != _majority(both, truth, FLOOR)
     assert _majority(both, truth, BLUE_BIN) != _majority(both, truth, WALL)
     assert _are(truth, both) <= 0.1
-    assert _are(truth, both) < min(_are(truth, color), _are(truth, normal))
+    assert _are(truth, both) < _are(truth, color)
+
+
+@pytest.mark.xfail(
+    reason="scene property (issue 34, docs/design/segmentation.md): the simulated blue bin is a sharp-edged "
+    "box 16 cm deep whose outline normals form a crease; normals alone keep it apart from the wall "
+    "(majority segments 4 vs 1 at K_norm 9; still apart at 20, 50, 100)",
+    strict=True,
+)
+def test_fig_4_4_normals_alone_merge_the_blue_bin_with_the_wall(hallway):
+    points, colors = hallway.cloud()
+    truth = hallway.labels
+    normal = segment.segment_colored_cloud(points, colors, criteria="normal", k_norm=9, min_size=100)
+    both = segment.segment_colored_cloud(points, colors, k_rgb=9000, k_norm=10, min_size=100)
+    # Fig. 4.4d: normals alone separate the grey bin from the floor and merge the blue bin with the wall.
+    assert _majority(normal, truth, GREY_BIN) != _majority(normal, truth, FLOOR)
+    assert _majority(normal, truth, BLUE_BIN) == _majority(normal, truth, WALL)
+    assert _are(truth, both) < _are(truth, normal)
 
 
 @pytest.mark.parametrize(
@@ -67,7 +81,9 @@ def test_fig_4_4_colour_and_normals_separate_what_each_alone_merges(hallway):
         pytest.param(
             "hill",
             marks=pytest.mark.xfail(
-                reason="open (issue 34): adapted Rand error 0.485 > 0.1 on the hill scene at the first build",
+                reason="scene property (issue 34, docs/design/segmentation.md): adapted Rand error 0.485 > 0.1; colour "
+                "splits the sunlit from the shaded ground (R 202-209 vs 34-40, 32 % of it in shade), which alone "
+                "costs 0.276 against the one-label ground truth",
                 strict=True,
             ),
         ),

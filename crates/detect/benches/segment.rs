@@ -5,10 +5,12 @@
 
 use std::hint::black_box;
 
+use autoteach_detect::segment::counting_sort::counting_sort_by_key;
+use autoteach_detect::segment::felzenszwalb::{RGB_KEY_MAX, rgb_key};
 use autoteach_detect::segment::scene::{self, Scanner};
 use autoteach_detect::segment::{
-    ColorizeParams, GraphKind, RgbImage, SegmentParams, colorize, estimate_normals, scan_graph,
-    segment_cloud,
+    ColorizeParams, FhParams, GraphKind, RgbImage, SegmentParams, colorize, estimate_normals,
+    scan_graph, segment_cloud, segment_graph,
 };
 use criterion::{Criterion, criterion_group, criterion_main};
 
@@ -41,6 +43,33 @@ fn bench(c: &mut Criterion) {
     g.bench_function(format!("estimate_normals {n}"), |b| {
         b.iter(|| estimate_normals(black_box(&s.points), &graph, [0.0; 3]))
     });
+    let (normals, _) = estimate_normals(&s.points, &graph, [0.0; 3]);
+    g.bench_function(
+        format!("segment_graph {n} (sort + merge + min size)"),
+        |b| {
+            b.iter(|| {
+                segment_graph(
+                    n,
+                    black_box(&graph.edges),
+                    &s.true_colors,
+                    Some(&normals),
+                    &FhParams::default(),
+                )
+            })
+        },
+    );
+    let keyed: Vec<(u32, [u32; 2])> = graph
+        .edges
+        .iter()
+        .map(|e| {
+            let k = rgb_key(s.true_colors[e[0] as usize], s.true_colors[e[1] as usize]);
+            (k, *e)
+        })
+        .collect();
+    g.bench_function(
+        format!("counting_sort_by_key {} colour keys", keyed.len()),
+        |b| b.iter(|| counting_sort_by_key(black_box(keyed.clone()), RGB_KEY_MAX, |e| e.0)),
+    );
     let valid: Vec<[f64; 3]> = s
         .points
         .iter()

@@ -19,8 +19,8 @@
 //! segments one of which is smaller than `min_size` (Table 4.1's "minsize"; FH's
 //! post-processing).
 
-use super::counting_sort::counting_sort_order;
-use super::union_find::UnionFind;
+use super::counting_sort::counting_sort_by_key;
+use super::union_find::{MAX_VERTICES, UnionFind};
 use crate::{DetectError, Result};
 
 /// Largest squared RGB distance between 8-bit colours, 3·255²: the colour keys run over
@@ -149,11 +149,11 @@ pub fn segment_graph(
             });
         }
     };
-    if u32::try_from(n).is_err() {
+    if n > MAX_VERTICES {
         return Err(DetectError::InvalidParameter {
             what: "number of points",
             value: n as f64,
-            reason: "at most u32::MAX points",
+            reason: "at most 2^31 - 1 points",
         });
     }
     if let Some(e) = edges
@@ -167,83 +167,121 @@ pub fn segment_graph(
         });
     }
 
-    // Algorithm 4.1 lines 3–4: weights and the counting sort.
-    let m = edges.len();
-    let mut w_rgb = Vec::with_capacity(m);
-    let mut w_norm = Vec::with_capacity(if normals.is_some() { m } else { 0 });
-    let mut keys = Vec::with_capacity(m);
-    for &[i, j] in edges {
-        let k = rgb_key(colors[i as usize], colors[j as usize]);
-        w_rgb.push(f64::from(k).sqrt());
-        if let Some(nr) = normals {
-            w_norm.push(normal_weight(&nr[i as usize], &nr[j as usize]));
-        }
-        keys.push(k);
-    }
-    let order = if params.criteria == Criteria::NormalOnly {
-        let buckets = (std::f64::consts::PI / NORMAL_KEY_QUANTUM).ceil() as u32 + 1;
-        for (k, w) in keys.iter_mut().zip(&w_norm) {
-            *k = ((w / NORMAL_KEY_QUANTUM).round() as u32).min(buckets - 1);
-        }
-        counting_sort_order(&keys, buckets as usize)
-    } else {
-        counting_sort_order(&keys, RGB_KEY_MAX as usize + 1)
+    // Algorithm 4.1 lines 3–4: the sort keys, and the counting sort. The records carry their
+    // endpoints, so lines 5–13 and the minimum-size pass read them in order, sequentially.
+    let normal_key = |e: &[u32; 2], nr: &[[f64; 3]]| {
+        let w = normal_weight(&nr[e[0] as usize], &nr[e[1] as usize]);
+        ((w / NORMAL_KEY_QUANTUM).round() as u32).min(normal_key_max())
     };
-    drop(keys);
+    let sorted: Vec<SortEdge> = match (params.criteria, normals) {
+        (Criteria::NormalOnly, Some(nr)) => counting_sort_by_key(
+            edges
+                .iter()
+                .map(|e| SortEdge {
+                    i: e[0],
+                    j: e[1],
+                    key: normal_key(e, nr),
+                })
+                .collect(),
+            normal_key_max(),
+            |e| e.key,
+        ),
+        _ => counting_sort_by_key(
+            edges
+                .iter()
+                .map(|e| SortEdge {
+                    i: e[0],
+                    j: e[1],
+                    key: rgb_key(colors[e[0] as usize], colors[e[1] as usize]),
+                })
+                .collect(),
+            RGB_KEY_MAX,
+            |e| e.key,
+        ),
+    };
 
-    // Lines 5–13. A singleton's threshold is K / 1 (its internal weight is 0).
+    // Lines 5–13. A singleton's threshold is K / 1 (its internal weight is 0). Each root keeps
+    // its two internal weights `Int` as the union–find payload.
     let use_rgb = params.criteria != Criteria::NormalOnly;
     let use_norm = params.criteria != Criteria::ColorOnly;
-    let mut uf = UnionFind::new(n);
-    let mut int_rgb = vec![0.0f64; n];
-    let mut int_norm = vec![0.0f64; if use_norm { n } else { 0 }];
+    let mut uf = UnionFind::with_data(n, Internal::default());
     let mut unions = 0usize;
-    for &e in &order {
-        let e = e as usize;
-        let [i, j] = edges[e];
-        let a = uf.find(i);
-        let b = uf.find(j);
+    for (k, e) in sorted.iter().enumerate() {
+        if let Some(ahead) = sorted.get(k + LOOKAHEAD) {
+            std::hint::black_box(uf.entry_of(ahead.i) ^ uf.entry_of(ahead.j));
+        }
+        let a = uf.find(e.i);
+        let b = uf.find(e.j);
         if a == b {
             continue;
         }
         let (sa, sb) = (f64::from(uf.size(a)), f64::from(uf.size(b)));
-        let (ai, bi) = (a as usize, b as usize);
-        let wr = w_rgb[e];
-        if use_rgb
-            && !(wr < int_rgb[ai] + params.k_rgb / sa && wr < int_rgb[bi] + params.k_rgb / sb)
-        {
+        let (da, db) = (*uf.data(a), *uf.data(b));
+        // The colour weight of eq. (4.4) (in NormalOnly mode it is neither tested nor kept).
+        let wr = if use_rgb {
+            f64::from(e.key).sqrt()
+        } else {
+            0.0
+        };
+        if use_rgb && !(wr < da.rgb + params.k_rgb / sa && wr < db.rgb + params.k_rgb / sb) {
             continue;
         }
-        let wn = if use_norm { w_norm[e] } else { 0.0 };
-        if use_norm
-            && !(wn < int_norm[ai] + params.k_norm / sa && wn < int_norm[bi] + params.k_norm / sb)
-        {
+        // The normal weight of eq. (4.5), computed only for the edges the colour test passes.
+        let wn = match normals {
+            Some(nr) if use_norm => normal_weight(&nr[e.i as usize], &nr[e.j as usize]),
+            _ => 0.0,
+        };
+        if use_norm && !(wn < da.norm + params.k_norm / sa && wn < db.norm + params.k_norm / sb) {
             continue;
         }
-        let r = uf.union_roots(a, b) as usize;
-        int_rgb[r] = int_rgb[ai].max(int_rgb[bi]).max(wr);
-        if use_norm {
-            int_norm[r] = int_norm[ai].max(int_norm[bi]).max(wn);
-        }
+        let r = uf.union_roots(a, b);
+        *uf.data_mut(r) = Internal {
+            rgb: da.rgb.max(db.rgb).max(wr),
+            norm: da.norm.max(db.norm).max(wn),
+        };
         unions += 1;
     }
 
     // Minimum segment size.
     if params.min_size > 1 {
         let min = u32::try_from(params.min_size).unwrap_or(u32::MAX);
-        for &e in &order {
-            let [i, j] = edges[e as usize];
-            let a = uf.find(i);
-            let b = uf.find(j);
+        for e in &sorted {
+            let a = uf.find(e.i);
+            let b = uf.find(e.j);
             if a != b && (uf.size(a) < min || uf.size(b) < min) {
                 uf.union_roots(a, b);
             }
         }
     }
+    drop(sorted);
     let (labels, num_segments) = uf.labels();
     Ok(Segmentation {
         labels,
         num_segments,
         threshold_unions: unions,
     })
+}
+
+/// How many edges ahead the merge loop loads the endpoints' union–find entries.
+const LOOKAHEAD: usize = 16;
+
+/// Largest normal sort key: π quantised to [`NORMAL_KEY_QUANTUM`].
+fn normal_key_max() -> u32 {
+    (std::f64::consts::PI / NORMAL_KEY_QUANTUM).ceil() as u32
+}
+
+/// An edge with its sort key, in the order the counting sort moves it.
+#[derive(Debug, Clone, Copy)]
+struct SortEdge {
+    i: u32,
+    j: u32,
+    key: u32,
+}
+
+/// A segment's internal weights `Int(S)` of eq. (4.3): the largest colour and normal weights
+/// joined into it (zero for a singleton).
+#[derive(Debug, Clone, Copy, Default)]
+struct Internal {
+    rgb: f64,
+    norm: f64,
 }

@@ -194,14 +194,8 @@ fn majority(labels: &[u32], truth: &[u32], object: u32) -> u32 {
         .unwrap_or(UNLABELLED)
 }
 
-/// Fig. 4.4c–e on the simulated hallway (truth colours, organised scan): colour alone merges
-/// the grey bin with the floor, normals alone merge the blue bin with the wall, both together
-/// separate both pairs.
-#[test]
-#[ignore = "Fig. 4.4 not reproduced yet (issue 34): in a debug build normals alone give the blue \
-            bin segment 15 and the wall 5, and both criteria merge the grey bin with the floor \
-            (4 and 4); the same figure is a strict xfail in tests/test_segment.py"]
-fn fig_4_4_hallway() {
+/// Labels of the simulated hallway at Table 4.1's 0.75° (truth colours, organised scan).
+fn hallway_labels(criteria: Criteria, k_rgb: f64, k_norm: f64) -> (Vec<u32>, Vec<u32>) {
     let sc = scene::preset("hallway").unwrap();
     let scanner = Scanner {
         beam_step_deg: 0.75,
@@ -209,47 +203,71 @@ fn fig_4_4_hallway() {
         ..Scanner::hokuyo()
     };
     let s = scene::scan(&sc, &scanner, 3.0, 2).unwrap();
-    let run = |criteria: Criteria, k_rgb: f64, k_norm: f64| {
-        let params = SegmentParams {
-            fh: fh(k_rgb, k_norm, 100, criteria),
-            edge_cut: 0.25,
-            graph: GraphKind::Scan {
-                lines: s.lines,
-                beams: s.beams,
-            },
-            viewpoint: [0.0; 3],
-        };
-        segment_cloud(&s.points, &s.true_colors, None, &params)
-            .unwrap()
-            .labels
+    let params = SegmentParams {
+        fh: fh(k_rgb, k_norm, 100, criteria),
+        edge_cut: 0.25,
+        graph: GraphKind::Scan {
+            lines: s.lines,
+            beams: s.beams,
+        },
+        viewpoint: [0.0; 3],
     };
-    let (floor, wall, grey_bin, blue_bin) = (1, 2, 6, 7);
-    let color = run(Criteria::ColorOnly, 1000.0, 0.0);
+    let labels = segment_cloud(&s.points, &s.true_colors, None, &params)
+        .unwrap()
+        .labels;
+    (labels, s.labels)
+}
+
+const FLOOR: u32 = 1;
+const WALL: u32 = 2;
+const GREY_BIN: u32 = 6;
+const BLUE_BIN: u32 = 7;
+
+/// Fig. 4.4c and 4.4e on the simulated hallway (Table 4.1 constants): colour alone merges the
+/// grey bin with the floor and separates the blue bin from the wall; both criteria should
+/// separate both pairs. They do not: see "The unsorted threshold" in docs/design/segmentation.md
+/// (the seed's literal eq. (4.3) for the normal weight passes this case but fails others).
+#[test]
+#[ignore = "open (issue 34): both criteria merge the grey bin with the floor (majority segments \
+            4 and 4); the same figure is a strict xfail in tests/test_segment.py"]
+fn fig_4_4_colour_alone_and_both_criteria() {
+    let (color, truth) = hallway_labels(Criteria::ColorOnly, 1000.0, 0.0);
     assert_eq!(
-        majority(&color, &s.labels, grey_bin),
-        majority(&color, &s.labels, floor)
+        majority(&color, &truth, GREY_BIN),
+        majority(&color, &truth, FLOOR)
     );
     assert_ne!(
-        majority(&color, &s.labels, blue_bin),
-        majority(&color, &s.labels, wall)
+        majority(&color, &truth, BLUE_BIN),
+        majority(&color, &truth, WALL)
     );
-    let normal = run(Criteria::NormalOnly, 0.0, 9.0);
+    let (both, truth) = hallway_labels(Criteria::Both, 9000.0, 10.0);
     assert_ne!(
-        majority(&normal, &s.labels, grey_bin),
-        majority(&normal, &s.labels, floor)
+        majority(&both, &truth, GREY_BIN),
+        majority(&both, &truth, FLOOR)
+    );
+    assert_ne!(
+        majority(&both, &truth, BLUE_BIN),
+        majority(&both, &truth, WALL)
+    );
+}
+
+/// Fig. 4.4d on the simulated hallway: normals alone separate the grey bin from the floor
+/// and should merge the blue bin with the wall. The simulated blue bin is a sharp-edged box
+/// 16 cm deep: the PCA normals along its outline turn by tens of degrees, a crease no
+/// segment's normal threshold crosses (see docs/design/segmentation.md).
+#[test]
+#[ignore = "scene property (issue 34): normals alone keep the simulated blue bin (segment 15) \
+            apart from the wall (segment 5); the same figure is a strict xfail in \
+            tests/test_segment.py"]
+fn fig_4_4_normals_alone() {
+    let (normal, truth) = hallway_labels(Criteria::NormalOnly, 0.0, 9.0);
+    assert_ne!(
+        majority(&normal, &truth, GREY_BIN),
+        majority(&normal, &truth, FLOOR)
     );
     assert_eq!(
-        majority(&normal, &s.labels, blue_bin),
-        majority(&normal, &s.labels, wall)
-    );
-    let both = run(Criteria::Both, 9000.0, 10.0);
-    assert_ne!(
-        majority(&both, &s.labels, grey_bin),
-        majority(&both, &s.labels, floor)
-    );
-    assert_ne!(
-        majority(&both, &s.labels, blue_bin),
-        majority(&both, &s.labels, wall)
+        majority(&normal, &truth, BLUE_BIN),
+        majority(&normal, &truth, WALL)
     );
 }
 
@@ -369,4 +387,147 @@ fn simulated_hokuyo_has_the_seed_geometry() {
         )
         .unwrap();
     assert!((hit.t - 1.0).abs() < 1e-12 && sc.objects[hit.object].label == 1);
+}
+
+/// The segmentation as first written (weights for every edge, a permutation from the one-pass
+/// counting sort, weights gathered through it, parents and internal weights in separate
+/// arrays): the reference the cache-friendly [`segment_graph`] must reproduce label for label.
+fn reference_segment_graph(
+    n: usize,
+    edges: &[[u32; 2]],
+    colors: &[[u8; 3]],
+    normals: Option<&[[f64; 3]]>,
+    params: &FhParams,
+) -> (Vec<u32>, usize) {
+    use super::counting_sort::counting_sort_order;
+    use super::felzenszwalb::{NORMAL_KEY_QUANTUM, RGB_KEY_MAX, normal_weight, rgb_key};
+    use super::union_find::UnionFind;
+    let normals = if params.criteria == Criteria::ColorOnly {
+        None
+    } else {
+        normals
+    };
+    let m = edges.len();
+    let mut w_rgb = Vec::with_capacity(m);
+    let mut w_norm = Vec::with_capacity(m);
+    let mut keys = Vec::with_capacity(m);
+    for &[i, j] in edges {
+        let k = rgb_key(colors[i as usize], colors[j as usize]);
+        w_rgb.push(f64::from(k).sqrt());
+        if let Some(nr) = normals {
+            w_norm.push(normal_weight(&nr[i as usize], &nr[j as usize]));
+        }
+        keys.push(k);
+    }
+    let order = if params.criteria == Criteria::NormalOnly {
+        let buckets = (std::f64::consts::PI / NORMAL_KEY_QUANTUM).ceil() as u32 + 1;
+        for (k, w) in keys.iter_mut().zip(&w_norm) {
+            *k = ((w / NORMAL_KEY_QUANTUM).round() as u32).min(buckets - 1);
+        }
+        counting_sort_order(&keys, buckets as usize)
+    } else {
+        counting_sort_order(&keys, RGB_KEY_MAX as usize + 1)
+    };
+    let use_rgb = params.criteria != Criteria::NormalOnly;
+    let use_norm = params.criteria != Criteria::ColorOnly;
+    let mut uf = UnionFind::new(n);
+    let mut int_rgb = vec![0.0f64; n];
+    let mut int_norm = vec![0.0f64; n];
+    for &e in &order {
+        let e = e as usize;
+        let [i, j] = edges[e];
+        let (a, b) = (uf.find(i), uf.find(j));
+        if a == b {
+            continue;
+        }
+        let (sa, sb) = (f64::from(uf.size(a)), f64::from(uf.size(b)));
+        let (ai, bi) = (a as usize, b as usize);
+        let wr = w_rgb[e];
+        if use_rgb
+            && !(wr < int_rgb[ai] + params.k_rgb / sa && wr < int_rgb[bi] + params.k_rgb / sb)
+        {
+            continue;
+        }
+        let wn = if use_norm { w_norm[e] } else { 0.0 };
+        if use_norm
+            && !(wn < int_norm[ai] + params.k_norm / sa && wn < int_norm[bi] + params.k_norm / sb)
+        {
+            continue;
+        }
+        let r = uf.union_roots(a, b) as usize;
+        int_rgb[r] = int_rgb[ai].max(int_rgb[bi]).max(wr);
+        int_norm[r] = int_norm[ai].max(int_norm[bi]).max(wn);
+    }
+    if params.min_size > 1 {
+        let min = params.min_size as u32;
+        for &e in &order {
+            let [i, j] = edges[e as usize];
+            let (a, b) = (uf.find(i), uf.find(j));
+            if a != b && (uf.size(a) < min || uf.size(b) < min) {
+                uf.union_roots(a, b);
+            }
+        }
+    }
+    uf.labels()
+}
+
+/// The speed-up (records sorted digit by digit, normal weights only for edges the colour test
+/// passes, packed union–find records) leaves the labels unchanged: the simulated hallway in
+/// all three modes, and random graphs with random colours and normals.
+#[test]
+fn fast_segmentation_matches_the_reference_labels() {
+    let sc = scene::preset("hallway").unwrap();
+    let scanner = Scanner {
+        beam_step_deg: 0.75,
+        tilt_speed_deg_s: 30.0,
+        ..Scanner::hokuyo()
+    };
+    let s = scene::scan(&sc, &scanner, 3.0, 2).unwrap();
+    let graph = scan_graph(&s.points, s.lines, s.beams, 0.25).unwrap();
+    let (normals, _) = estimate_normals(&s.points, &graph, [0.0; 3]);
+    let n = s.points.len();
+    for p in [
+        fh(9000.0, 10.0, 100, Criteria::Both),
+        fh(1000.0, 0.0, 100, Criteria::ColorOnly),
+        fh(0.0, 9.0, 100, Criteria::NormalOnly),
+        fh(300.0, 0.5, 1, Criteria::Both),
+    ] {
+        let fast = segment_graph(n, &graph.edges, &s.true_colors, Some(&normals), &p).unwrap();
+        let (labels, k) =
+            reference_segment_graph(n, &graph.edges, &s.true_colors, Some(&normals), &p);
+        assert_eq!(fast.num_segments, k, "{p:?}");
+        assert_eq!(fast.labels, labels, "{p:?}");
+    }
+    let mut rng = SimRng::new(7);
+    for trial in 0..20 {
+        let n = 50 + trial * 20;
+        let edges: Vec<[u32; 2]> = (0..3 * n)
+            .map(|_| {
+                let i = (rng.uniform() * n as f64) as u32 % n as u32;
+                let j = (rng.uniform() * n as f64) as u32 % n as u32;
+                [i.min(j), i.max(j)]
+            })
+            .filter(|e| e[0] != e[1])
+            .collect();
+        // Few colour levels, so equal keys (ties in the sort) are common.
+        let colors: Vec<[u8; 3]> = (0..n)
+            .map(|_| [0; 3].map(|_: u8| ((rng.uniform() * 4.0) as u8) * 20))
+            .collect();
+        let normals: Vec<[f64; 3]> = (0..n)
+            .map(|_| {
+                let v = [rng.normal(), rng.normal(), rng.normal() + 3.0];
+                let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                [v[0] / l, v[1] / l, v[2] / l]
+            })
+            .collect();
+        for p in [
+            fh(60.0, 0.8, 3, Criteria::Both),
+            fh(60.0, 0.0, 1, Criteria::ColorOnly),
+            fh(0.0, 0.8, 4, Criteria::NormalOnly),
+        ] {
+            let fast = segment_graph(n, &edges, &colors, Some(&normals), &p).unwrap();
+            let (labels, _) = reference_segment_graph(n, &edges, &colors, Some(&normals), &p);
+            assert_eq!(fast.labels, labels, "trial {trial} {p:?}");
+        }
+    }
 }
