@@ -45,6 +45,14 @@ def as_f64(value: ArrayLike, name: str) -> F64Array:
     return arr.astype(np.float64, copy=False)
 
 
+def as_finite_f64(value: ArrayLike, name: str) -> F64Array:
+    """:func:`as_f64`, refusing NaN and infinity too (for arrays checked in Python, not in Rust)."""
+    arr = as_f64(value, name)
+    if not np.all(np.isfinite(arr)):
+        raise InvalidInputError(f"{name} must be finite, got {arr[~np.isfinite(arr)].ravel()[0]}")
+    return arr
+
+
 def as_float(value: Any, name: str) -> float:
     """Convert a real, finite scalar (Python or NumPy, or a 0-d array) to ``float``."""
     arr = _real_array(value, name, "a real number", (str, bytes, bool, np.bool_), f"{type(value).__name__} of ")

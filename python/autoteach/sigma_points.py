@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
-from autoteach._convert import as_f64, as_float
+from autoteach._convert import as_f64, as_finite_f64, as_float
 from autoteach.errors import InvalidInputError
 
 __all__ = [
@@ -250,15 +250,15 @@ def unscented_transform(
     000_3b1454b2b2194811.txt §5.2): the default ``UT`` of
     :class:`~autoteach.estimate.UnscentedKalmanFilter`'s ``predict``/``update``/``rts_smoother``.
     """
-    s = np.atleast_2d(_finite(sigmas, "sigmas"))
-    wm = _finite(Wm, "Wm").reshape(-1)
-    wc = _finite(Wc, "Wc").reshape(-1)
+    s = np.atleast_2d(as_finite_f64(sigmas, "sigmas"))
+    wm = as_finite_f64(Wm, "Wm").reshape(-1)
+    wc = as_finite_f64(Wc, "Wc").reshape(-1)
     if s.ndim != 2 or s.shape[0] != wm.size or wm.size != wc.size:
         raise InvalidInputError(
             f"sigmas of shape {s.shape} need one mean and one covariance weight per row, got {wm.size} and {wc.size}"
         )
     n = s.shape[1]
-    noise = None if noise_cov is None else _finite(noise_cov, "noise_cov")
+    noise = None if noise_cov is None else as_finite_f64(noise_cov, "noise_cov")
     if noise is not None and noise.shape not in ((), (1,), (n, n), (1, 1)):
         raise InvalidInputError(f"noise_cov must be a scalar or ({n}, {n}), got shape {noise.shape}")
     with np.errstate(over="ignore", invalid="ignore"):
@@ -273,11 +273,3 @@ def unscented_transform(
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
         raise InvalidInputError("the sigma points are too large: their mean or covariance overflows float64")
     return x, P
-
-
-def _finite(value: ArrayLike, name: str) -> F64Array:
-    """``value`` as a float64 array of real, finite numbers."""
-    arr = as_f64(value, name)
-    if not np.all(np.isfinite(arr)):
-        raise InvalidInputError(f"{name} must be finite, got {arr[~np.isfinite(arr)].ravel()[0]}")
-    return arr
