@@ -207,11 +207,34 @@ for e in ("dense", "truncated", "fast_gauss"):
 scene = np.vstack([X, rng.uniform(-3, 3, size=(200, 2))])
 hyps = registration.global_cpd(scene, Y[::2], k=3, max_iterations=30)
 out["global"] = np.vstack([h.cpd.transformed for h in hyps])
+# Other parallel computations: voting, JIoU batches, k-NN segmentation, MRGP, bundle adjustment.
+from autoteach import estimate, polygon, radio, segment, uncertainty
+h = polygon.global_voting(scene, Y[::2], k=3)
+out["voting"] = np.vstack([np.c_[x.rotation, x.translation] for x in h])
+boxes = np.c_[rng.normal(size=(64, 2)), np.full(64, 4.0), np.full(64, 1.8), rng.normal(scale=0.2, size=64)]
+cov = np.broadcast_to(np.diag([0.04, 0.02, 0.05, 0.01, 0.005]), (64, 5, 5))
+out["jiou"] = uncertainty.jiou(boxes, cov, boxes + 0.3, cov)
+pts = rng.normal(size=(3000, 3))
+out["segment"] = segment.segment_colored_cloud(pts, rng.uniform(size=(3000, 3)), graph="knn", min_size=5)
+tx, rx = rng.uniform(0, 50, size=(400, 2)), rng.uniform(0, 50, size=(400, 2))
+rss = -40 - 20 * np.log10(np.hypot(*(tx - rx).T) + 1) + rng.normal(scale=4, size=400)
+out["mrgp"] = radio.MRGP().fit(tx, rx, rss).predict(tx[:50], rx[:50])
+K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
+poses = np.stack([np.eye(4) for _ in range(6)])
+poses[:, 0, 3] = np.linspace(0, 0.5, 6)
+P3 = rng.normal(size=(80, 3)) * 0.4 + [0, 0, 4]
+pi, qi = np.repeat(np.arange(6), 80), np.tile(np.arange(80), 6)
+cam = np.einsum("nij,nj->ni", poses[pi, :3, :3].transpose(0, 2, 1), P3[qi] - poses[pi, :3, 3])
+obs = (cam @ K.T)[:, :2] / cam[:, 2:] + rng.normal(scale=0.5, size=(480, 2))
+start = poses.copy()
+start[1:, :3, 3] += 0.01
+ba = estimate.bundle_adjust(K, start, P3 + 0.01, obs, pi, qi, fixed_poses=[0])
+out["bundle"] = np.concatenate([ba.poses.ravel(), ba.points.ravel()])
 print(json.dumps({{k: hashlib.sha256(np.ascontiguousarray(v).tobytes()).hexdigest() for k, v in out.items()}}))
 """
 
 
-def test_cpd_is_bit_identical_on_one_and_two_threads():
+def test_parallel_results_are_bit_identical_on_one_and_two_threads():
     # Regression: block and chunk counts followed the thread count, so the fixed-order sums
     # were fixed per thread count only (differences of 3e-14 to 9e-12).
     runs = []
@@ -227,4 +250,4 @@ def test_cpd_is_bit_identical_on_one_and_two_threads():
         assert out.returncode == 0, out.stderr[-2000:]
         runs.append(json.loads(out.stdout))
     assert runs[0] == runs[1]
-    assert len(runs[0]) == 10
+    assert len(runs[0]) == 15
