@@ -337,7 +337,135 @@ def _jiou(d: Any) -> None:
     holds(lambda: uncertainty.jiou(a, ca, b, cb, grid=d.draw(ints(2, 30)), samples=d.draw(ints(1, 64))))
 
 
+def _robot(d: Any) -> None:
+    what = d.draw(st.sampled_from(["ik", "base", "encoders"]))
+    if what == "ik":
+        robot = geometry.WaferRobot()
+        T = robot.blade_pose(np.array([0.3, 0.4, -0.2, 0.1, 0.2]))
+        holds(lambda: robot.inverse_kinematics(d.draw(arrays((4, 4), st.just(T))), blade=d.draw(ints(1, 2))))
+    elif what == "base":
+        holds(lambda: geometry.WaferRobot(base=d.draw(arrays((4, 4), poses()))).blade_pose(np.zeros(5)))
+    else:
+        holds(lambda: geometry.joints_from_encoders(d.draw(arrays((5,))), d.draw(arrays((5,)))))
+
+
+def _camera(d: Any) -> None:
+    model = d.draw(st.sampled_from(["pinhole", "brown_conrady", "kannala_brandt"]))
+    n = {"pinhole": 4, "brown_conrady": 9, "kannala_brandt": 8}[model]
+    nominal = np.r_[500.0, 500.0, 320.0, 240.0, np.zeros(n - 4)]
+
+    def call() -> Any:
+        cam = geometry.Camera(model, d.draw(arrays((n,), st.just(nominal))), d.draw(ints(1, 640)), 480)
+        return cam.project(d.draw(arrays((7, 3), st.just(np.c_[np.zeros((7, 2)), np.linspace(1, 3, 7)]))))
+
+    holds(call)
+
+
+def _image(d: Any, h: int, w: int) -> Any:
+    smooth = st.builds(
+        lambda s: np.clip(
+            128 + 60 * np.cos(np.hypot(*np.mgrid[0:h, 0:w] - [[[h / 2]], [[w / 2]]]) / (3 + s)), 0, 255
+        ).astype(np.uint8),
+        st.integers(0, 5),
+    )
+    return d.draw(arrays((h, w), smooth))
+
+
+def _mapping(d: Any) -> None:
+    from autoteach import mapping
+
+    n = d.draw(st.integers(0, 3))
+    ranges = np.full((n, 31), 5.0)
+    args = {
+        "node_ids": np.arange(n),
+        "robot_ids": np.zeros(n, dtype=np.int64),
+        "poses": np.c_[np.arange(n, dtype=float), np.zeros(n), np.zeros(n)],
+        "scans": ranges,
+    }
+    name = d.draw(st.sampled_from(list(args)))
+    args[name] = d.draw(arrays(np.shape(args[name])))
+    r = mapping.Rasterizer(slice_size=2, resolution=0.5, beams=31, max_range=10.0)
+    holds(lambda: r.update(**args))
+
+
+def _pooling(d: Any) -> None:
+    P = np.array([[600.0, -700.0, 0.0, 0.0], [180.0, 0.0, -700.0, 0.0], [1.0, 0.0, 0.0, 0.0]])
+    pts = st.builds(
+        lambda s: np.random.default_rng(s).uniform([1, -20, -1], [40, 20, 1], size=(50, 3)), st.integers(0, 9)
+    )
+
+    def call() -> Any:
+        rows = d.draw(ints(1, 23))
+        op = fusion.SparsePooling.build(
+            d.draw(arrays((50, 3), pts)),
+            d.draw(arrays((3, 4), st.just(P))),
+            (rows, 78, 16.0),
+            (0.0, -30.0, d.draw(st.one_of(st.just(1.0), scalars())), 60, d.draw(ints(1, 60))),
+            neighbourhood=d.draw(ints(1, 3)),
+        )
+        shape = (rows if isinstance(rows, int) and 0 < rows < 100 else 1, 78, 2)
+        return op.forward(d.draw(arrays(shape, st.just(np.ones(shape)))))
+
+    holds(call)
+
+
+def _tracker(d: Any) -> None:
+    from autoteach import track
+
+    t = np.linspace(0.2, 2.8, 30)
+    good = np.c_[300 + 200 * np.cos(t), 200 + 40 * np.sin(t)]
+
+    def call() -> Any:
+        tracker = track.WaferTracker()
+        e = geometry.Ellipse(300.0, 200.0, 200.0, 40.0, 0.0)
+        edges = [track.Edge(e, d.draw(arrays((30, 2), st.just(good))))]
+        tracker.update(edges)
+        return [tr.id for tr in tracker.update(edges, camera_pose=d.draw(arrays((4, 4), poses())))]
+
+    holds(call)
+
+
+def _control(d: Any) -> None:
+    from autoteach import control
+
+    def call() -> Any:
+        plant = control.TransferFunction(
+            d.draw(arrays((1,), st.just(np.array([100.0])))), d.draw(arrays((3,), st.just(np.array([1.0, 2.0, 0.0]))))
+        )
+        return control.bandwidth(plant)
+
+    holds(call, finite=False)  # a bandwidth or margin may be infinite by definition
+
+
 ENTRY_POINTS: dict[str, Callable[[Any], None]] = {
+    "WaferRobot": _robot,
+    "Camera.project": _camera,
+    "detect_wafers": lambda d: holds(lambda: detect.detect_wafers(_image(d, 48, 64))),
+    "detect_ellipses": lambda d: holds(lambda: detect.detect_ellipses(_image(d, 48, 64))),
+    "assign_with_unassigned": lambda d: holds(
+        lambda: detect.assign_with_unassigned(d.draw(arrays((3, 4))), d.draw(arrays((3,))), d.draw(arrays((4,))))
+    ),
+    "global_cpd": lambda d: holds(
+        lambda: registration.global_cpd(
+            d.draw(arrays((30, 2), point_sets(2, 30, 30))),
+            d.draw(arrays((20, 2), point_sets(2, 20, 20))),
+            k=d.draw(ints(1, 3)),
+            max_iterations=10,
+        )
+    ),
+    "Rasterizer.update": _mapping,
+    "SparsePooling": _pooling,
+    "WaferTracker": _tracker,
+    "TransferFunction": _control,
+    "spatial_distribution": lambda d: holds(
+        lambda: uncertainty.spatial_distribution(
+            d.draw(arrays((5,), st.just(np.array([0.0, 0.0, 4.0, 2.0, 0.3])))),
+            d.draw(arrays((5, 5), st.just(np.eye(5) * 0.01))),
+            points=d.draw(arrays((9, 2), st.just(np.zeros((9, 2))))),
+            lattice=d.draw(ints(2, 20)),
+        )
+    ),
+    "clearance": lambda d: holds(lambda: plan.clearance(plan.default_scene()[0], d.draw(arrays((5,)))), finite=False),
     "so3_exp": lambda d: holds(lambda: geometry.so3_exp(d.draw(arrays((3,))))),
     "so3_log": lambda d: holds(lambda: geometry.so3_log(d.draw(arrays((3, 3), rotations())))),
     "se3_exp": lambda d: holds(lambda: geometry.se3_exp(d.draw(arrays((6,))))),

@@ -223,8 +223,11 @@ def _ids(value: ArrayLike, name: str) -> NDArray[np.int64]:
     arr = np.asarray(value)
     if arr.ndim != 1:
         raise InvalidInputError(f"{name} must be one-dimensional, got shape {arr.shape}")
-    if arr.size and not np.issubdtype(arr.dtype, np.integer):
+    # An empty list comes as float64; any other non-integer dtype (complex, bool, object) is refused.
+    if arr.dtype.kind not in "iu" and not (arr.size == 0 and arr.dtype.kind == "f"):
         raise InvalidInputError(f"{name} must hold integers, got dtype {arr.dtype}")
+    if arr.dtype.kind == "u" and arr.size and arr.max() > np.iinfo(np.int64).max:
+        raise InvalidInputError(f"{name} must fit in int64, got {arr.max()}")
     return np.ascontiguousarray(arr, dtype=np.int64)
 
 
@@ -335,6 +338,11 @@ class Rasterizer:
         elif isinstance(scans, np.ndarray) and scans.ndim == 2:
             return np.arange(scans.shape[0], dtype=np.int64), as_f64(scans, "scans")
         else:
+            if isinstance(scans, (str, bytes)) or not hasattr(scans, "__len__") or np.ndim(scans) == 0:
+                raise InvalidInputError(
+                    "scans must be an (n, beams) array, a sequence of n ranges or a mapping, "
+                    f"got {type(scans).__name__}"
+                )
             if len(scans) != len(ids):
                 raise InvalidInputError(f"scans must have one entry per node ({len(ids)}), got {len(scans)}")
             rows = [k for k, s in enumerate(scans) if s is not None]

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
+from autoteach._convert import as_f64, as_float, as_int
 from autoteach._sync import serialized
 from autoteach.errors import InvalidInputError
 from autoteach.geometry import Ellipse
@@ -154,7 +155,7 @@ def _ellipse_array(e: Any, i: int) -> NDArray[np.float64]:
         raise InvalidInputError(f"edge {i} has no ellipse")
     if hasattr(e, "cx"):
         return np.array([e.cx, e.cy, e.a, e.b, e.theta], dtype=np.float64)
-    arr = np.asarray(e, dtype=np.float64).reshape(-1)
+    arr = as_f64(e, f"edge {i}: ellipse").reshape(-1)
     if arr.shape != (5,):
         raise InvalidInputError(f"edge {i}: ellipse must have 5 values (cx, cy, a, b, theta), got {arr.shape}")
     return arr
@@ -173,15 +174,21 @@ def _kind(k: Any, i: int) -> str:
 def _edge_tuple(edge: Any, i: int) -> tuple[NDArray[np.float64], NDArray[np.float64], str, int, float]:
     ell = _ellipse_array(_get(edge, "ellipse"), i)
     pts = _get(edge, "points")
-    pts = np.zeros((0, 2)) if pts is None else np.ascontiguousarray(np.asarray(pts, dtype=np.float64))
+    pts = np.zeros((0, 2)) if pts is None else np.ascontiguousarray(as_f64(pts, f"edge {i}: points"))
     if pts.size and (pts.ndim != 2 or pts.shape[1] != 2):
         raise InvalidInputError(f"edge {i}: points must have shape (N, 2), got {pts.shape}")
     wid = _get(edge, "wafer_id")
-    wid = i if wid is None else int(wid)
+    wid = i if wid is None else as_int(wid, f"edge {i}: wafer_id", signed=True)
     if wid < 0:
         raise InvalidInputError(f"edge {i}: wafer_id must be >= 0, got {wid}")
     res = _get(edge, "residual")
-    return ell, pts.reshape(-1, 2), _kind(_get(edge, "kind"), i), wid, float(res if res is not None else 0.0)
+    return (
+        ell,
+        pts.reshape(-1, 2),
+        _kind(_get(edge, "kind"), i),
+        wid,
+        (0.0 if res is None else as_float(res, f"edge {i}: residual")),
+    )
 
 
 @serialized
@@ -239,7 +246,7 @@ class WaferTracker:
             if params.get(key) is not None:
                 params[key] = tuple(float(v) for v in params[key])
         if params.get("intrinsics") is not None:
-            params["intrinsics"] = np.asarray(params["intrinsics"], dtype=np.float64)
+            params["intrinsics"] = as_f64(params["intrinsics"], "intrinsics")
         self.params = dict(params)
         self._inner = _core.TrackWaferTracker(**params)
         self._tracks: dict[int, Track] = {}
@@ -275,7 +282,7 @@ class WaferTracker:
         """
         edges = list(edges)
         tuples = [_edge_tuple(e, i) for i, e in enumerate(edges)]
-        pose = None if camera_pose is None else np.ascontiguousarray(np.asarray(camera_pose, dtype=np.float64))
+        pose = None if camera_pose is None else np.ascontiguousarray(as_f64(camera_pose, "camera_pose"))
         frame = self.frame
         owners = self._inner.update(tuples, pose)
         self.frame_assignments.append(list(owners))

@@ -635,22 +635,24 @@ fn binners(p: &Problem, pairs: &Pairs, shift: f64) -> Result<Vec<Binner>> {
             }
         };
         if !wrapped {
-            let (mut lo, mut hi) = (i64::MAX, i64::MIN);
+            // The bin range in f64: an i64 difference of saturated bins (a width of 1e-20 of
+            // the data's extent) would wrap past the guard below.
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
             for q in 0..n {
-                let k = b.raw(pairs.vals[q * pairs.dv + dim]);
+                let k = (f64::from(pairs.vals[q * pairs.dv + dim]) / b.width + b.shift).floor();
                 lo = lo.min(k);
                 hi = hi.max(k);
             }
-            let count = (hi - lo + 1).max(1) as u64;
-            if count > 50_000_000 {
+            let span = hi - lo + 1.0;
+            if span.is_nan() || span > 50_000_000.0 {
                 return Err(DetectError::InvalidParameter {
                     what: "translation_bin",
                     value: b.width,
                     reason: "too small for the extent of the data (over 5·10⁷ bins in one dimension)",
                 });
             }
-            b.kmin = lo.min(hi);
-            b.bins = count as usize;
+            b.kmin = lo.min(hi) as i64;
+            b.bins = span.max(1.0) as usize;
         }
         out.push(b);
     }

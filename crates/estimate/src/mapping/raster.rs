@@ -276,6 +276,7 @@ impl Rasterizer {
                 }
             }
         }
+        self.check_extent(graph)?;
         let known_present = graph.len() - scans.iter().filter(|s| s.is_some()).count();
         if known_present < self.nodes.len() {
             let gone: Vec<u64> = self
@@ -292,6 +293,36 @@ impl Rasterizer {
             )));
         }
         Ok(scans)
+    }
+
+    /// The map can only cover the poses' box grown by the sensor range: its cells must have
+    /// i32 indices (|x|/resolution < 2³⁰) and its vote buffers must fit in memory. Checked
+    /// here so that a pose of 1e8 m is an error rather than an aborting allocation, and 1e300 m
+    /// an error rather than a map on saturated cell indices.
+    fn check_extent(&self, graph: &[NodeInput<'_>]) -> Result<()> {
+        let (res, reach) = (self.cfg.resolution, self.cfg.scan.max_range);
+        let limit = f64::from(1u32 << 30);
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for n in graph {
+            for c in 0..2 {
+                let v = n.pose[c];
+                if (v.abs() + reach) / res >= limit {
+                    return Err(EstimateError::InvalidMapInput(format!(
+                        "pose of node {} has coordinate {v} m, beyond the map's reach of {:.3e} m \
+                         at resolution {res} m (cell indices are 32-bit)",
+                        n.id,
+                        limit * res - reach
+                    )));
+                }
+                lo[c] = lo[c].min(v);
+                hi[c] = hi[c].max(v);
+            }
+        }
+        let cells = |c: usize| ((hi[c] - lo[c] + 2.0 * reach) / res).ceil() as usize + 1;
+        let area = autoteach_geometry::alloc::checked_count("map cells", cells(0), cells(1))?;
+        // Free and occupied votes (u16 each) and a stamp (u32) per cell.
+        autoteach_geometry::alloc::ensure_fits::<u64>("map cells", area)?;
+        Ok(())
     }
 
     /// Rasterizes the next graph (Algorithm 2.1 for CoverComposite) and returns its map.

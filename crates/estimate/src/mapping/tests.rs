@@ -438,6 +438,25 @@ fn bad_input_gives_clear_errors_and_leaves_state_untouched() {
             .to_string()
             .contains("negative")
     );
+    // A pose beyond 32-bit cell indices (1e300 m), and poses whose box cannot be allocated
+    // (1e8 m apart at 0.1 m: 1e18 cells).
+    let e = r
+        .update(&[node(5, [1e300, 0.0, 0.0], Some(leaked))])
+        .unwrap_err();
+    assert!(e.to_string().contains("beyond the map's reach"), "{e}");
+    let e = r
+        .update(&[
+            node(6, [0.0; 3], Some(leaked)),
+            node(7, [1e8, 1e8, 0.0], Some(leaked)),
+        ])
+        .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            EstimateError::Geometry(autoteach_geometry::GeometryError::OutOfMemory { .. })
+        ),
+        "{e}"
+    );
     assert_eq!(r.num_nodes(), 0, "a rejected update changed the state");
     // NaN and inf ranges are data: NaN dropped, inf = no return.
     let mixed: &'static [f64] = Box::leak(vec![f64::NAN, f64::INFINITY, 2.0].into_boxed_slice());

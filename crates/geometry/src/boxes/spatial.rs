@@ -427,7 +427,8 @@ pub fn pg_moments_at(
         [c * c * a + s * s * b, c * s * (a - b)],
         [c * s * (a - b), s * s * a + c * c * b],
     ];
-    let mut comps = Vec::with_capacity(lattice * lattice);
+    let n_comps = crate::alloc::checked_count("p_G lattice components", lattice, lattice)?;
+    let mut comps = crate::alloc::try_with_capacity("p_G lattice components", n_comps)?;
     for i in 0..lattice {
         for j in 0..lattice {
             let v0 = [-0.5 + (i as f64 + 0.5) * h, -0.5 + (j as f64 + 0.5) * h];
@@ -455,7 +456,13 @@ pub fn pg_moments_at(
                 .map(|(m, inv, norm)| {
                     let (dx, dy) = (u[0] - m[0], u[1] - m[1]);
                     let q = inv[0][0] * dx * dx + 2.0 * inv[0][1] * dx * dy + inv[1][1] * dy * dy;
-                    norm * (-0.5 * q).exp()
+                    // The form is positive definite: NaN only comes from ∞ − ∞ when the squares
+                    // overflow (a point ~1e154 away), where the density is 0.
+                    if q.is_nan() {
+                        0.0
+                    } else {
+                        norm * (-0.5 * q).exp()
+                    }
                 })
                 .sum::<f64>()
                 * weight
