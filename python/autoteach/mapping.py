@@ -338,7 +338,7 @@ class Rasterizer:
         elif isinstance(scans, np.ndarray) and scans.ndim == 2:
             return np.arange(scans.shape[0], dtype=np.int64), as_f64(scans, "scans")
         else:
-            if isinstance(scans, (str, bytes)) or not hasattr(scans, "__len__") or np.ndim(scans) == 0:
+            if isinstance(scans, (str, bytes)) or not hasattr(scans, "__len__") or getattr(scans, "ndim", 1) == 0:
                 raise InvalidInputError(
                     "scans must be an (n, beams) array, a sequence of n ranges or a mapping, "
                     f"got {type(scans).__name__}"
