@@ -645,9 +645,15 @@ fn binners(p: &Problem, pairs: &Pairs, shift: f64) -> Result<Vec<Binner>> {
             }
             let span = hi - lo + 1.0;
             if span.is_nan() || span > 50_000_000.0 {
+                // The width in the caller's units (translations are binned in the voting frame).
+                let (what, value) = if angle {
+                    ("angle_bin", b.width)
+                } else {
+                    ("translation_bin", b.width * p.unit * p.scale)
+                };
                 return Err(DetectError::InvalidParameter {
-                    what: "translation_bin",
-                    value: b.width,
+                    what,
+                    value,
                     reason: "too small for the extent of the data (over 5·10⁷ bins in one dimension)",
                 });
             }
@@ -1157,6 +1163,19 @@ mod tests {
             let tr = &h[0].translation / unit;
             assert!((tr - &base[0].translation).amax() < 1e-6, "unit {unit}");
             assert!((angle(&h[0].rotation) - 0.7).abs() < 0.05);
+        }
+        // A bin too small for the data is reported in the caller's units.
+        let tiny = VotingOptions {
+            translation_bin: Some(1e-9),
+            ..VotingOptions::default()
+        };
+        match global_voting(&(to_mat2(&x) * 1e40), &(to_mat2(&y) * 1e40), &tiny) {
+            Err(DetectError::InvalidParameter {
+                what: "translation_bin",
+                value,
+                ..
+            }) => assert!((value / 1e-9 - 1.0).abs() < 1e-9, "{value}"),
+            other => panic!("{other:?}"),
         }
     }
     #[test]
