@@ -28,6 +28,18 @@ use rayon::prelude::*;
 use super::Feature;
 use crate::{DetectError, Result};
 
+/// `a · b` cells, which the kernel's u32 cell indices must be able to address.
+fn cell_count(what: &'static str, a: usize, b: usize) -> Result<usize> {
+    match a.checked_mul(b) {
+        Some(n) if n <= u32::MAX as usize => Ok(n),
+        _ => Err(DetectError::InvalidParameter {
+            what,
+            value: a as f64 * b as f64,
+            reason: "more cells than the kernel's 32-bit cell indices address (2³² − 1)",
+        }),
+    }
+}
+
 /// The image feature map: `rows × cols` cells of `stride × stride` pixels; pixel `(u, v)` falls
 /// in cell `(⌊v/stride⌋, ⌊u/stride⌋)`, flat index `row·cols + col`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,6 +62,7 @@ impl ImageGrid {
                 reason: "need rows, cols ≥ 1 and a positive finite stride",
             });
         }
+        cell_count("image grid (rows × cols)", rows, cols)?;
         Ok(Self { rows, cols, stride })
     }
 
@@ -93,6 +106,7 @@ impl BevGrid {
                 reason: "need nx, ny ≥ 1, a positive cell size and finite edges",
             });
         }
+        cell_count("BEV grid (nx × ny)", nx, ny)?;
         Ok(Self {
             x_min,
             y_min,

@@ -202,6 +202,10 @@ fn bad_inputs_give_errors() {
     assert!(SparsePooling::build(&[[1.0, 0.0, 0.0]], &p, ig, bg, 2).is_err());
     assert!(ImageGrid::new(0, 4, 1.0).is_err());
     assert!(BevGrid::new(0.0, 0.0, -1.0, 4, 4).is_err());
+    // More cells than u32 indices address (the product 60·2⁶² wrapped to 0 before).
+    assert!(BevGrid::new(0.0, 0.0, 1.0, 60, 1 << 62).is_err());
+    assert!(ImageGrid::new(1 << 16, 1 << 16, 1.0).is_err());
+    assert!(ImageGrid::new(1 << 16, (1 << 16) - 1, 1.0).is_ok());
     let op = SparsePooling::build(&[[1.0, 0.0, 0.0]], &p, ig, bg, 1).unwrap();
     let mut out = vec![0.0; 16 * 3];
     let err = op
