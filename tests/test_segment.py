@@ -24,6 +24,13 @@ def hallway() -> segment.SimulatedScan:
     return segment.simulate_scan("hallway", seed=3)
 
 
+@pytest.fixture(scope="module")
+def hallway_both(hallway: segment.SimulatedScan) -> np.ndarray:
+    """Labels of the hallway with both criteria (Table 4.1, Fig. 4.4e), shared by the Fig. 4.4 tests."""
+    points, colors = hallway.cloud()
+    return segment.segment_colored_cloud(points, colors, k_rgb=9000, k_norm=10, min_size=100)
+
+
 def _majority(labels: np.ndarray, truth: np.ndarray, obj: int) -> int:
     sel = labels[(truth == obj) & (labels >= 0)]
     values, counts = np.unique(sel, return_counts=True)
@@ -42,11 +49,11 @@ def _are(truth: np.ndarray, labels: np.ndarray) -> float:
     "separate them on this scan either",
     strict=True,
 )
-def test_fig_4_4_colour_alone_and_both_criteria(hallway):
+def test_fig_4_4_colour_alone_and_both_criteria(hallway, hallway_both):
     points, colors = hallway.cloud()
     truth = hallway.labels
     color = segment.segment_colored_cloud(points, colors, criteria="color", k_rgb=1000, min_size=100)
-    both = segment.segment_colored_cloud(points, colors, k_rgb=9000, k_norm=10, min_size=100)
+    both = hallway_both
     # Fig. 4.4c: colour alone merges the grey bin with the grey floor, keeps the blue bin apart.
     assert _majority(color, truth, GREY_BIN) == _majority(color, truth, FLOOR)
     assert _majority(color, truth, BLUE_BIN) != _majority(color, truth, WALL)
@@ -63,11 +70,11 @@ def test_fig_4_4_colour_alone_and_both_criteria(hallway):
     "(majority segments 4 vs 1 at K_norm 9; still apart at 20, 50, 100)",
     strict=True,
 )
-def test_fig_4_4_normals_alone_merge_the_blue_bin_with_the_wall(hallway):
+def test_fig_4_4_normals_alone_merge_the_blue_bin_with_the_wall(hallway, hallway_both):
     points, colors = hallway.cloud()
     truth = hallway.labels
     normal = segment.segment_colored_cloud(points, colors, criteria="normal", k_norm=9, min_size=100)
-    both = segment.segment_colored_cloud(points, colors, k_rgb=9000, k_norm=10, min_size=100)
+    both = hallway_both
     # Fig. 4.4d: normals alone separate the grey bin from the floor and merge the blue bin with the wall.
     assert _majority(normal, truth, GREY_BIN) != _majority(normal, truth, FLOOR)
     assert _majority(normal, truth, BLUE_BIN) == _majority(normal, truth, WALL)

@@ -195,14 +195,19 @@ fn majority(labels: &[u32], truth: &[u32], object: u32) -> u32 {
 }
 
 /// Labels of the simulated hallway at Table 4.1's 0.75° (truth colours, organised scan).
-fn hallway_labels(criteria: Criteria, k_rgb: f64, k_norm: f64) -> (Vec<u32>, Vec<u32>) {
-    let sc = scene::preset("hallway").unwrap();
+/// The hallway at ¾° beams and 30°/s tilt (colour noise 3, seed 2): the scan the Fig. 4.4 and
+/// reference-label tests share.
+fn coarse_hallway() -> scene::Scan {
     let scanner = Scanner {
         beam_step_deg: 0.75,
         tilt_speed_deg_s: 30.0,
         ..Scanner::hokuyo()
     };
-    let s = scene::scan(&sc, &scanner, 3.0, 2).unwrap();
+    scene::scan(&scene::preset("hallway").unwrap(), &scanner, 3.0, 2).unwrap()
+}
+
+fn hallway_labels(criteria: Criteria, k_rgb: f64, k_norm: f64) -> (Vec<u32>, Vec<u32>) {
+    let s = coarse_hallway();
     let params = SegmentParams {
         fh: fh(k_rgb, k_norm, 100, criteria),
         edge_cut: 0.25,
@@ -476,13 +481,7 @@ fn reference_segment_graph(
 /// all three modes, and random graphs with random colours and normals.
 #[test]
 fn fast_segmentation_matches_the_reference_labels() {
-    let sc = scene::preset("hallway").unwrap();
-    let scanner = Scanner {
-        beam_step_deg: 0.75,
-        tilt_speed_deg_s: 30.0,
-        ..Scanner::hokuyo()
-    };
-    let s = scene::scan(&sc, &scanner, 3.0, 2).unwrap();
+    let s = coarse_hallway();
     let graph = scan_graph(&s.points, s.lines, s.beams, 0.25).unwrap();
     let (normals, _) = estimate_normals(&s.points, &graph, [0.0; 3]);
     let n = s.points.len();
