@@ -102,11 +102,9 @@ def _voting_options(**kw: Any) -> dict[str, Any]:
         raise InvalidInputError(f"count must be 'y' or 'pairs', got {count!r}")
     # Counts are unsigned in the compiled options: name a negative one here (the user's `k`
     # is the options' `top_k`).
-    names = {"top_k": "k", "neighbours": "neighbours", "min_votes": "min_votes"}
-    names |= {"max_points": "max_points", "max_pairs": "max_pairs"}
-    for key, name in names.items():
+    for key in ("top_k", "neighbours", "min_votes", "max_points", "max_pairs"):
         if key in kw:
-            kw[key] = as_int(kw[key], name)
+            kw[key] = as_int(kw[key], "k" if key == "top_k" else key)
     return {k: v for k, v in kw.items() if v is not None}
 
 
