@@ -26,6 +26,7 @@ coincident ends, NaN RSS, an empty training set and links outside the map raise
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -549,18 +550,33 @@ def compare(
     stride: int = 5,
     bins: int = 10,
     max_train: Mapping[str, int] | None = None,
+    params: Mapping[str, Mapping[str, Mapping[str, float]]] | None = None,
 ) -> dict[str, Any]:
     """Replay every environment with the four models; returns a JSON-ready summary.
+
+    ``params[env][model]`` overrides a model's keyword arguments in that environment (for example
+    the meta-parameters :func:`autoteach.radio_tuning.tune` found on training missions); the
+    others keep their defaults (Table 3.1, evaluation 1).
 
     ``results[env][model]``: ``rmse`` per horizon bin, ``near_term`` (pooled 0-6 s), ``far``
     (pooled 10-20 s) and fit seconds. ``ranking_ok``: MATTE < MRT < MRGP < LogFit near-term.
     """
     out: dict[str, Any] = {"sigma": sigma, "duration": duration, "seed": seed, "stride": stride, "results": {}}
     caps = dict(DEFAULT_MAX_TRAIN if max_train is None else max_train)
+    for env, per_model in (params or {}).items():
+        unknown = sorted(set(per_model) - set(MODELS))
+        if env not in environments or unknown:
+            raise InvalidInputError(
+                f"params: environment {env!r} is not compared, or unknown models {unknown} "
+                f"(models: {', '.join(MODELS)})"
+            )
     for k, env in enumerate(environments):
         sim = simulate(env, duration=duration, seed=seed + 101 * k, sigma=sigma)
-        res = replay(sim, stride=stride, bins=bins, max_train=caps)
+        given = (params or {}).get(env, {})
+        models = {m: functools.partial(cls, **given.get(m, {})) for m, cls in MODELS.items()}
+        res = replay(sim, models=models, stride=stride, bins=bins, max_train=caps)
         row: dict[str, Any] = {"horizons": res.horizons.tolist(), "steps": res.steps, "models": {}}
+        row["params"] = {m: dict(v) for m, v in given.items()}
         for m in res.rmse:
             far = res.horizons >= 10.0
             c = res.count[m][far]

@@ -3,11 +3,13 @@
 Usage::
 
     autoteach radio --simulate [--environments office,campus,mixed] [--duration 240] [--seed 0]
-                    [--stride 5] [--out radio_out] [--json]
+                    [--stride 5] [--tune] [--out radio_out] [--json]
 
 Replays simulated missions in 2 s steps (section 3.3), prints the RMSE of LogFit, MRGP, MRT and
 MATTE per prediction horizon, and writes error-versus-horizon plots (like Figs. 3.5-3.6) and
 MATTE's attenuation map (Fig. 3.1) into ``--out`` (needs matplotlib: ``pip install autoteach[plot]``).
+With ``--tune``, MRT's and MATTE's meta-parameters are first found by compass search on two
+training missions per environment (section 3.3; :mod:`autoteach.radio_tuning`), as the seed did.
 """
 
 from __future__ import annotations
@@ -34,6 +36,11 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--sigma", type=float, default=4.0, help="shadowing standard deviation, dB (default 4)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--stride", type=int, default=5, help="evaluate every N-th 2 s step (default 5)")
+    p.add_argument(
+        "--tune",
+        action="store_true",
+        help="compass-search MRT's and MATTE's parameters on two training missions per environment first (sec. 3.3)",
+    )
     p.add_argument("--out", type=Path, default=Path("radio_out"), help="folder for the plots (default radio_out)")
     p.add_argument("--no-plots", action="store_true", help="do not write plots")
     p.set_defaults(func=run)
@@ -48,6 +55,10 @@ def format_table(r: dict[str, Any]) -> str:
             bins = " ".join(f"{x:.1f}" for x in v["rmse"])
             lines.append(f"{env:<10}{m:<8}{v['near_term']:>8.2f}{v['far']:>9.2f}{1e3 * v['fit_seconds']:>9.1f}  {bins}")
         lines.append(f"{'':<10}ranking MATTE < MRT < MRGP < LogFit (0-6 s): {'yes' if row['ranking_ok'] else 'no'}")
+        for m, p in r.get("tuned", {}).get(env, {}).items():
+            values = ", ".join(f"{k}={v:.4g}" for k, v in p["params"].items())
+            rmse = p["training_rmse"]
+            lines.append(f"{'':<10}{m} tuned on training missions: {values} (training RMSE {rmse:.2f} dB)")
     return "\n".join(lines)
 
 
@@ -120,7 +131,12 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.stride < 1 or args.duration <= 30:
         raise InvalidInputError("--stride must be >= 1 and --duration > 30 s")
-    result = compare(envs, duration=args.duration, seed=args.seed, sigma=args.sigma, stride=args.stride)
+    if args.tune:
+        from autoteach.radio_tuning import compare_tuned
+
+        result = compare_tuned(envs, duration=args.duration, seed=args.seed, sigma=args.sigma, stride=args.stride)
+    else:
+        result = compare(envs, duration=args.duration, seed=args.seed, sigma=args.sigma, stride=args.stride)
     if not args.no_plots:
         result["plots"] = write_plots(result, args.out, args.seed)
     if args.json:
