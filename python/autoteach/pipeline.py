@@ -706,7 +706,7 @@ def gate_detections(
     side face (the bright band between its two rims) is at least that wide, measured along the
     rim's image normal (:func:`band_width`). Where the band narrows towards the ends of the
     visible arc its two edges blur into one and the detector's edge points are biased and
-    noisier (measured against the simulator's truth, see ``docs/benchmarks.md``): those
+    noisier (measured against the simulator's truth, see ``docs/design/handeye.md``): those
     points carry a correlated error that the per-point noise model of eq. (5.5) lacks.
 
     ``band_weights`` gives every kept point a standard-deviation factor from the predicted band
