@@ -620,9 +620,9 @@ def _drop_sparse_wafers(obs: Observations, min_frames: int) -> Observations:
 #: RMS normal offset of the detected points from the true rim, relative to that of upper-rim
 #: points on bands of at least 3 px (0.0615 px), at the centres of the bins 0–1, 1–1.5, then
 #: 0.25 px wide to 3.5 (1.5–2 measured as one bin: its value serves both entries), and 3.5–4
-#: px. Re-measured on the session-12 detector with its defaults (the arc rules, rim screens and
-#: partner search of sessions 10–12) on the simulated sessions of seeds 0–4 (200 frames, 395 k
-#: gated points, reference RMS 0.0615 px; ``python benchmarks/autoteach_sessions.py
+#: px. Measured on the detector with its default rules (arc rules, rim screens, partner search)
+#: on the simulated sessions of seeds 0–4 (200 frames, 395 k gated points, reference RMS
+#: 0.0615 px; ``python benchmarks/autoteach_sessions.py
 #: --noise-model --seeds 0 1 2 3 4``); seeds 5–7 were not used. Where the band narrows its
 #: two blurred edges merge and the band-profile fit of the detector is biased along the edge;
 #: the lower rim, the band's far edge, is the worse one from 3 px down.
@@ -706,7 +706,7 @@ def gate_detections(
     side face (the bright band between its two rims) is at least that wide, measured along the
     rim's image normal (:func:`band_width`). Where the band narrows towards the ends of the
     visible arc its two edges blur into one and the detector's edge points are biased and
-    noisier (measured against the simulator's truth, see ``docs/benchmarks.md``): those
+    noisier (measured against the simulator's truth, see ``docs/design/handeye.md``): those
     points carry a correlated error that the per-point noise model of eq. (5.5) lacks.
 
     ``band_weights`` gives every kept point a standard-deviation factor from the predicted band
