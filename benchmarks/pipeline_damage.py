@@ -1,4 +1,4 @@
-"""Robustness of the detect front end over random damage patterns (docs/benchmarks.md, session 19).
+"""Robustness of the detect front end over random damage patterns (figures in docs/benchmarks.md).
 
 The detections of the 40-frame rendered session of seed 3 are damaged as in
 ``tests/test_pipeline_detect.py``: 40 % of the rims dropped, every fourth frame empty, one false arc

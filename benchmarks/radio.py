@@ -1,7 +1,8 @@
 """Radio signal-strength prediction (issue 33, seed 004 ch. 3): accuracy and speed, one run.
 
 1. Accuracy: replay of the three simulated environments (office: indoor-heavy, campus: outdoor-heavy,
-   mixed) in 2 s steps (section 3.3), RMSE per horizon for LogFit, MRGP, MRT and MATTE at 4 dB shadowing.
+   mixed) in 2 s steps (section 3.3), RMSE per horizon for LogFit, MRGP, MRT and MATTE at 4 dB shadowing;
+   with ``--tune``, MRT's and MATTE's parameters are first compass-searched on training missions (seed §3.3).
 2. MRGP on 6 000 training links: fit time, and scikit-learn's ``GaussianProcessRegressor`` (dense
    Cholesky; the same kernel as a vectorised NumPy callable, fixed hyper-parameters, ``optimizer=None``)
    on the same data; predictions compared.
@@ -25,7 +26,7 @@ from scipy.sparse import linalg as splinalg
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import Kernel
 
-from autoteach import radio
+from autoteach import radio, radio_tuning
 
 
 class SkLinkKernel(Kernel):
@@ -76,9 +77,12 @@ def timed(f, repeats=3):
     return statistics.median(ts), out
 
 
-def accuracy(stride: int, duration: float) -> dict:
+def accuracy(stride: int, duration: float, tune: bool) -> dict:
     t0 = time.perf_counter()
-    r = radio.compare(radio.ENVIRONMENTS, duration=duration, seed=0, sigma=4.0, stride=stride)
+    if tune:  # the seed's protocol (§3.3): MRT's and MATTE's parameters by compass search on training missions
+        r = radio_tuning.compare_tuned(radio.ENVIRONMENTS, duration=duration, seed=0, sigma=4.0, stride=stride)
+    else:
+        r = radio.compare(radio.ENVIRONMENTS, duration=duration, seed=0, sigma=4.0, stride=stride)
     r["seconds"] = time.perf_counter() - t0
     print(f"\n== accuracy: RMSE (dB) at 4 dB shadowing, {duration:g} s missions, every {stride}. 2 s step ==")
     print(f"{'env':<8}{'model':<8}{'0-6 s':>7}{'10-20 s':>9}{'fit ms':>8}   per bin 0-2 ... 18-20 s")
@@ -87,6 +91,9 @@ def accuracy(stride: int, duration: float) -> dict:
             bins = " ".join(f"{x:.1f}" for x in v["rmse"])
             print(f"{env:<8}{m:<8}{v['near_term']:>7.2f}{v['far']:>9.2f}{1e3 * v['fit_seconds']:>8.0f}   {bins}")
         print(f"        ranking MATTE < MRT < MRGP < LogFit: {row['ranking_ok']}")
+        for m, p in r.get("tuned", {}).get(env, {}).items():
+            rmse, evals = p["training_rmse"], p["evaluations"]
+            print(f"        {m} tuned: {p['params']} (training RMSE {rmse:.2f} dB, {evals} evaluations)")
     return r
 
 
@@ -179,6 +186,7 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=240.0)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--json", type=str, default=None)
+    ap.add_argument("--tune", action="store_true", help="accuracy with MRT/MATTE tuned on training missions (sec. 3.3)")
     ap.add_argument(
         "--only", action="append", choices=["solves", "mrgp", "accuracy"], help="run only these parts (repeatable)"
     )
@@ -194,7 +202,7 @@ def main() -> None:
     if "mrgp" in parts:
         out["mrgp"] = mrgp_vs_sklearn(2000 if args.quick else 6000)
     if "accuracy" in parts:
-        out["accuracy"] = accuracy(args.stride, args.duration)
+        out["accuracy"] = accuracy(args.stride, args.duration, args.tune)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1, default=float)

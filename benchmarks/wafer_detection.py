@@ -14,7 +14,7 @@ bright boundary of the wafer forms two edges"). Rim points where the side face t
 only the silhouette of the dark top/bottom face against what lies behind: on these images their
 contrast is 3.6 grey levels in the median (noise 2), against 86 for band edges, so a rim seen
 only there (a disturbance wafer high above the camera whose front arc is above the image) is not
-a visible edge. ``--all-silhouettes`` counts those rims too (the session-2 definition). A detection matches a rim
+a visible edge. ``--all-silhouettes`` counts those rims too (the earlier definition). A detection matches a rim
 when its kind (upper/lower) agrees, its centre is within 1 px and both semi-axes are within 1 %
 (optimal one-to-one matching). Recall = matched visible rims / visible rims; precision = matched
 detections / detections, where a detection that matches a rim that is present but below the

@@ -30,10 +30,8 @@ def scene() -> tuple[np.ndarray, list[dict]]:
 
 def test_robustness_on_20_rendered_images() -> None:
     """Smaller version of benchmarks/wafer_detection.py (which runs 210 images)."""
-    # Regression floors just under the measured level (session 9: recall 0.838 of 68 visible
-    # rims, precision 0.95, median centre error 0.094 px, axis 0.17 % on these 20 images), short
-    # of the issue's recall/precision goals (0.98 / 0.98): see docs/benchmarks.md for the
-    # failure modes.
+    # Regression floors under the measured level on these 20 images; the failure modes are in
+    # docs/design/wafer-rims.md.
     r = bench.evaluate(20, seed=101)
     assert r["visible_rims"] >= 60
     assert r["recall"] >= 0.80, r

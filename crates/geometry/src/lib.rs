@@ -23,6 +23,7 @@ pub mod boxes;
 pub mod camera;
 pub mod collision;
 pub mod conic;
+pub mod counting_sort;
 pub mod error;
 pub mod lie;
 pub mod plan;

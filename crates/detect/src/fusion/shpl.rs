@@ -23,6 +23,7 @@
 //! `N·k²` non-zeros, whatever the feature-map sizes. Points behind the camera (`w ≤ 0`) or
 //! outside either grid are dropped and counted, never written out of bounds.
 
+use autoteach_geometry::counting_sort::bucket_offsets;
 use rayon::prelude::*;
 
 use super::Feature;
@@ -163,17 +164,13 @@ pub struct Csr {
     data32: Vec<f32>,
 }
 
-/// Start offsets of `n` counting-sort buckets for `keys` (each `< n`): bucket `k` occupies
-/// `[out[k], out[k + 1])`.
-fn bucket_offsets(n: usize, keys: impl Iterator<Item = u32>) -> Vec<u32> {
-    let mut ptr = vec![0u32; n + 1];
-    for k in keys {
-        ptr[k as usize + 1] += 1;
-    }
-    for k in 0..n {
-        ptr[k + 1] += ptr[k];
-    }
-    ptr
+/// [`bucket_offsets`] as the `u32` row and column pointers of [`Csr`] (fewer than 2³² entries:
+/// the kernel indexes with `u32`).
+fn bucket_offsets_u32(n: usize, keys: impl Iterator<Item = u32>) -> Vec<u32> {
+    bucket_offsets(n, keys)
+        .into_iter()
+        .map(|o| o as u32)
+        .collect()
 }
 
 impl Csr {
@@ -185,7 +182,7 @@ impl Csr {
     /// `O(nnz + rows + cols)`.
     fn from_triplets(rows: usize, cols: usize, trip: &[(u32, u32, f64)]) -> Self {
         // Column buckets.
-        let cptr = bucket_offsets(cols, trip.iter().map(|t| t.1));
+        let cptr = bucket_offsets_u32(cols, trip.iter().map(|t| t.1));
         let mut fill = cptr.clone();
         let mut by_col = vec![(0u32, 0.0f64); trip.len()];
         for t in trip {
@@ -194,7 +191,7 @@ impl Csr {
             fill[c] += 1;
         }
         // Row buckets, filled column by column.
-        let rptr = bucket_offsets(rows, trip.iter().map(|t| t.0));
+        let rptr = bucket_offsets_u32(rows, trip.iter().map(|t| t.0));
         let mut fill = rptr.clone();
         let mut idx = vec![0u32; trip.len()];
         let mut val = vec![0.0f64; trip.len()];
@@ -240,7 +237,7 @@ impl Csr {
     /// The transpose (`cols × rows`), by one counting pass; rows stay in ascending column order.
     fn transpose(&self) -> Self {
         let nnz = self.indices.len();
-        let ptr = bucket_offsets(self.cols, self.indices.iter().copied());
+        let ptr = bucket_offsets_u32(self.cols, self.indices.iter().copied());
         let mut fill = ptr.clone();
         let mut idx = vec![0u32; nnz];
         let mut val = vec![0.0f64; nnz];

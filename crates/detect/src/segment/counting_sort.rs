@@ -3,25 +3,7 @@
 //! constant … a constant time sorting algorithm sorts edge weights in O(n + k)", and
 //! Algorithm 4.1 line 4, `countingSortOnRGB`).
 
-/// The permutation that sorts `keys` ascending, stable (equal keys keep their input order, so
-/// the segmentation is deterministic). Every key must be `< buckets`. O(n + buckets) time,
-/// O(n + buckets) memory.
-pub fn counting_sort_order(keys: &[u32], buckets: usize) -> Vec<u32> {
-    let mut start = vec![0u32; buckets + 1];
-    for &k in keys {
-        start[k as usize + 1] += 1;
-    }
-    for b in 0..buckets {
-        start[b + 1] += start[b];
-    }
-    let mut order = vec![0u32; keys.len()];
-    for (i, &k) in keys.iter().enumerate() {
-        let slot = &mut start[k as usize];
-        order[*slot as usize] = i as u32;
-        *slot += 1;
-    }
-    order
-}
+pub use autoteach_geometry::counting_sort::counting_sort_order;
 
 /// Widest digit of [`counting_sort_by_key`]: 2¹¹ counters (16 KiB) stay in the L1 cache.
 const MAX_DIGIT_BITS: u32 = 11;
@@ -82,15 +64,6 @@ pub fn counting_sort_by_key<T: Copy>(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn matches_a_stable_comparison_sort() {
-        let keys: Vec<u32> = (0..1000u32).map(|i| (i * 7919 + 13) % 97).collect();
-        let order = counting_sort_order(&keys, 97);
-        let mut reference: Vec<u32> = (0..keys.len() as u32).collect();
-        reference.sort_by_key(|&i| keys[i as usize]); // `sort_by_key` is stable
-        assert_eq!(order, reference);
-    }
 
     /// The digit-wise counting sort gives the stable comparison sort's order, for the colour
     /// key's range (two 9-bit passes), the normal key's (two 8-bit passes), one-pass and

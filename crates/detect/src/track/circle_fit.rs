@@ -4,7 +4,7 @@
 //!
 //! A single ellipse determines its circle only up to the two-fold ambiguity of [`super::circle`],
 //! and badly when the rim is seen nearly edge-on or only in part (the fitted ellipse of a short
-//! or flat arc is poorly constrained; closing note of session 2). Here the circle — centre and
+//! or flat arc is poorly constrained). Here the circle — centre and
 //! plane normal, with the known wafer radius — is the pose `T_wo` of an object frame whose
 //! `z = 0` plane holds the rim (`z` along the normal; the rotation about `z` is a gauge freedom
 //! and is not estimated, leaving 5 parameters). Its image in view `v` is the conic of eq. (5.13),

@@ -154,7 +154,7 @@ pub struct DetectParams {
     pub border_pairs_take_arcs: bool,
     /// A dim candidate counts as a reflection (see [`DetectParams::min_contrast_ratio`]) only
     /// when it lies inside the brighter rim, on whose face it would be mirrored; false compares
-    /// it with every brighter rim of about its size (the rule before session 11). Default true.
+    /// it with every brighter rim of about its size (the earlier, wider rule). Default true.
     pub reflection_inside_rim: bool,
     /// A rim is reported only when its fit determines the minor axis to a standard deviation
     /// (from the fit's covariance, [`WaferEdge::covariance`]) of at most this fraction of `b`.

@@ -99,15 +99,9 @@ use nalgebra::{Matrix5, Matrix6, SMatrix, SVector, Vector2, Vector6};
 
 /// Largest semi-minor axis (pixels, of either rim's edge-point fit) of a rim pair refitted
 /// here: the band is then a few pixels from the face's silhouette, and the front arcs' slopes
-/// stay small. Wider rims are measured by the edge-point fits. Measured on the wafer benchmark
-/// with the rim offset prior (210 images; seed 3 / seed 4 recall, precision): 8 px 0.9305 /
-/// 0.9206, 0.9626 / 0.9557 (true rims of `b` 7.3–7.9 px whose edge-point fit is 2 % high were
-/// left out); 9 px 0.9363 / 0.9250, 0.9686 / 0.9588; 10 px 0.9334 / 0.9265, 0.9627 / 0.9604.
-/// Re-measured with the exact lower-rim map and the band model on both sides (session 16;
-/// seed 3 recall / precision, seed 4): 8 px 0.9682 / 0.9882, 0.9574 / 0.9834; 9 px 0.9740 /
-/// 0.9941, 0.9632 / 0.9894; 10 px 0.9653 / 0.9823, 0.9632 / 0.9894. Again with the pixel-grid
-/// edge profile ([`EdgeProfile::PixelGrid`], session 17): 8 px 0.9740 / 0.9912, 0.9691 /
-/// 0.9955; 9 px 0.9768 / 0.9941, 0.9721 / 0.9985; 10 px 0.9667 / 0.9838, 0.9691 / 0.9955.
+/// stay small. Wider rims are measured by the edge-point fits. On the wafer benchmark (pixel-grid
+/// edge profile, seed 3 / seed 4 recall and precision) 9 px is the best of 8, 9 and 10 px:
+/// 0.9768 / 0.9941, 0.9721 / 0.9985 (the sweeps: docs/design/wafer-rims.md).
 pub(super) const MAX_B: f64 = 9.0;
 /// [`MAX_B`] for a wafer seen from above (the lower rim's `b` the larger): there the face's
 /// silhouette still pins `b` where the front arcs alone leave it to trade off with `a` and the
@@ -164,8 +158,8 @@ const MAX_ITER: usize = 40;
 /// `δᵀJᵀJδ`, i.e. `σ̂²` times the squared distance to the optimum in standard deviations, so
 /// the last solve ends within `√FINAL_TOL` ≈ 0.3 standard deviations of its optimum, and the
 /// solves on the column subset before it (which only screen the columns and start the next
-/// solve) within `√SUBSET_TOL` = 1. (Until session 17 one relative threshold, 10⁻⁷ of the RSS,
-/// i.e. 0.01–0.03 standard deviations: the same benchmark figures at twice the evaluations.)
+/// solve) within `√SUBSET_TOL` = 1. A relative threshold of 10⁻⁷ of the RSS (0.01–0.03 standard
+/// deviations) gives the same benchmark figures at twice the evaluations.
 const FINAL_TOL: f64 = 0.1;
 const SUBSET_TOL: f64 = 1.0;
 /// Most columns of the first solve of a fit (an even subset; the screening rounds use all).
@@ -191,7 +185,7 @@ const CLIP_LEVEL: f64 = 255.0;
 /// Laplacian difference mask `N = [1 −2 1; −2 4 −2; 1 −2 1]`, which cancels locally linear image
 /// content. The sum runs over every [`NOISE_ROW_STRIDE`]-th row (a 1280×720 image still gives
 /// 5.7·10⁴ terms: a relative standard error of 0.45 % on pure Gaussian noise, measured; every
-/// fourth row until session 17, 0.2 % at 4× the time, ≈ 1 ms of a frame). Edges raise it
+/// fourth row gives 0.2 % at 4× the time, ≈ 1 ms of a frame). Edges raise it
 /// slightly; the result is used as a scale, not a test statistic.
 pub(super) fn noise_sigma<T: Pixel>(image: &GrayView<'_, T>) -> f64 {
     let (w, h) = (image.width(), image.height());

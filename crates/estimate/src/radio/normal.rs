@@ -22,6 +22,8 @@
 //! (test `blocked_normal_assembly_equals_the_dense_product`). Measured effect and the
 //! alternatives weighed: docs/design/radio.md.
 
+use autoteach_geometry::counting_sort::{bucket_offsets, counting_sort_order};
+
 use super::sparse::LowerCsc;
 use super::tomo::{Regularization, TomoRows};
 
@@ -49,18 +51,13 @@ impl Triplets {
     fn into_csc(self, n: usize) -> LowerCsc {
         let t = self.values.len();
         // Pass 1: stable order by row.
-        let by_row = counting_order(&self.rows, n);
+        let by_row = counting_sort_order(&self.rows, n);
         // Pass 2: stable order by column of the row-ordered sequence.
-        let mut cnt = vec![0usize; n + 1];
-        for &c in &self.cols {
-            cnt[c as usize + 1] += 1;
-        }
-        for c in 0..n {
-            cnt[c + 1] += cnt[c];
-        }
+        let cnt = bucket_offsets(n, self.cols.iter().copied());
         let mut order = vec![0usize; t];
         let mut fill = cnt.clone();
         for &k in &by_row {
+            let k = k as usize;
             let c = self.cols[k] as usize;
             order[fill[c]] = k;
             fill[c] += 1;
@@ -92,23 +89,6 @@ impl Triplets {
             values,
         }
     }
-}
-
-/// The permutation that sorts `keys` (each `< n`) stably: a counting sort.
-fn counting_order(keys: &[u32], n: usize) -> Vec<usize> {
-    let mut cnt = vec![0usize; n + 1];
-    for &k in keys {
-        cnt[k as usize + 1] += 1;
-    }
-    for c in 0..n {
-        cnt[c + 1] += cnt[c];
-    }
-    let mut order = vec![0usize; keys.len()];
-    for (i, &k) in keys.iter().enumerate() {
-        order[cnt[k as usize]] = i;
-        cnt[k as usize] += 1;
-    }
-    order
 }
 
 /// `S = A_vᵀA_v + λ²ΓᵀΓ + φ²I` of `rows` and `reg` in lower CSC (see the module doc). Every
@@ -144,10 +124,13 @@ pub fn gram_lower(rows: &TomoRows, reg: &Regularization) -> LowerCsc {
         .collect();
     // Two stable counting sorts: by last unknown, then by first.
     let his: Vec<u32> = order.iter().map(|o| o.1 as u32).collect();
-    let by_hi = counting_order(&his, n);
-    let los: Vec<u32> = by_hi.iter().map(|&k| order[k].0 as u32).collect();
-    let by_lo = counting_order(&los, n);
-    let sorted: Vec<usize> = by_lo.iter().map(|&k| order[by_hi[k]].2).collect();
+    let by_hi = counting_sort_order(&his, n);
+    let los: Vec<u32> = by_hi.iter().map(|&k| order[k as usize].0 as u32).collect();
+    let by_lo = counting_sort_order(&los, n);
+    let sorted: Vec<usize> = by_lo
+        .iter()
+        .map(|&k| order[by_hi[k as usize] as usize].2)
+        .collect();
     order.clear();
 
     let mut local = vec![usize::MAX; n];
