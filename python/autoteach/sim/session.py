@@ -18,6 +18,7 @@ from autoteach.errors import InvalidInputError
 
 if TYPE_CHECKING:
     from autoteach.geometry import Camera, RobotParams
+    from autoteach.io import LogDamage
     from autoteach.sim.config import SimConfig
 
 #: Names of the five joints, in the order of the joint vector ``q = (θ1, θ2, θ3, θ4, h)``.
@@ -144,6 +145,8 @@ class Session:
             only as the low-contrast silhouette of the dark top/bottom face).
         timings: wall-clock seconds of the simulation stages (not stored in logs).
         source: the file the session was read from, if any.
+        damage: for a damaged log read with ``allow_truncated=True``, the byte ranges skipped and the
+            frames lost (:class:`autoteach.io.LogDamage`); ``None`` for a complete read.
 
     """
 
@@ -163,6 +166,7 @@ class Session:
     rims: list[list[dict[str, Any]]] | None = None
     timings: dict[str, float] = field(default_factory=dict)
     source: str | None = None
+    damage: LogDamage | None = None
 
     def __post_init__(self) -> None:
         self.validate()
