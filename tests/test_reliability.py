@@ -251,3 +251,57 @@ def test_parallel_results_are_bit_identical_on_one_and_two_threads():
         runs.append(json.loads(out.stdout))
     assert runs[0] == runs[1]
     assert len(runs[0]) == 15
+
+
+# -- found by the property suite of part two (tests/test_properties_cli.py) --------------------
+
+
+@pytest.mark.parametrize("command", ["plan", "tune", "uncertainty"])
+def test_a_command_without_its_mode_switch_reports_on_stderr(command, capsys):
+    # Regression: `autoteach plan` (and tune, uncertainty) printed the reason to stdout and
+    # exited with 2, leaving stderr empty.
+    from autoteach.cli import main
+
+    assert main([command]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith(f"autoteach {command}") and len(err.strip().splitlines()) == 1
+
+
+def test_plan_arguments_are_checked_by_name():
+    # Regression: max_iterations=-1 reached the compiled core as an unsigned count (a bare
+    # OverflowError); a complex path lost its imaginary part in np.asarray(dtype=float).
+    from autoteach import plan
+
+    ws, poses = plan.default_scene()
+    with pytest.raises(InvalidInputError, match="max_iterations must be a non-negative integer"):
+        plan.plan_path(ws, poses["home"], poses["chamber"], max_iterations=-1)
+    with pytest.raises(InvalidInputError, match=r"joints\[0\]"):
+        plan.plan_path(ws, poses["home"], poses["chamber"], joints=[-2])
+    path = np.array([poses["home"], poses["home"] + 0.01])
+    with pytest.raises(InvalidInputError, match="path must be an array of real numbers"):
+        plan.optimize_trajectory(ws, path + 1j)
+    with pytest.raises(InvalidInputError, match="n_ctrl"):
+        plan.optimize_trajectory(ws, path, n_ctrl=-3)
+    with pytest.raises(InvalidInputError, match=r"limits\.d_safe must be finite"):
+        plan.optimize_trajectory(ws, path, plan.Limits(d_safe=float("nan")))
+
+
+def test_write_log_refuses_what_json_cannot_hold_before_writing(tmp_path):
+    # Regression: a NaN frame rate or ground-truth pose raised json's bare ValueError half-way
+    # through the file; a missing directory raised FileNotFoundError for the '.part' file.
+    import dataclasses
+
+    from autoteach.io import write_log
+    from autoteach.sim import SimConfig, simulate_session
+
+    cfg = SimConfig(camera_params=(60.0, 60.0, 39.5, 22.0), width=80, height=45, supersample=1)
+    s = simulate_session(seed=1, frames=2, config=cfg)
+    with pytest.raises(InvalidInputError, match="frame_rate_hz must be a positive finite number"):
+        dataclasses.replace(s, frame_rate_hz=float("nan"))
+    poses = s.camera_poses.copy()
+    poses[1, 0, 3] = np.inf
+    with pytest.raises(InvalidInputError, match="camera_poses must be finite"):
+        write_log(dataclasses.replace(s, camera_poses=poses), tmp_path / "a.mcap")
+    with pytest.raises(InvalidInputError, match="does not exist"):
+        write_log(s, tmp_path / "no" / "a.mcap")
+    assert list(tmp_path.iterdir()) == []

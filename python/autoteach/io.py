@@ -486,6 +486,14 @@ def _rim_from_json(d: dict[str, Any]) -> dict[str, Any]:
 # --------------------------------------------------------------------------------------------
 
 
+def _dumps(obj: Any, what: str) -> str:
+    """JSON text of ``obj``; a NaN or infinity (which JSON cannot hold) is an :class:`InvalidInputError`."""
+    try:
+        return json.dumps(obj, allow_nan=False)
+    except ValueError as exc:
+        raise InvalidInputError(f"the {what} cannot be written as JSON: {exc} (NaN or infinity)") from None
+
+
 def _writable_target(path: Path) -> Path:
     """The ``.part`` file beside ``path`` after checking that both may be written.
 
@@ -494,6 +502,8 @@ def _writable_target(path: Path) -> Path:
     ``.part`` would block: both are refused, and nothing is touched.
     """
     part = path.with_name(path.name + ".part")
+    if not path.parent.is_dir():
+        raise InvalidInputError(f"cannot write the log {path}: the directory {path.parent} does not exist")
     for p, what in ((path, "target"), (part, "temporary file")):
         try:
             st = os.stat(p)
@@ -546,6 +556,12 @@ def write_log(
     session.validate()
     if session.n_frames and session.timestamps[0] < 0:
         raise InvalidInputError("timestamps must be non-negative nanoseconds for MCAP")
+    # Ground truth is stored as JSON, which has no NaN or infinity: refuse it rather than fail
+    # half-way through the file.
+    for name in ("camera_poses", "wafer_poses"):
+        value = getattr(session, name)
+        if value is not None and not np.all(np.isfinite(value)):
+            raise InvalidInputError(f"session.{name} must be finite to be written, it holds NaN or infinity")
     ctype = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}.get(compression or "", CompressionType.NONE)
     path = Path(path)
     part = _writable_target(path)
@@ -583,7 +599,7 @@ def write_log(
                 "frame_rate_hz": session.frame_rate_hz,
                 "frames": session.n_frames,
             }
-            meta_json = json.dumps(meta, allow_nan=False)
+            meta_json = _dumps(meta, "session metadata")
             add(TOPIC_SESSION, t0, meta_json.encode())
             # The schemas, channels and session metadata close a chunk of their own, and so does the
             # ground-truth scene: a damaged frame chunk then costs that frame only (salvage resumes at
@@ -597,7 +613,7 @@ def write_log(
                     "wafer_poses": [] if session.wafer_poses is None else session.wafer_poses.tolist(),
                     "calibration": None if session.calibration is None else session.calibration.to_dict(),
                 }
-                add(TOPIC_SCENE, t0, json.dumps(scene, allow_nan=False).encode())
+                add(TOPIC_SCENE, t0, _dumps(scene, "ground-truth scene").encode())
                 writer.flush()
             names = tuple(session.joint_names)
             for i in tqdm(range(session.n_frames), desc="writing", unit="frame", disable=not progress, leave=False):

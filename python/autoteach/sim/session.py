@@ -192,6 +192,11 @@ class Session:
                 raise InvalidInputError("wafer_slots must give one slot per wafer pose")
         if self.rims is not None and len(self.rims) != n:
             raise InvalidInputError(f"rims must have one list per frame ({n}), got {len(self.rims)}")
+        rate = self.frame_rate_hz
+        if rate is not None:
+            ok = isinstance(rate, (int, float, np.integer, np.floating)) and not isinstance(rate, (bool, np.bool_))
+            if not ok or not (math.isfinite(float(rate)) and float(rate) > 0.0):
+                raise InvalidInputError(f"frame_rate_hz must be a positive finite number or None, got {rate!r}")
 
     @property
     def n_frames(self) -> int:
