@@ -305,3 +305,18 @@ def test_write_log_refuses_what_json_cannot_hold_before_writing(tmp_path):
     with pytest.raises(InvalidInputError, match="does not exist"):
         write_log(s, tmp_path / "no" / "a.mcap")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_simulate_refuses_an_unwritable_target_before_simulating(monkeypatch, capsys):
+    # Regression: `autoteach simulate --out /dev/null` simulated every frame first and only
+    # then found that the target is not a regular file.
+    import autoteach.sim
+    from autoteach.cli import main
+
+    def never(*args, **kwargs):
+        raise AssertionError("simulated before checking the target")
+
+    monkeypatch.setattr(autoteach.sim, "simulate_session", never)
+    assert main(["simulate", "--frames", "1", "--out", "/dev/null"]) == 2
+    err = capsys.readouterr().err
+    assert "not a regular file" in err and len(err.strip().splitlines()) == 1
