@@ -172,3 +172,15 @@ def test_a_broken_chunk_header_without_a_summary_is_skipped_by_scanning(
     assert part.damage.frames_lost == (1, 4)
     starts = [a for a, _, _ in part.damage.skipped]
     assert starts == [c1.chunk_start_offset, c4.chunk_start_offset]
+
+
+def test_a_damaged_first_chunk_of_the_old_layout_says_what_was_lost(tmp_path: Path) -> None:
+    # The old layout holds the metadata and every frame in its first chunk: nothing can be
+    # decoded, and the error says so and where the damage lies.
+    data = (DATA / "session_layout1.mcap").read_bytes()
+    with open(DATA / "session_layout1.mcap", "rb") as f:
+        (chunk,) = make_reader(f).get_summary().chunk_indexes
+    path = tmp_path / "old.mcap"
+    path.write_bytes(_flip(data, chunk.chunk_start_offset + chunk.chunk_length // 2))
+    with pytest.raises(LogReadError, match=rf"bytes {chunk.chunk_start_offset}-\d+ .*session metadata"):
+        read_log(path, allow_truncated=True)

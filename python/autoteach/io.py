@@ -837,7 +837,7 @@ def _scan(path: Path, *, salvage: bool = False) -> _Scan:
                     for inner in breakup_chunk(rec, validate_crc=True):
                         take(inner)
                 elif isinstance(rec, DataEnd):
-                    crc = zlib.crc32(data[:good])
+                    crc = zlib.crc32(memoryview(data)[:good])
                     if not scan.skipped and rec.data_section_crc not in (0, crc):
                         detail = (
                             f"the data section's CRC {crc:#010x} does not match the recorded "
@@ -894,16 +894,20 @@ def _scan(path: Path, *, salvage: bool = False) -> _Scan:
             f"MCAP log {path} is truncated: reading stopped at byte offset {good} of {n} after "
             f"{len(messages)} messages without reaching the footer"
         )
+    orphans = 0
     for channel_id, log_time, sequence, payload in messages:
         ch = scan.channels.get(channel_id)
         if ch is None:
             # Salvage drops it (its channel was in a damaged chunk and the summary is unreadable).
             lost_channel = f"MCAP log {path} is corrupt: a message is on the unknown channel id {channel_id}"
             scan.error = scan.error or lost_channel
+            orphans += 1
             continue
         scan.messages[ch.topic].append((log_time, payload))
         scan.sequences[ch.topic].append(sequence)
         scan.n_messages += 1
+    if orphans:
+        scan.notes.append(f"{orphans} messages on channels whose definition was lost were dropped")
     return scan
 
 
