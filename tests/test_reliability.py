@@ -320,3 +320,54 @@ def test_simulate_refuses_an_unwritable_target_before_simulating(monkeypatch, ca
     assert main(["simulate", "--frames", "1", "--out", "/dev/null"]) == 2
     err = capsys.readouterr().err
     assert "not a regular file" in err and len(err.strip().splitlines()) == 1
+
+
+def test_render_opening_refuses_huge_blurs_and_sizes_instead_of_aborting():
+    # Regression: a blur σ of 1e300 asked for a kernel of 6e300 taps and a 2³¹ × 2³¹ image for
+    # 2⁶² pixels, both allocated infallibly: the process aborted.
+    with pytest.raises(InvalidInputError, match="blur_sigma"):
+        polygon.simulate_opening(0, width=40, height=40, blur_sigma=1e300)
+    with pytest.raises(AllocationError):
+        polygon.simulate_opening(0, width=2**31, height=2**31)
+    assert polygon.simulate_opening(0, width=40, height=30, blur_sigma=40.0).image.shape == (30, 40)
+
+
+def test_radio_simulation_refuses_endless_walks_and_huge_missions():
+    # Regression: speed/rate of 1e300 m per step walked the roadmap edge by edge for ever;
+    # duration·rate of 1e300 steps aborted on allocation; robots=-1 was a bare OverflowError.
+    from autoteach import radio
+
+    with pytest.raises(InvalidInputError, match="speed/rate"):
+        radio.simulate("office", robots=2, duration=1.0, speed=1e300, rate=1.0)
+    with pytest.raises(InvalidInputError, match="duration"):
+        radio.simulate("office", robots=2, duration=1e300, rate=1.0)
+    with pytest.raises(InvalidInputError, match="robots must be a non-negative integer"):
+        radio.simulate("office", robots=-1, duration=1.0)
+    sim = radio.simulate("office", robots=2, duration=2.0, rate=2.0)
+    assert len(sim.times) == len(sim.rss) > 0
+
+
+def test_sim_config_refuses_non_numbers_instead_of_casting():
+    # Regression: width=nan raised int()'s bare ValueError; complex camera parameters lost their
+    # imaginary part in np.asarray(dtype=float64) (a ComplexWarning at most).
+    from autoteach.sim import SimConfig
+
+    for field, value in (("width", float("nan")), ("height", float("inf")), ("supersample", 1e300)):
+        with pytest.raises(InvalidInputError, match=field):
+            SimConfig(**{field: value})
+    with pytest.raises(InvalidInputError, match="camera_params must be a sequence of real numbers"):
+        SimConfig(camera_params=np.array([1000.0, 1000.0, 640.0, 360.0]) + 1j)
+    with pytest.raises(InvalidInputError, match="blur_sigma"):
+        SimConfig(blur_sigma="x")
+
+
+def test_calibrate_refuses_an_image_size_that_is_not_pixels(tmp_path, capsys):
+    # Regression: image_size [inf, -4] in the .npz reached int() (OverflowError, reported as an
+    # internal error with exit status 1).
+    from autoteach.cli import main
+
+    path = tmp_path / "views.npz"
+    np.savez(path, image_size=[np.inf, -4], object_points=np.zeros((2, 5, 3)), image_points=np.zeros((2, 5, 2)))
+    assert main(["calibrate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "image_size" in err and len(err.strip().splitlines()) == 1
