@@ -11,7 +11,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from autoteach.errors import AutoteachError, InvalidInputError, LogReadError
+from autoteach.errors import AutoteachError, InvalidInputError, LogReadError, LogSalvageWarning
 from autoteach.io import TOPICS, log_info, read_log, write_log
 from autoteach.sim import CameraInfo, SimConfig, simulate_session
 from autoteach.sim.session import Session
@@ -293,9 +293,11 @@ def test_truncated_log_can_be_salvaged(sim_log, sim_session, tmp_path):
     data = Path(sim_log).read_bytes()
     path = tmp_path / "cut.mcap"
     path.write_bytes(data[: int(len(data) * 0.8)])
-    part = read_log(path, allow_truncated=True)
+    with pytest.warns(LogSalvageWarning, match="cut.mcap"):
+        part = read_log(path, allow_truncated=True)
     k = part.n_frames
     assert 0 < k < sim_session.n_frames
+    assert part.damage.frames_lost == tuple(range(k, sim_session.n_frames))
     assert bits(part.images) == bits(sim_session.images[:k])
     assert bits(part.joints_encoder) == bits(sim_session.joints_encoder[:k])
     assert bits(part.camera_poses) == bits(sim_session.camera_poses[:k])

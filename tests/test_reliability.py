@@ -251,3 +251,123 @@ def test_parallel_results_are_bit_identical_on_one_and_two_threads():
         runs.append(json.loads(out.stdout))
     assert runs[0] == runs[1]
     assert len(runs[0]) == 15
+
+
+# -- found by the property suite of part two (tests/test_properties_cli.py) --------------------
+
+
+@pytest.mark.parametrize("command", ["plan", "tune", "uncertainty"])
+def test_a_command_without_its_mode_switch_reports_on_stderr(command, capsys):
+    # Regression: `autoteach plan` (and tune, uncertainty) printed the reason to stdout and
+    # exited with 2, leaving stderr empty.
+    from autoteach.cli import main
+
+    assert main([command]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith(f"autoteach {command}") and len(err.strip().splitlines()) == 1
+
+
+def test_plan_arguments_are_checked_by_name():
+    # Regression: max_iterations=-1 reached the compiled core as an unsigned count (a bare
+    # OverflowError); a complex path lost its imaginary part in np.asarray(dtype=float).
+    from autoteach import plan
+
+    ws, poses = plan.default_scene()
+    with pytest.raises(InvalidInputError, match="max_iterations must be a non-negative integer"):
+        plan.plan_path(ws, poses["home"], poses["chamber"], max_iterations=-1)
+    with pytest.raises(InvalidInputError, match=r"joints\[0\]"):
+        plan.plan_path(ws, poses["home"], poses["chamber"], joints=[-2])
+    path = np.array([poses["home"], poses["home"] + 0.01])
+    with pytest.raises(InvalidInputError, match="path must be an array of real numbers"):
+        plan.optimize_trajectory(ws, path + 1j)
+    with pytest.raises(InvalidInputError, match="n_ctrl"):
+        plan.optimize_trajectory(ws, path, n_ctrl=-3)
+    with pytest.raises(InvalidInputError, match=r"limits\.d_safe must be finite"):
+        plan.optimize_trajectory(ws, path, plan.Limits(d_safe=float("nan")))
+
+
+def test_write_log_refuses_what_json_cannot_hold_before_writing(tmp_path):
+    # Regression: a NaN frame rate or ground-truth pose raised json's bare ValueError half-way
+    # through the file; a missing directory raised FileNotFoundError for the '.part' file.
+    import dataclasses
+
+    from autoteach.io import write_log
+    from autoteach.sim import SimConfig, simulate_session
+
+    cfg = SimConfig(camera_params=(60.0, 60.0, 39.5, 22.0), width=80, height=45, supersample=1)
+    s = simulate_session(seed=1, frames=2, config=cfg)
+    with pytest.raises(InvalidInputError, match="frame_rate_hz must be a positive finite number"):
+        dataclasses.replace(s, frame_rate_hz=float("nan"))
+    poses = s.camera_poses.copy()
+    poses[1, 0, 3] = np.inf
+    with pytest.raises(InvalidInputError, match="camera_poses must be finite"):
+        write_log(dataclasses.replace(s, camera_poses=poses), tmp_path / "a.mcap")
+    with pytest.raises(InvalidInputError, match="does not exist"):
+        write_log(s, tmp_path / "no" / "a.mcap")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_simulate_refuses_an_unwritable_target_before_simulating(monkeypatch, capsys):
+    # Regression: `autoteach simulate --out /dev/null` simulated every frame first and only
+    # then found that the target is not a regular file.
+    import autoteach.sim
+    from autoteach.cli import main
+
+    def never(*args, **kwargs):
+        raise AssertionError("simulated before checking the target")
+
+    monkeypatch.setattr(autoteach.sim, "simulate_session", never)
+    assert main(["simulate", "--frames", "1", "--out", "/dev/null"]) == 2
+    err = capsys.readouterr().err
+    assert "not a regular file" in err and len(err.strip().splitlines()) == 1
+
+
+def test_render_opening_refuses_huge_blurs_and_sizes_instead_of_aborting():
+    # Regression: a blur σ of 1e300 asked for a kernel of 6e300 taps and a 2³¹ × 2³¹ image for
+    # 2⁶² pixels, both allocated infallibly: the process aborted.
+    with pytest.raises(InvalidInputError, match="blur_sigma"):
+        polygon.simulate_opening(0, width=40, height=40, blur_sigma=1e300)
+    with pytest.raises(AllocationError):
+        polygon.simulate_opening(0, width=2**31, height=2**31)
+    assert polygon.simulate_opening(0, width=40, height=30, blur_sigma=40.0).image.shape == (30, 40)
+
+
+def test_radio_simulation_refuses_endless_walks_and_huge_missions():
+    # Regression: speed/rate of 1e300 m per step walked the roadmap edge by edge for ever;
+    # duration·rate of 1e300 steps aborted on allocation; robots=-1 was a bare OverflowError.
+    from autoteach import radio
+
+    with pytest.raises(InvalidInputError, match="speed/rate"):
+        radio.simulate("office", robots=2, duration=1.0, speed=1e300, rate=1.0)
+    with pytest.raises(InvalidInputError, match="duration"):
+        radio.simulate("office", robots=2, duration=1e300, rate=1.0)
+    with pytest.raises(InvalidInputError, match="robots must be a non-negative integer"):
+        radio.simulate("office", robots=-1, duration=1.0)
+    sim = radio.simulate("office", robots=2, duration=2.0, rate=2.0)
+    assert len(sim.times) == len(sim.rss) > 0
+
+
+def test_sim_config_refuses_non_numbers_instead_of_casting():
+    # Regression: width=nan raised int()'s bare ValueError; complex camera parameters lost their
+    # imaginary part in np.asarray(dtype=float64) (a ComplexWarning at most).
+    from autoteach.sim import SimConfig
+
+    for field, value in (("width", float("nan")), ("height", float("inf")), ("supersample", 1e300)):
+        with pytest.raises(InvalidInputError, match=field):
+            SimConfig(**{field: value})
+    with pytest.raises(InvalidInputError, match="camera_params must be a sequence of real numbers"):
+        SimConfig(camera_params=np.array([1000.0, 1000.0, 640.0, 360.0]) + 1j)
+    with pytest.raises(InvalidInputError, match="blur_sigma"):
+        SimConfig(blur_sigma="x")
+
+
+def test_calibrate_refuses_an_image_size_that_is_not_pixels(tmp_path, capsys):
+    # Regression: image_size [inf, -4] in the .npz reached int() (OverflowError, reported as an
+    # internal error with exit status 1).
+    from autoteach.cli import main
+
+    path = tmp_path / "views.npz"
+    np.savez(path, image_size=[np.inf, -4], object_points=np.zeros((2, 5, 3)), image_points=np.zeros((2, 5, 2)))
+    assert main(["calibrate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "image_size" in err and len(err.strip().splitlines()) == 1

@@ -107,9 +107,11 @@ def _parser() -> argparse.ArgumentParser:
 
 def _simulate_and_write(args: argparse.Namespace, out: Path | None) -> tuple[Any, dict[str, Any]]:
     """Simulate a session; write its MCAP log to ``out`` unless ``out`` is None."""
-    from autoteach.io import write_log
+    from autoteach.io import _writable_target, write_log
     from autoteach.sim import simulate_session
 
+    if out is not None:
+        _writable_target(out)  # refuse a target that cannot be written before simulating
     progress = _progress_enabled(args)
     session = simulate_session(seed=args.seed, frames=args.frames, progress=progress)
     if out is None:

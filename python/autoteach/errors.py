@@ -23,6 +23,10 @@ class LogReadError(AutoteachError, OSError):
     """An MCAP log cannot be read (fully): the message says which file and where reading stopped."""
 
 
+class LogSalvageWarning(UserWarning):
+    """A damaged log was read with ``allow_truncated=True``: the message says which bytes and frames were lost."""
+
+
 __all__ = [
     "AllocationError",
     "AutoteachError",
@@ -31,5 +35,6 @@ __all__ = [
     "InternalError",
     "InvalidInputError",
     "LogReadError",
+    "LogSalvageWarning",
     "UnreachablePoseError",
 ]

@@ -42,18 +42,22 @@ import json
 import os
 import stat
 import struct
+import warnings
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from autoteach.errors import InvalidInputError, LogReadError
+from autoteach.errors import InvalidInputError, LogReadError, LogSalvageWarning
 from autoteach.sim.config import SimConfig
 from autoteach.sim.session import Calibration, CameraInfo, Session
 
 __all__ = [
     "FORMAT_VERSION",
+    "LogDamage",
+    "LogSalvageWarning",
     "RESULT_TOPICS",
     "TOPICS",
     "LogReadError",
@@ -212,6 +216,9 @@ _SCHEMA_DATA: dict[str, bytes] = {
 }
 
 _COMPRESSION = ("zstd", "lz4", None, "none")
+
+# Name of the MCAP metadata record holding a copy of the ``/session`` message (``{"json": ...}``).
+_METADATA_SESSION = "autoteach.session"
 
 # Chunks of about one frame: a log cut short (a crash while recording) loses only its last frames
 # when read with ``allow_truncated=True``, and a reader can seek to any frame.
@@ -479,6 +486,14 @@ def _rim_from_json(d: dict[str, Any]) -> dict[str, Any]:
 # --------------------------------------------------------------------------------------------
 
 
+def _dumps(obj: Any, what: str) -> str:
+    """JSON text of ``obj``; a NaN or infinity (which JSON cannot hold) is an :class:`InvalidInputError`."""
+    try:
+        return json.dumps(obj, allow_nan=False)
+    except ValueError as exc:
+        raise InvalidInputError(f"the {what} cannot be written as JSON: {exc} (NaN or infinity)") from None
+
+
 def _writable_target(path: Path) -> Path:
     """The ``.part`` file beside ``path`` after checking that both may be written.
 
@@ -487,6 +502,8 @@ def _writable_target(path: Path) -> Path:
     ``.part`` would block: both are refused, and nothing is touched.
     """
     part = path.with_name(path.name + ".part")
+    if not path.parent.is_dir():
+        raise InvalidInputError(f"cannot write the log {path}: the directory {path.parent} does not exist")
     for p, what in ((path, "target"), (part, "temporary file")):
         try:
             st = os.stat(p)
@@ -539,6 +556,12 @@ def write_log(
     session.validate()
     if session.n_frames and session.timestamps[0] < 0:
         raise InvalidInputError("timestamps must be non-negative nanoseconds for MCAP")
+    # Ground truth is stored as JSON, which has no NaN or infinity: refuse it rather than fail
+    # half-way through the file.
+    for name in ("camera_poses", "wafer_poses"):
+        value = getattr(session, name)
+        if value is not None and not np.all(np.isfinite(value)):
+            raise InvalidInputError(f"session.{name} must be finite to be written, it holds NaN or infinity")
     ctype = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}.get(compression or "", CompressionType.NONE)
     path = Path(path)
     part = _writable_target(path)
@@ -576,7 +599,12 @@ def write_log(
                 "frame_rate_hz": session.frame_rate_hz,
                 "frames": session.n_frames,
             }
-            add(TOPIC_SESSION, t0, json.dumps(meta, allow_nan=False).encode())
+            meta_json = _dumps(meta, "session metadata")
+            add(TOPIC_SESSION, t0, meta_json.encode())
+            # The schemas, channels and session metadata close a chunk of their own, and so does the
+            # ground-truth scene: a damaged frame chunk then costs that frame only (salvage resumes at
+            # the next chunk), where it used to take the metadata -- and so every frame -- with it.
+            writer.flush()
             if gt:
                 scene = {
                     "seed": session.seed,
@@ -585,7 +613,8 @@ def write_log(
                     "wafer_poses": [] if session.wafer_poses is None else session.wafer_poses.tolist(),
                     "calibration": None if session.calibration is None else session.calibration.to_dict(),
                 }
-                add(TOPIC_SCENE, t0, json.dumps(scene, allow_nan=False).encode())
+                add(TOPIC_SCENE, t0, _dumps(scene, "ground-truth scene").encode())
+                writer.flush()
             names = tuple(session.joint_names)
             for i in tqdm(range(session.n_frames), desc="writing", unit="frame", disable=not progress, leave=False):
                 t = int(session.timestamps[i])
@@ -599,6 +628,9 @@ def write_log(
                 if session.rims is not None:
                     msg = {"timestamp": _stamp(t), "frame": i, "rims": [_rim_to_json(r) for r in session.rims[i]]}
                     add(TOPIC_RIMS, t, json.dumps(msg, allow_nan=False).encode())
+            # A second copy of the metadata at the other end of the data section: salvage reads it
+            # when the first chunk is damaged.
+            writer.add_metadata(name=_METADATA_SESSION, data={"json": meta_json})
             writer.finish()
         os.replace(part, path)
     except BaseException:
@@ -612,6 +644,63 @@ def write_log(
 # --------------------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class LogDamage:
+    """Where a salvaged log could not be read and what it cost: ``Session.damage`` of a salvaged read.
+
+    Attributes:
+        path: the log.
+        size: its size in bytes.
+        skipped: the byte ranges ``(start, end, reason)`` that could not be read; reading resumed
+            at ``end`` (the next intact chunk, found through the summary's chunk index or by
+            scanning for a chunk record), or stopped there when ``end == size``.
+        frames_expected: the frame count the ``/session`` message announces.
+        frames_read: the frames returned.
+        frames_lost: indices (the writer's per-frame sequence numbers, 0-based) of the announced
+            frames that are not returned; ``None`` when the log's sequence numbers do not number its
+            frames.
+        notes: other losses (the ground truth scene, the summary section, ...).
+
+    """
+
+    path: str
+    size: int
+    skipped: tuple[tuple[int, int, str], ...]
+    frames_expected: int
+    frames_read: int
+    frames_lost: tuple[int, ...] | None
+    notes: tuple[str, ...] = ()
+
+    def __str__(self) -> str:
+        """One paragraph: which byte ranges were skipped and which frames were lost."""
+        ranges = "; ".join(f"bytes {a}-{b} ({why})" for a, b, why in self.skipped) or "none"
+        if self.frames_lost is None:
+            lost = f"{self.frames_expected - self.frames_read} frame(s)"
+        elif self.frames_lost:
+            lost = "frame(s) " + _ranges_text(self.frames_lost)
+        else:
+            lost = "no frame"
+        notes = "".join(f"; {n}" for n in self.notes)
+        return (
+            f"salvaged {self.frames_read} of {self.frames_expected} frames from the damaged log {self.path} "
+            f"({self.size} bytes): lost {lost}; unreadable byte ranges: {ranges}{notes}"
+        )
+
+
+def _ranges_text(items: tuple[int, ...]) -> str:
+    """``0-3, 7, 9-10`` for ``(0, 1, 2, 3, 7, 9, 10)``."""
+    out: list[str] = []
+    start = prev = items[0]
+    for v in (*items[1:], None):
+        if v is not None and v == prev + 1:
+            prev = v
+            continue
+        out.append(str(start) if start == prev else f"{start}-{prev}")
+        if v is not None:
+            start = prev = v
+    return ", ".join(out)
+
+
 class _Scan:
     """Schemas, channels and messages collected from one pass over an MCAP file."""
 
@@ -619,10 +708,15 @@ class _Scan:
         self.schemas: dict[int, Any] = {}
         self.channels: dict[int, Any] = {}
         self.messages: dict[str, list[tuple[int, bytes]]] = defaultdict(list)
+        self.sequences: dict[str, list[int]] = defaultdict(list)
+        self.metadata: dict[str, dict[str, str]] = {}
         self.n_messages = 0
         self.complete = False
         self.error: str | None = None
         self.size = 0
+        self.skipped: list[tuple[int, int, str]] = []
+        self.summary_damaged = False
+        self.notes: list[str] = []
 
     def topics(self) -> dict[str, tuple[str, str, str]]:
         out = {}
@@ -636,74 +730,200 @@ class _Scan:
         return out
 
 
-def _scan(path: Path) -> _Scan:
-    """Read every record of an MCAP file; record (not raise) where and why reading stopped."""
+def _chunk_starts(data: bytes) -> list[int]:
+    """Start offsets of the chunks listed in the summary's chunk index (empty if it cannot be read).
+
+    The offsets are only hints: a resumed read accepts a chunk only if it parses and passes its CRC.
+    """
     import io
 
-    from mcap.exceptions import EndOfFile, RecordLengthLimitExceeded
-    from mcap.records import Channel, DataEnd, Footer, Message, Schema
+    from mcap.records import ChunkIndex, Footer
     from mcap.stream_reader import StreamReader
+
+    n = len(data)
+    footer_at = n - len(MCAP_MAGIC) - 29  # opcode, length and the footer's three fields
+    if footer_at <= len(MCAP_MAGIC) or data[n - len(MCAP_MAGIC) :] != MCAP_MAGIC or data[footer_at] != 0x02:
+        return []
+    try:
+        footer = next(iter(StreamReader(io.BytesIO(data[footer_at:]), skip_magic=True).records))
+        if not isinstance(footer, Footer) or not len(MCAP_MAGIC) < footer.summary_start < footer_at:
+            return []
+        buf = io.BytesIO(data[footer.summary_start : n - len(MCAP_MAGIC)])
+        starts = []
+        for rec in StreamReader(buf, skip_magic=True, emit_chunks=True, record_size_limit=n).records:
+            if isinstance(rec, ChunkIndex) and 0 < rec.chunk_start_offset < n:
+                starts.append(rec.chunk_start_offset)
+        return sorted(set(starts))
+    # As in _scan: a damaged summary raises any of the decoder's exception types; it only means
+    # there is no index to use.
+    except Exception:  # noqa: BLE001
+        return []
+
+
+def _next_chunk(data: bytes, after: int, hints: list[int]) -> int | None:
+    """The first offset past ``after`` where an intact chunk (or the data-end record) may start."""
+    import bisect
+
+    i = bisect.bisect_right(hints, after)
+    if i < len(hints):
+        return hints[i]
+    n = len(data)
+    pos = after
+    while True:
+        chunk = data.find(b"\x06", pos + 1)
+        end = data.find(b"\x0f\x04\x00\x00\x00\x00\x00\x00\x00", pos + 1)
+        cands = [c for c in (chunk, end) if c >= 0]
+        if not cands:
+            return None
+        pos = min(cands)
+        if data[pos] == 0x0F:
+            return pos
+        # A chunk record: its length must fit in the file and hold at least the chunk's fixed fields.
+        if pos + 9 <= n:
+            length = int.from_bytes(data[pos + 1 : pos + 9], "little")
+            if 40 <= length <= n - pos - 9:
+                return pos
+
+
+def _scan(path: Path, *, salvage: bool = False) -> _Scan:
+    """Read every record of an MCAP file; record (not raise) where and why reading stopped.
+
+    A strict scan stops at the first damaged record. A salvage scan resumes at the next intact
+    chunk (through the summary's chunk index when it can be read, else by scanning for a chunk
+    record) and lists the byte ranges it skipped in ``_Scan.skipped``.
+    """
+    import io
+    import zlib
+
+    from mcap.exceptions import EndOfFile, RecordLengthLimitExceeded
+    from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema
+    from mcap.stream_reader import StreamReader, breakup_chunk
 
     try:
         data = path.read_bytes()
     except OSError as exc:
         raise LogReadError(f"cannot read log {path}: {exc.strerror or exc}") from exc
     scan = _Scan()
-    scan.size = len(data)
+    n = scan.size = len(data)
     if data[: len(MCAP_MAGIC)] != MCAP_MAGIC:
         raise LogReadError(
             f"{path} is not an MCAP file: it does not start with the MCAP magic bytes "
-            f"(first bytes: {data[:8]!r}, file size {len(data)} bytes)"
+            f"(first bytes: {data[:8]!r}, file size {n} bytes)"
         )
+    hints = _chunk_starts(data) if salvage else []
+    messages: list[tuple[int, int, int, bytes]] = []  # channel id, log time, sequence, data
+
+    def take(rec: Any) -> None:
+        if isinstance(rec, Schema):
+            scan.schemas.setdefault(rec.id, rec)
+        elif isinstance(rec, Channel):
+            scan.channels.setdefault(rec.id, rec)
+        elif isinstance(rec, Message):
+            messages.append((rec.channel_id, rec.log_time, rec.sequence, rec.data))
+        elif isinstance(rec, Metadata):
+            scan.metadata.setdefault(rec.name, dict(rec.metadata))
+
     buf = io.BytesIO(data)
-    reader = StreamReader(buf, validate_crcs=True, record_size_limit=max(len(data), 1))
-    good = len(MCAP_MAGIC)  # end of the last record read completely = start of the next one
+    pos = good = len(MCAP_MAGIC)
     data_end = False
-    try:
-        for rec in reader.records:
-            if isinstance(rec, Schema):
-                scan.schemas[rec.id] = rec
-            elif isinstance(rec, Channel):
-                scan.channels[rec.id] = rec
-            elif isinstance(rec, Message):
-                ch = scan.channels.get(rec.channel_id)
-                if ch is None:
-                    raise ValueError(f"message on unknown channel id {rec.channel_id}")
-                scan.messages[ch.topic].append((rec.log_time, rec.data))
-                scan.n_messages += 1
-            elif isinstance(rec, DataEnd):
-                data_end = True
-            elif isinstance(rec, Footer):
-                scan.complete = True
-            good = buf.tell()
-    # The pure-Python MCAP decoder raises many exception types on damaged input (its own errors,
-    # struct.error, zstd/lz4 errors, UnicodeDecodeError, ...); every one of them means the same
-    # thing to the caller -- the log cannot be read past this point -- so all are recorded here.
-    except Exception as exc:  # noqa: BLE001
-        # The record-size limit is the file size: a longer record runs past the end of the file.
-        truncated = isinstance(exc, (EndOfFile, RecordLengthLimitExceeded)) or buf.tell() >= len(data)
-        detail = type(exc).__name__ + (f": {exc}" if str(exc) and str(exc) != type(exc).__name__ else "")
-        section = " in the summary section (every message was read)" if data_end else ""
-        if truncated and good >= len(data):
-            cut = f"the file ends at byte {len(data)}, after the last complete record{section}"
-        elif truncated:
-            cut = f"the file ends at byte {len(data)} inside the record starting at byte offset {good}{section}"
-        if truncated:
-            scan.error = (
-                f"MCAP log {path} is truncated: {cut}; reading stopped after {scan.n_messages} messages ({detail})"
-            )
-        else:
-            scan.error = (
-                f"MCAP log {path} is corrupt: reading stopped at the record starting at byte offset {good} "
-                f"of {len(data)}{section} after {scan.n_messages} messages ({detail})"
-            )
-        scan.complete = False
+    while True:  # ends at the footer, or where no intact chunk follows a damaged record
+        good = pos  # end of the last record read completely = start of the next one
+        buf.seek(pos)
+        reader = StreamReader(buf, skip_magic=True, emit_chunks=True, record_size_limit=n)
+        try:
+            for rec in reader.records:
+                if isinstance(rec, Chunk):
+                    # Decompressed and checked against its CRC before any of it is used.
+                    for inner in breakup_chunk(rec, validate_crc=True):
+                        take(inner)
+                elif isinstance(rec, DataEnd):
+                    crc = zlib.crc32(memoryview(data)[:good])
+                    if not scan.skipped and rec.data_section_crc not in (0, crc):
+                        detail = (
+                            f"the data section's CRC {crc:#010x} does not match the recorded "
+                            f"{rec.data_section_crc:#010x}: a record outside the chunks is damaged"
+                        )
+                        if not salvage:
+                            raise ValueError(detail)
+                        # Every chunk passed its own CRC: what is damaged is an index record.
+                        scan.notes.append(detail + " (every chunk passed its own CRC)")
+                        scan.error = scan.error or f"MCAP log {path} is corrupt: {detail}"
+                    data_end = True
+                else:
+                    take(rec)
+                if isinstance(rec, Footer):
+                    # The summary CRC covers the summary section and the footer up to this field.
+                    crc = zlib.crc32(data[rec.summary_start : good + 25]) if rec.summary_start else 0
+                    if rec.summary_crc not in (0, crc) and not scan.summary_damaged:
+                        detail = (
+                            f"the summary section (bytes {rec.summary_start}-{good}) has CRC {crc:#010x}, "
+                            f"not the recorded {rec.summary_crc:#010x}"
+                        )
+                        scan.summary_damaged = True
+                        scan.notes.append(detail + " (the summary is an index; every chunk was read)")
+                        scan.error = scan.error or f"MCAP log {path} is corrupt: {detail}"
+                    end = buf.tell()
+                    if data[end : end + len(MCAP_MAGIC)] != MCAP_MAGIC:
+                        good = end
+                        raise EndOfFile() if end + len(MCAP_MAGIC) > n else ValueError("no MCAP magic after the footer")
+                    scan.complete = not scan.skipped
+                good = buf.tell()
+            break
+        # The pure-Python MCAP decoder raises many exception types on damaged input (its own errors,
+        # struct.error, zstd/lz4 errors, UnicodeDecodeError, ...); every one of them means the same
+        # thing to the caller -- the log cannot be read past this point -- so all are recorded here.
+        except Exception as exc:  # noqa: BLE001
+            # The record-size limit is the file size: a longer record runs past the end of the file.
+            truncated = isinstance(exc, (EndOfFile, RecordLengthLimitExceeded)) or buf.tell() >= n
+            detail = type(exc).__name__ + (f": {exc}" if str(exc) and str(exc) != type(exc).__name__ else "")
+            if scan.error is None:
+                scan.error = _stop_message(path, n, good, truncated, data_end, len(messages), detail)
+            resume = _next_chunk(data, good, hints) if salvage else None
+            stop = n if resume is None else resume
+            why = ("truncated" if truncated and resume is None else "damaged") + f": {detail}"
+            if scan.skipped and scan.skipped[-1][1] == good:
+                scan.skipped[-1] = (scan.skipped[-1][0], stop, scan.skipped[-1][2])
+            else:
+                scan.skipped.append((good, stop, why))
+            scan.summary_damaged |= data_end
+            if resume is None:
+                break
+            pos = resume
     if not scan.complete and scan.error is None:
         scan.error = (
-            f"MCAP log {path} is truncated: reading stopped at byte offset {good} of {len(data)} after "
-            f"{scan.n_messages} messages without reaching the footer"
+            f"MCAP log {path} is truncated: reading stopped at byte offset {good} of {n} after "
+            f"{len(messages)} messages without reaching the footer"
         )
+    orphans = 0
+    for channel_id, log_time, sequence, payload in messages:
+        ch = scan.channels.get(channel_id)
+        if ch is None:
+            # Salvage drops it (its channel was in a damaged chunk and the summary is unreadable).
+            lost_channel = f"MCAP log {path} is corrupt: a message is on the unknown channel id {channel_id}"
+            scan.error = scan.error or lost_channel
+            orphans += 1
+            continue
+        scan.messages[ch.topic].append((log_time, payload))
+        scan.sequences[ch.topic].append(sequence)
+        scan.n_messages += 1
+    if orphans:
+        scan.notes.append(f"{orphans} messages on channels whose definition was lost were dropped")
     return scan
+
+
+def _stop_message(path: Path, n: int, good: int, truncated: bool, data_end: bool, n_msgs: int, detail: str) -> str:
+    """The error of a strict read: where reading stopped, and whether the file was cut or damaged."""
+    section = " in the summary section (every message was read)" if data_end else ""
+    if truncated and good >= n:
+        cut = f"the file ends at byte {n}, after the last complete record{section}"
+    elif truncated:
+        cut = f"the file ends at byte {n} inside the record starting at byte offset {good}{section}"
+    if truncated:
+        return f"MCAP log {path} is truncated: {cut}; reading stopped after {n_msgs} messages ({detail})"
+    return (
+        f"MCAP log {path} is corrupt: reading stopped at the record starting at byte offset {good} "
+        f"of {n}{section} after {n_msgs} messages ({detail})"
+    )
 
 
 def _decode_json(path: Path, topic: str, index: int, data: bytes) -> Any:
@@ -766,15 +986,18 @@ def log_info(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 
 def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
-    scan = _scan(path)
+    scan = _scan(path, salvage=allow_truncated)
     if scan.error is not None and not allow_truncated:
         raise LogReadError(scan.error)
+    notes = list(scan.notes)
     topics = scan.topics()
     missing = [t for t in REQUIRED_TOPICS if t not in topics]
     if missing:
         want = ", ".join(f"{t} ({TOPICS[t][0]})" for t in missing)
         found = ", ".join(sorted(topics)) or "none"
-        prefix = f"{scan.error}; before that point the" if scan.error else f"{path} is an MCAP file but the"
+        prefix = (
+            f"{_skipped_text(scan)}; what could be read of the" if scan.error else f"{path} is an MCAP file but the"
+        )
         raise LogReadError(f"{prefix} log lacks the autoteach session channel(s) {want}; found channels: {found}")
     for topic, (schema, schema_enc, msg_enc) in topics.items():
         if topic in TOPICS and (schema, schema_enc, msg_enc) != TOPICS[topic]:
@@ -783,9 +1006,21 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
                 f"expected {TOPICS[topic][0]!r} ({TOPICS[topic][1]}) with {TOPICS[topic][2]} messages"
             )
 
-    if not scan.messages.get(TOPIC_SESSION):
-        raise LogReadError(scan.error or f"{path}: the {TOPIC_SESSION} channel has no message")
-    meta = _decode_json(path, TOPIC_SESSION, 0, scan.messages[TOPIC_SESSION][0][1])
+    if scan.messages.get(TOPIC_SESSION):
+        meta = _decode_json(path, TOPIC_SESSION, 0, scan.messages[TOPIC_SESSION][0][1])
+    elif "json" in scan.metadata.get(_METADATA_SESSION, {}):
+        # The first chunk is damaged; logs written since issue 38 keep a copy at the end.
+        meta = _decode_json(
+            path, f"the {_METADATA_SESSION} metadata record", 0, scan.metadata[_METADATA_SESSION]["json"]
+        )
+        notes.append(f"the {TOPIC_SESSION} message was lost; its copy in the {_METADATA_SESSION} metadata was used")
+    elif scan.error:
+        raise LogReadError(
+            f"{_skipped_text(scan)}; the session metadata ({TOPIC_SESSION}) was lost with it, so no frame can be "
+            "decoded (logs written by this version keep a second copy at the end of the data section)"
+        )
+    else:
+        raise LogReadError(f"{path}: the {TOPIC_SESSION} channel has no message")
     try:
         if meta.get("format") != "autoteach.session":
             raise ValueError(f"format is {meta.get('format')!r}, expected 'autoteach.session'")
@@ -803,6 +1038,8 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
     scene = None
     if TOPIC_SCENE in topics and scan.messages.get(TOPIC_SCENE):
         scene = _decode_json(path, TOPIC_SCENE, 0, scan.messages[TOPIC_SCENE][0][1])
+    elif scan.error is not None and TOPIC_SCENE in topics:
+        notes.append(f"the ground-truth scene ({TOPIC_SCENE}) was lost: the session has no ground truth")
 
     def by_time(topic: str) -> dict[int, tuple[int, bytes]]:
         out: dict[int, tuple[int, bytes]] = {}
@@ -822,7 +1059,7 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
         lacking += [topic for topic, m in gt_t.items() if t not in m]
         if lacking:
             if allow_truncated and scan.error is not None:
-                break
+                continue  # a frame whose other messages were in a damaged chunk
             raise LogReadError(
                 f"{path}: the image at log time {t} ns (frame {len(keep)}) has no message on {', '.join(lacking)}"
             )
@@ -838,7 +1075,9 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
     poses = np.empty((len(keep), 4, 4)) if scene is not None else None
     rims: list[list[dict[str, Any]]] | None = [] if scene is not None else None
     n_ok = 0
-    for i, t in enumerate(keep):
+    ok_times: list[int] = []
+    for t in keep:
+        i = n_ok
         topic, idx = TOPIC_IMAGE, images_t[t][0]
         try:
             img = _decode_image(images_t[t][1])
@@ -860,9 +1099,11 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
                 rims.append([_rim_from_json(r) for r in msg["rims"]])
         except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
             if allow_truncated and scan.error is not None:
-                break
+                notes.append(f"message {idx} on {topic} (log time {t} ns) cannot be decoded ({exc}): frame dropped")
+                continue
             raise LogReadError(f"{path}: message {idx} on {topic} (log time {t} ns) cannot be decoded: {exc}") from exc
         n_ok += 1
+        ok_times.append(t)
 
     session_kw: dict[str, Any] = {}
     if scene is not None:
@@ -884,7 +1125,7 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
             raise LogReadError(f"{path}: the {TOPIC_SCENE} message is invalid: {exc}") from exc
     try:
         session = Session(
-            timestamps=np.asarray(keep[:n_ok], dtype=np.int64),
+            timestamps=np.asarray(ok_times, dtype=np.int64),
             joints_encoder=joints[:n_ok],
             images=images[:n_ok],
             camera=camera,
@@ -895,7 +1136,46 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
         )
     except InvalidInputError as exc:
         raise LogReadError(f"{path}: the log does not form a valid session: {exc}") from exc
+    if scan.error is not None:
+        session.damage = _damage(path, scan, images_t, ok_times, n_expected, notes)
+        warnings.warn(str(session.damage), LogSalvageWarning, stacklevel=3)
     return session, scan
+
+
+def _skipped_text(scan: _Scan) -> str:
+    """The strict error, followed by the byte ranges a salvage read skipped."""
+    if not scan.skipped:
+        return str(scan.error)
+    ranges = "; ".join(f"bytes {a}-{b} ({why})" for a, b, why in scan.skipped)
+    return f"{scan.error}; unreadable byte ranges: {ranges}"
+
+
+def _damage(
+    path: Path,
+    scan: _Scan,
+    images_t: dict[int, tuple[int, bytes]],
+    ok_times: list[int],
+    n_expected: int,
+    notes: list[str],
+) -> LogDamage:
+    """What a salvaged read lost: skipped byte ranges and the indices of the frames not returned."""
+    seqs = scan.sequences.get(TOPIC_IMAGE, [])
+    by_t = {t: seqs[idx] for t, (idx, _) in images_t.items() if idx < len(seqs)}
+    numbered = len(set(by_t.values())) == len(by_t) and all(0 <= q < n_expected for q in by_t.values())
+    lost = tuple(sorted(set(range(n_expected)) - {by_t[t] for t in ok_times})) if numbered else None
+    if scan.summary_damaged and not any("summary" in n for n in notes):
+        notes = [*notes, "the summary section is damaged (every chunk before it was read)"]
+    if not scan.skipped and not notes:
+        notes = [str(scan.error)]
+    return LogDamage(
+        path=str(path),
+        size=scan.size,
+        skipped=tuple(scan.skipped),
+        frames_expected=n_expected,
+        frames_read=len(ok_times),
+        frames_lost=lost,
+        notes=tuple(notes),
+    )
 
 
 def _joint_positions(expected: tuple[str, ...], names: list[str], position: np.ndarray) -> np.ndarray:

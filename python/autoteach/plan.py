@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 
 from autoteach import _core
-from autoteach._convert import as_f64
+from autoteach._convert import as_f64, as_float, as_int
+from autoteach.errors import InvalidInputError
 
 __all__ = [
     "BSplineTrajectory",
@@ -128,15 +129,21 @@ def plan_path(
             malformed input.
         ConvergenceError: no path within the budget.
     """
+    if not isinstance(method, str):
+        raise InvalidInputError(f"method must be 'rrt*' or 'a*', got {type(method).__name__}")
+    if joints is not None:
+        if isinstance(joints, (str, bytes)) or not hasattr(joints, "__iter__"):
+            raise InvalidInputError(f"joints must be a list of joint indices, got {type(joints).__name__}")
+        joints = [as_int(j, f"joints[{i}]") for i, j in enumerate(joints)]
     d = _core.plan_path(
         workspace._ws,
         _joints(q_start, "q_start"),
         _joints(q_goal, "q_goal"),
         method,
-        margin,
-        max_iterations,
-        seed,
-        step_deg,
+        as_float(margin, "margin"),
+        as_int(max_iterations, "max_iterations"),
+        as_int(seed, "seed"),
+        as_float(step_deg, "step_deg"),
         joints,
     )
     keys = ("path", "cost", "iterations", "collision_checks", "time_s")
@@ -242,9 +249,15 @@ def optimize_trajectory(
             collision, or a malformed path.
     """
     lim = limits or Limits()
-    vec = [np.asarray(v, dtype=np.float64) for v in (lim.velocity, lim.acceleration, lim.jerk, lim.torque)]
+    names = ("velocity", "acceleration", "jerk", "torque")
+    vec = [as_f64(getattr(lim, n), f"limits.{n}") for n in names]
     d = _core.plan_optimize(
-        workspace._ws, np.asarray(path, dtype=np.float64), *vec, float(lim.d_safe), n_ctrl, max_iterations
+        workspace._ws,
+        as_f64(path, "path"),
+        *vec,
+        as_float(lim.d_safe, "limits.d_safe"),
+        as_int(n_ctrl, "n_ctrl"),
+        as_int(max_iterations, "max_iterations"),
     )
     traj = BSplineTrajectory(np.asarray(d["knots"]), np.asarray(d["control_points"]))
     return OptimizeResult(

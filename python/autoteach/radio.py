@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
-from autoteach._convert import as_f64, as_float
+from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
 
 F64Array = NDArray[np.float64]
@@ -434,11 +434,11 @@ def simulate(
         raise InvalidInputError(f"environment must be one of {', '.join(ENVIRONMENTS)}, got {environment!r}")
     d = _core.radio_simulate(
         environment,
-        robots=int(robots),
+        robots=as_int(robots, "robots"),
         duration=as_float(duration, "duration"),
         speed=as_float(speed, "speed"),
         rate=as_float(rate, "rate"),
-        seed=int(seed),
+        seed=as_int(seed, "seed"),
         sigma=as_float(sigma, "sigma"),
         **{k: as_float(v, k) for k, v in radio.items()},
     )

@@ -4,10 +4,9 @@ use thiserror::Error;
 
 /// Everything that can go wrong in this crate. Messages carry the offending values.
 ///
-/// `#[non_exhaustive]` so that estimation engines can add variants without breaking the
-/// bindings' mapping to Python exceptions.
+/// Exhaustive on purpose: the bindings map every variant to a Python exception in one `match`
+/// (`crates/py/src/errors.rs`), so a new variant does not compile until it is given its class.
 #[derive(Debug, Error, Clone, PartialEq)]
-#[non_exhaustive]
 pub enum EstimateError {
     /// An error from the geometry crate.
     #[error(transparent)]

@@ -4,11 +4,11 @@
 //! be `float64` (the Python wrappers convert other dtypes first), finite, and are read through
 //! ndarray views, so non-contiguous inputs are handled without raw-slice access.
 
-use numpy::ndarray::{ArrayViewD, Axis, Dimension};
+use numpy::ndarray::ArrayViewD;
 use numpy::{PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
-use crate::errors;
+use crate::{errors, validate};
 
 /// A borrowed, validated float64 array of any shape.
 pub struct Array<'py> {
@@ -47,69 +47,24 @@ impl<'py> Array<'py> {
 
     /// Fails unless every element is finite.
     pub fn finite(self) -> PyResult<Self> {
-        let view = self.view();
-        // Fast path over contiguous memory; the (slower) indexed walk only runs to report.
-        let all_finite = match view.as_slice() {
-            Some(s) => s.iter().all(|v| v.is_finite()),
-            None => view.iter().all(|v| v.is_finite()),
-        };
-        if all_finite {
-            return Ok(self);
-        }
-        if let Some((idx, v)) = view.indexed_iter().find(|(_, v)| !v.is_finite()) {
-            return Err(errors::invalid_input(format!(
-                "{} contains a non-finite value {} at index {:?}",
-                self.name,
-                v,
-                idx.slice()
-            )));
-        }
+        validate::finite(&self.view(), self.name).map_err(errors::invalid_input)?;
         Ok(self)
     }
 
     /// Requires shape `(..., n)`: returns the rows (all leading dimensions flattened) and the
     /// leading shape, so results can be reshaped back for batched calls.
     pub fn rows(&self, n: usize, expected: &str) -> PyResult<(Vec<Vec<f64>>, Vec<usize>)> {
-        let shape = self.shape();
-        if shape.is_empty() || shape[shape.len() - 1] != n {
-            return Err(errors::invalid_input(format!(
-                "{} must have shape {}, got {:?}",
-                self.name, expected, shape
-            )));
-        }
-        let lead = shape[..shape.len() - 1].to_vec();
-        let count: usize = lead.iter().product();
-        let v = self.view();
-        let flat = v
-            .to_shape((count, n))
-            .map_err(|e| errors::internal(format!("reshaping {}: {e}", self.name)))?;
-        let rows = flat.axis_iter(Axis(0)).map(|r| r.to_vec()).collect();
-        Ok((rows, lead))
+        validate::rows(&self.view(), self.name, n, expected).map_err(errors::invalid_input)
     }
 
     /// Requires exactly shape `shape` and returns the elements in row-major order.
     pub fn exact(&self, shape: &[usize]) -> PyResult<Vec<f64>> {
-        if self.shape() != shape {
-            return Err(errors::invalid_input(format!(
-                "{} must have shape {}, got {}",
-                self.name,
-                shape_str(shape),
-                shape_str(self.shape())
-            )));
-        }
-        Ok(self.view().iter().copied().collect())
+        validate::exact(&self.view(), self.name, shape).map_err(errors::invalid_input)
     }
 
     /// Requires a 1-D array and returns it.
     pub fn vector(&self) -> PyResult<Vec<f64>> {
-        if self.shape().len() != 1 {
-            return Err(errors::invalid_input(format!(
-                "{} must be one-dimensional, got shape {:?}",
-                self.name,
-                self.shape()
-            )));
-        }
-        Ok(self.view().iter().copied().collect())
+        validate::vector(&self.view(), self.name).map_err(errors::invalid_input)
     }
 }
 
@@ -119,24 +74,7 @@ impl Array<'_> {
     /// be reshaped to `(..., *out_item)`. `expected` spells the shape for the error message,
     /// e.g. `"(..., 4, 4)"`.
     pub fn batch(&self, item: &[usize], expected: &str) -> PyResult<(Vec<f64>, Vec<usize>)> {
-        let shape = self.shape();
-        if shape.len() < item.len() || shape[shape.len() - item.len()..] != *item {
-            return Err(errors::invalid_input(format!(
-                "{} must have shape {}, got {}",
-                self.name,
-                expected,
-                shape_str(shape)
-            )));
-        }
-        let lead = shape[..shape.len() - item.len()].to_vec();
-        let view = self.view();
-        let data = match view.as_slice() {
-            // C-contiguous: one copy.
-            Some(s) => s.to_vec(),
-            // `iter` walks the logical (row-major) order whatever the strides.
-            None => view.iter().copied().collect(),
-        };
-        Ok((data, lead))
+        validate::batch(&self.view(), self.name, item, expected).map_err(errors::invalid_input)
     }
 
     /// The argument name used in error messages.
@@ -147,17 +85,7 @@ impl Array<'_> {
 
 /// A shape as Python prints it: `(3,)`, `(2, 2)`, `()`.
 pub fn shape_str(shape: &[usize]) -> String {
-    match shape {
-        [n] => format!("({n},)"),
-        _ => format!(
-            "({})",
-            shape
-                .iter()
-                .map(|n| n.to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    }
+    validate::shape_str(shape)
 }
 
 /// Reads a finite batch of shape `(..., *item)`: the row-major elements and the leading shape.
@@ -228,12 +156,7 @@ fn with_index(err: PyErr, name: &str, flat: usize, lead: &[usize]) -> PyErr {
 }
 
 /// Tolerance on `|RᵀR − I|` (Frobenius) for a matrix accepted as a rotation.
-pub const ROTATION_TOL: f64 = 1e-6;
-
-/// `|RᵀR − I|` (Frobenius); NaN when `RᵀR` overflows.
-fn orthonormality_defect(r: &nalgebra::Matrix3<f64>) -> f64 {
-    (r.transpose() * r - nalgebra::Matrix3::identity()).norm()
-}
+pub const ROTATION_TOL: f64 = validate::ROTATION_TOL;
 
 /// Converts a 3×3 matrix to a rotation, rejecting matrices that are not orthonormal with
 /// determinant +1 (to [`ROTATION_TOL`]); NaN or overflowing entries are rejected too.
@@ -241,17 +164,7 @@ pub fn matrix_to_rotation(
     r: &nalgebra::Matrix3<f64>,
     name: &str,
 ) -> PyResult<nalgebra::Rotation3<f64>> {
-    let orth = orthonormality_defect(r);
-    // Written so that NaN fails: a huge matrix overflows RᵀR to NaN, which must not pass.
-    let is_rotation = orth <= ROTATION_TOL && r.determinant() > 0.0;
-    if !is_rotation {
-        return Err(errors::invalid_input(format!(
-            "{name} is not a rotation matrix (|RᵀR − I| = {orth:.3e}, det R = {:.6})",
-            r.determinant()
-        )));
-    }
-    // Re-orthonormalise so tiny input errors do not leak into the core.
-    Ok(nalgebra::Rotation3::from_matrix(r))
+    validate::rotation(r, name).map_err(errors::invalid_input)
 }
 
 /// A new float64 NumPy array of `shape` holding `data` in row-major order.
@@ -306,25 +219,7 @@ pub fn matrix_to_isometry(
     m: &nalgebra::Matrix4<f64>,
     name: &str,
 ) -> PyResult<nalgebra::Isometry3<f64>> {
-    let r = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let orth = orthonormality_defect(&r);
-    let last_ok =
-        (m[(3, 0)].abs() + m[(3, 1)].abs() + m[(3, 2)].abs() + (m[(3, 3)] - 1.0).abs()) <= 1e-9;
-    // Written so that NaN fails (see `matrix_to_rotation`).
-    let is_rigid = orth <= ROTATION_TOL && r.determinant() > 0.0 && last_ok;
-    if !is_rigid {
-        return Err(errors::invalid_input(format!(
-            "{name} is not a rigid transform (|RᵀR − I| = {orth:.3e}, det R = {:.6}, last row {:?})",
-            r.determinant(),
-            [m[(3, 0)], m[(3, 1)], m[(3, 2)], m[(3, 3)]]
-        )));
-    }
-    let rot = nalgebra::Rotation3::from_matrix(&r);
-    let t = nalgebra::Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]);
-    Ok(nalgebra::Isometry3::from_parts(
-        t,
-        nalgebra::UnitQuaternion::from_rotation_matrix(&rot),
-    ))
+    validate::isometry(m, name).map_err(errors::invalid_input)
 }
 
 /// Row-major 4×4 of an isometry.

@@ -12,6 +12,12 @@
 //! ```
 //! The classes are built at module initialisation (so they can derive from both
 //! `AutoteachError` and the matching built-in) and live in `autoteach._core`.
+//!
+//! Every core error enum (`GeometryError`, `EstimateError`, `DetectError`, `PlanError`) is
+//! mapped here by an exhaustive `match` with no catch-all arm. Adding a variant to one of them
+//! fails to compile until it gets an arm: choose the class by who must act — the caller's input
+//! (`InvalidInputError`), the data's geometry (`DegenerateGeometryError`), a pose out of reach
+//! (`UnreachablePoseError`), the numerics (`ConvergenceError`) or memory (`AllocationError`).
 
 use autoteach_geometry::GeometryError;
 use pyo3::prelude::*;
@@ -159,9 +165,6 @@ pub fn estimate(err: autoteach_estimate::EstimateError) -> PyErr {
         | E::CoincidentLink { .. }
         | E::OutsideMap { .. }
         | E::EmptyInput(_) => invalid_input(err.to_string()),
-        // `EstimateError` is `#[non_exhaustive]`: variants added later default to a numerical
-        // failure until they get their own arm.
-        _ => new_err("ConvergenceError", err.to_string()),
     }
 }
 
@@ -181,5 +184,18 @@ pub fn detect(err: autoteach_detect::DetectError) -> PyErr {
         E::Degenerate { .. } | E::RankDeficient { .. } => {
             new_err("DegenerateGeometryError", err.to_string())
         }
+    }
+}
+
+/// Maps a planning error to its Python exception: a configuration in collision, malformed input
+/// and infeasible limits → `InvalidInputError`; no path within the budget → `ConvergenceError`.
+pub fn plan(err: autoteach_geometry::plan::PlanError) -> PyErr {
+    use autoteach_geometry::plan::PlanError as E;
+    match err {
+        E::Geometry(e) => geometry(e),
+        E::InvalidInput { .. } | E::InCollision { .. } | E::Infeasible { .. } => {
+            invalid_input(err.to_string())
+        }
+        E::NoPath { .. } => new_err("ConvergenceError", err.to_string()),
     }
 }

@@ -30,6 +30,7 @@ mod wafers;
 // issue 35: probabilistic boxes / JIoU and sparse pooling
 mod fusion;
 mod uncertainty;
+mod validate;
 
 /// The compiled module `autoteach._core`.
 #[pymodule]

@@ -29,14 +29,9 @@ type NamedPoses = Vec<(String, [f64; 5])>;
 
 /// Maps every planning error to its exception: a configuration in collision, malformed input
 /// and infeasible limits → `InvalidInputError`; no path within the budget → `ConvergenceError`.
+/// (The mapping itself is `errors::plan`, beside the other crates' mappings.)
 fn err(e: PlanError) -> PyErr {
-    match e {
-        PlanError::Geometry(g) => errors::geometry(g),
-        PlanError::InvalidInput { .. }
-        | PlanError::InCollision { .. }
-        | PlanError::Infeasible { .. } => errors::invalid_input(e.to_string()),
-        PlanError::NoPath { .. } => errors::new_err("ConvergenceError", e.to_string()),
-    }
+    errors::plan(e)
 }
 
 fn joints(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Joints> {

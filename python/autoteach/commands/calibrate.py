@@ -60,6 +60,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
 def _load_npz(path: Path) -> tuple[list[np.ndarray], list[np.ndarray], tuple[int, int]]:
     try:
         return _read_npz(path)
+    except InvalidInputError:
+        raise  # already names the file and the problem (it is a ValueError too)
     except (ValueError, EOFError, KeyError, zipfile.BadZipFile) as err:
         # np.load raises these for files that are not an .npz of plain arrays.
         raise InvalidInputError(
@@ -72,7 +74,10 @@ def _read_npz(path: Path) -> tuple[list[np.ndarray], list[np.ndarray], tuple[int
         keys = set(z.files)
         if "image_size" not in keys:
             raise InvalidInputError(f"{path}: missing 'image_size' ([width, height])")
-        w, h = (int(v) for v in np.asarray(z["image_size"]).ravel()[:2])
+        size = np.asarray(z["image_size"]).ravel()
+        if size.shape != (2,) or size.dtype.kind not in "iuf" or not np.all(np.isfinite(size)) or np.any(size < 1):
+            raise InvalidInputError(f"{path}: 'image_size' must be [width, height] in pixels, got {size.tolist()}")
+        w, h = (int(v) for v in size)
         if "object_points" in keys and "image_points" in keys:
             return list(z["object_points"]), list(z["image_points"]), (w, h)
         obj, img = [], []

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -86,7 +87,7 @@ def _plot(rows: list[dict[str, Any]], folder: Path, ws: Any) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     if not args.demo:
-        print("autoteach plan: only --demo is available")
+        print("autoteach plan: only --demo is available", file=sys.stderr)
         return 2
     rows = run_demo()
     if args.plot is not None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -93,7 +94,7 @@ def _jsonable(obj: Any) -> Any:
 
 def _run(args: argparse.Namespace) -> int:
     if not args.demo:
-        print("autoteach tune: only --demo is available (the simulated JT2/JT4 experiment)")
+        print("autoteach tune: only --demo is available (the simulated JT2/JT4 experiment)", file=sys.stderr)
         return 2
     from autoteach.control import demo, plot_sensitivities, table_2_3
 

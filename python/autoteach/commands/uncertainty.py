@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -98,7 +99,7 @@ def _plots(out: Path) -> list[str]:
 
 def _run(args: argparse.Namespace) -> int:
     if not args.demo:
-        print("nothing to do: pass --demo")
+        print("autoteach uncertainty: nothing to do: pass --demo", file=sys.stderr)
         return 2
     result = demo()
     if not args.no_plot:

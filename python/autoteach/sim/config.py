@@ -41,9 +41,13 @@ DEFAULT_BASE_POSE: tuple[tuple[float, ...], ...] = _yaw_pose(-1.0, 0.03, -0.45, 
 
 def _floats(values: Any, n: int | None, name: str) -> tuple[float, ...]:
     try:
-        out = tuple(float(v) for v in np.asarray(values, dtype=np.float64).reshape(-1))
+        arr = np.asarray(values)
+        # Real numbers only: a cast would drop imaginary parts and read booleans as 0 and 1.
+        if arr.dtype.kind not in "iuf":
+            raise TypeError(f"dtype {arr.dtype}")
+        out = tuple(float(v) for v in arr.astype(np.float64).reshape(-1))
     except (TypeError, ValueError) as exc:
-        raise InvalidInputError(f"{name} must be a sequence of numbers, got {values!r}") from exc
+        raise InvalidInputError(f"{name} must be a sequence of real numbers, got {values!r}") from exc
     if n is not None and len(out) != n:
         raise InvalidInputError(f"{name} must have {n} values, got {len(out)}")
     if not all(math.isfinite(v) for v in out):
@@ -61,7 +65,10 @@ def _range(values: Any, name: str, positive: bool = False) -> tuple[float, float
 
 
 def _nonneg(value: Any, name: str) -> float:
-    v = float(value)
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan
     if not math.isfinite(v) or v < 0.0:
         raise InvalidInputError(f"{name} must be finite and >= 0, got {value!r}")
     return v
@@ -216,16 +223,23 @@ class SimConfig:
         put = object.__setattr__
         for name in ("n_slots", "width", "height", "supersample", "n_rim_samples", "start_time_ns"):
             v = getattr(self, name)
-            if isinstance(v, bool) or int(v) != v:
+            try:
+                whole = not isinstance(v, bool) and int(v) == v
+            except (TypeError, ValueError, OverflowError):  # NaN, infinity, strings, arrays
+                whole = False
+            if not whole:
                 raise InvalidInputError(f"{name} must be an integer, got {v!r}")
             put(self, name, int(v))
         for name in ("n_slots", "width", "height", "supersample", "n_rim_samples"):
-            if getattr(self, name) < 1:
-                raise InvalidInputError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.start_time_ns < 0:
-            raise InvalidInputError(f"start_time_ns must be >= 0, got {self.start_time_ns}")
+            if not 1 <= getattr(self, name) < 2**31:
+                raise InvalidInputError(f"{name} must be in [1, 2**31), got {getattr(self, name)}")
+        if not 0 <= self.start_time_ns < 2**63:
+            raise InvalidInputError(f"start_time_ns must be in [0, 2**63), got {self.start_time_ns}")
         for name in ("slot_pitch", "wafer_radius", "wafer_thickness", "frame_rate_hz"):
-            v = float(getattr(self, name))
+            try:
+                v = float(getattr(self, name))
+            except (TypeError, ValueError):
+                v = math.nan
             if not math.isfinite(v) or v <= 0.0:
                 raise InvalidInputError(f"{name} must be finite and > 0, got {getattr(self, name)!r}")
             put(self, name, v)

@@ -18,6 +18,7 @@ from autoteach.errors import InvalidInputError
 
 if TYPE_CHECKING:
     from autoteach.geometry import Camera, RobotParams
+    from autoteach.io import LogDamage
     from autoteach.sim.config import SimConfig
 
 #: Names of the five joints, in the order of the joint vector ``q = (θ1, θ2, θ3, θ4, h)``.
@@ -144,6 +145,8 @@ class Session:
             only as the low-contrast silhouette of the dark top/bottom face).
         timings: wall-clock seconds of the simulation stages (not stored in logs).
         source: the file the session was read from, if any.
+        damage: for a damaged log read with ``allow_truncated=True``, the byte ranges skipped and the
+            frames lost (:class:`autoteach.io.LogDamage`); ``None`` for a complete read.
 
     """
 
@@ -163,6 +166,7 @@ class Session:
     rims: list[list[dict[str, Any]]] | None = None
     timings: dict[str, float] = field(default_factory=dict)
     source: str | None = None
+    damage: LogDamage | None = None
 
     def __post_init__(self) -> None:
         self.validate()
@@ -188,6 +192,11 @@ class Session:
                 raise InvalidInputError("wafer_slots must give one slot per wafer pose")
         if self.rims is not None and len(self.rims) != n:
             raise InvalidInputError(f"rims must have one list per frame ({n}), got {len(self.rims)}")
+        rate = self.frame_rate_hz
+        if rate is not None:
+            ok = isinstance(rate, (int, float, np.integer, np.floating)) and not isinstance(rate, (bool, np.bool_))
+            if not ok or not (math.isfinite(float(rate)) and float(rate) > 0.0):
+                raise InvalidInputError(f"frame_rate_hz must be a positive finite number or None, got {rate!r}")
 
     @property
     def n_frames(self) -> int:

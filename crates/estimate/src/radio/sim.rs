@@ -455,7 +455,7 @@ pub fn explore(
             });
         }
     }
-    if env.nodes.len() < robots + 1 {
+    if env.nodes.len() <= robots {
         return Err(EstimateError::InvalidProblem(
             "roadmap too small for the team".into(),
         ));
@@ -495,9 +495,34 @@ pub fn explore(
             }
         })
         .collect();
-    let steps = (duration * rate).round() as usize;
+    // Sizes and step lengths from the caller: a step longer than the map (speed/rate ≈ 1e300)
+    // walked the roadmap edge by edge for ever, and duration·rate ≈ 1e300 steps aborted the
+    // process on allocation.
+    let g = &env.geometry;
+    let extent = g.rows.max(g.cols) as f64 * g.resolution;
+    // speed and rate are finite and positive (checked above): no NaN reaches these tests.
+    if speed * 1.2 / rate > extent {
+        return Err(EstimateError::InvalidParameter {
+            name: "speed/rate",
+            value: speed / rate,
+            reason: "a robot must not move farther than the map's extent in one time step",
+        });
+    }
+    let steps_f = (duration * rate).round();
+    if steps_f >= u32::MAX as f64 {
+        return Err(EstimateError::InvalidParameter {
+            name: "duration·rate",
+            value: steps_f,
+            reason: "the number of time steps must stay below 2³²",
+        });
+    }
+    let steps = steps_f as usize;
     let dt = 1.0 / rate;
-    let mut times = Vec::with_capacity(steps);
+    autoteach_geometry::alloc::ensure_fits::<[f64; 2]>(
+        "trajectory samples",
+        autoteach_geometry::alloc::checked_count("trajectory samples", steps, robots + 1)?,
+    )?;
+    let mut times = autoteach_geometry::alloc::try_with_capacity("trajectory times", steps)?;
     let mut positions = vec![Vec::with_capacity(steps); robots];
     for s in 0..steps {
         times.push(s as f64 * dt);

@@ -179,6 +179,16 @@ fn validate(scene: &OpeningScene) -> Result<()> {
             reason: "must be non-negative",
         });
     }
+    // The blur kernel has 2·⌈3σ⌉ + 1 taps: a σ beyond the image's size flattens it and, at
+    // σ ≈ 1e300, asked for a kernel no allocator gives (the process aborted).
+    let extent = scene.width.max(scene.height) as f64;
+    if scene.blur_sigma > extent {
+        return Err(GeometryError::InvalidParameter {
+            what: "blur_sigma",
+            value: scene.blur_sigma,
+            reason: "must not exceed the image's larger side in pixels",
+        });
+    }
     for poly in &scene.polygons {
         if poly.vertices.len() < 3 {
             return Err(GeometryError::WrongLength {
@@ -229,7 +239,11 @@ pub fn render_opening(scene: &OpeningScene) -> Result<GrayImage> {
             value: scene.homography.determinant(),
             reason: "the homography must be invertible",
         })?;
-    let mut img = vec![0f32; w * h];
+    // Sizes from the caller: the image, the blur's scratch copy and the 8-bit result must fit.
+    let n = crate::alloc::checked_count("opening image pixels", w, h)?;
+    let mut img = crate::alloc::try_filled("opening image pixels", n, 0f32)?;
+    crate::alloc::ensure_fits::<f32>("opening blur buffer", n)?;
+    crate::alloc::ensure_fits::<u8>("opening image", n)?;
     img.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
         for (u, px) in row.iter_mut().enumerate() {
             let mut acc = 0.0;
