@@ -30,6 +30,8 @@ mod wafers;
 // issue 35: probabilistic boxes / JIoU and sparse pooling
 mod fusion;
 mod uncertainty;
+// issue 29: global registration with a distractor-proof selection
+mod global_register;
 
 /// The compiled module `autoteach._core`.
 #[pymodule]
@@ -55,6 +57,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     uncertainty::register(m)?;
     fusion::register(m)?;
     plan::register(m)?;
+    global_register::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
