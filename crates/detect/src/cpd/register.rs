@@ -39,6 +39,7 @@ use crate::voting::{RigidHypothesis, VotingOptions, global_voting};
 use crate::{DetectError, Result};
 
 mod scoring;
+mod trim;
 
 use scoring::{Index, median_spacing, subsample_rows};
 
@@ -61,8 +62,11 @@ pub struct GlobalRegisterOptions {
     pub voting: VotingOptions,
     /// Outlier weight `w` of the CPD runs and of the likelihood (default 0.5).
     pub w: f64,
-    /// Maximum iterations of each rigid CPD refinement (default 50).
+    /// Maximum iterations of each rigid CPD refinement (default 30).
     pub max_iterations: usize,
+    /// Iterations of the trimmed nearest-neighbour sharpening after each CPD (default 10; see
+    /// the `trim` module).
+    pub sharpen_iterations: usize,
     /// At most this many template points are refined and scored per hypothesis (uniform stride;
     /// default 300); the scene window is capped at four times as many.
     pub max_refine_points: usize,
@@ -93,7 +97,8 @@ impl Default for GlobalRegisterOptions {
                 ..VotingOptions::default()
             },
             w: 0.5,
-            max_iterations: 50,
+            max_iterations: 30,
+            sharpen_iterations: 10,
             max_refine_points: 300,
             window: 0.25,
             criterion: Criterion::Explained,
@@ -222,42 +227,71 @@ fn window_rows(x: &DMatrix<f64>, centre: &DVector<f64>, radius: f64, cap: usize)
     DMatrix::from_fn(keep.len(), x.ncols(), |r, c| x[(rows[keep[r]], c)])
 }
 
-/// Rigid CPD (no scale) of `y` moved by `(r0, t0)` onto the scene window around it; the composed
-/// pose and its σ². `None` when the window holds too few points or the CPD fails on them.
-fn refine(
-    x: &DMatrix<f64>,
-    y: &DMatrix<f64>,
-    r0: &DMatrix<f64>,
-    t0: &DVector<f64>,
+/// Shared inputs of the per-hypothesis refinement.
+struct Refiner<'a> {
+    x: &'a DMatrix<f64>,
+    index: &'a Index,
+    /// Template subsample.
+    ys: &'a DMatrix<f64>,
     size: f64,
-    o: &GlobalRegisterOptions,
-    sigma2: Option<f64>,
-) -> Result<Option<(DMatrix<f64>, DVector<f64>, f64)>> {
-    let d = y.ncols();
-    let moved = apply(y, r0, t0);
-    let centre = DVector::from_fn(d, |c, _| moved.column(c).mean());
-    let reach = (0..moved.nrows())
-        .map(|r| (moved.row(r).transpose() - &centre).norm())
-        .fold(0.0, f64::max);
-    let xw = window_rows(x, &centre, reach + o.window * size, 4 * o.max_refine_points);
-    if xw.nrows() < d + 1 {
-        return Ok(None);
-    }
-    let mut opts = RigidOptions {
-        scale: false,
-        ..RigidOptions::default()
-    };
-    opts.cpd.w = o.w;
-    opts.cpd.max_iterations = o.max_iterations;
-    opts.cpd.sigma2 = sigma2;
-    match rigid(&xw, &moved, &opts) {
-        Ok(res) => {
-            let r = &res.rotation * r0;
-            let t = &res.rotation * t0 + &res.translation;
-            Ok(Some((r, t, res.sigma2)))
+    /// Template point spacing.
+    h: f64,
+    /// Initial σ² of the CPD: the voting's own accuracy (module docs).
+    sigma2_0: f64,
+    o: &'a GlobalRegisterOptions,
+}
+
+impl Refiner<'_> {
+    /// Rigid CPD (no scale) of the template moved by `(r0, t0)` onto the scene window around it,
+    /// then trimmed sharpening ([`trim::sharpen`]); the composed pose and its σ². `None` when
+    /// the window holds too few points or the CPD fails on them.
+    fn refine(
+        &self,
+        r0: &DMatrix<f64>,
+        t0: &DVector<f64>,
+    ) -> Result<Option<(DMatrix<f64>, DVector<f64>, f64)>> {
+        let (y, o) = (self.ys, self.o);
+        let d = y.ncols();
+        let moved = apply(y, r0, t0);
+        let centre = DVector::from_fn(d, |c, _| moved.column(c).mean());
+        let reach = (0..moved.nrows())
+            .map(|r| (moved.row(r).transpose() - &centre).norm())
+            .fold(0.0, f64::max);
+        let xw = window_rows(
+            self.x,
+            &centre,
+            reach + o.window * self.size,
+            4 * o.max_refine_points,
+        );
+        if xw.nrows() < d + 1 {
+            return Ok(None);
         }
-        Err(DetectError::Degenerate { .. }) => Ok(None),
-        Err(e) => Err(e),
+        let mut opts = RigidOptions {
+            scale: false,
+            ..RigidOptions::default()
+        };
+        opts.cpd.w = o.w;
+        opts.cpd.max_iterations = o.max_iterations;
+        opts.cpd.sigma2 = Some(self.sigma2_0);
+        let (r, t, s2) = match rigid(&xw, &moved, &opts) {
+            Ok(res) => (
+                &res.rotation * r0,
+                &res.rotation * t0 + &res.translation,
+                res.sigma2,
+            ),
+            Err(DetectError::Degenerate { .. }) => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        Ok(Some(trim::sharpen(
+            self.index,
+            self.x,
+            y,
+            &r,
+            &t,
+            s2,
+            self.h,
+            o.sharpen_iterations,
+        )))
     }
 }
 
@@ -288,10 +322,31 @@ pub fn global_register(
     let keep = subsample_rows(y.nrows(), options.max_refine_points);
     let ys = DMatrix::from_fn(keep.len(), d, |r, c| y[(keep[r], c)]);
     let h = median_spacing(&ys)?;
+    let index = Index::new(x)?;
+    let rms_radius = {
+        let c = DVector::from_fn(d, |k, _| ys.column(k).mean());
+        ((0..ys.nrows())
+            .map(|r| (ys.row(r).transpose() - &c).norm_squared())
+            .sum::<f64>()
+            / ys.nrows() as f64)
+            .sqrt()
+    };
+    // The voting hypothesis is accurate to about one angle bin over the template's radius (the
+    // default translation bin): that is the CPD's initial σ (per coordinate).
+    let sigma2_0 = ((options.voting.angle_bin * rms_radius).powi(2) / d as f64).max(h * h);
+    let refiner = Refiner {
+        x,
+        index: &index,
+        ys: &ys,
+        size,
+        h,
+        sigma2_0,
+        o: options,
+    };
     let refined: Vec<Result<Option<(RigidHypothesis, DMatrix<f64>, DVector<f64>, f64)>>> = hyps
         .into_par_iter()
         .map(|hy| {
-            let r = refine(x, &ys, &hy.rotation, &hy.translation, size, options, None)?;
+            let r = refiner.refine(&hy.rotation, &hy.translation)?;
             Ok(r.map(|(r, t, s2)| (hy, r, t, s2)))
         })
         .collect();
@@ -312,7 +367,6 @@ pub fn global_register(
         .fold(f64::INFINITY, f64::min)
         .max(f64::MIN_POSITIVE);
     let radius = (3.0 * (d as f64 * sigma2).sqrt()).max(h);
-    let index = Index::new(x)?;
     let volume = (0..d)
         .map(|c| {
             let col = x.column(c);
@@ -353,7 +407,7 @@ pub fn global_register(
     rank(&mut candidates, options.criterion);
 
     // Symmetries of the template: vote it onto itself, refine, verify.
-    let symmetries = symmetries(&ys, size, radius, options)?;
+    let symmetries = symmetries(&ys, size, radius, sigma2_0, options)?;
     let best = candidates[0].clone();
     let mut equivalents = Vec::new();
     for (rs, ts) in &symmetries {
@@ -377,7 +431,7 @@ pub fn global_register(
                     votes: 0,
                     pair_votes: 0,
                 };
-                match refine(x, &ys, &r0, &t0, size, options, Some(best.sigma2))? {
+                match refiner.refine(&r0, &t0)? {
                     Some((r, t, s2)) => score(initial, r, t, s2, true)?,
                     None => continue,
                 }
@@ -389,26 +443,37 @@ pub fn global_register(
     candidates.splice(1..1, equivalents);
     let ambiguous = n_eq > 0;
 
-    // Full resolution from the chosen pose.
+    // Full resolution from the chosen pose: the trimmed sharpening on every template point (a
+    // CPD E-step over all M·N pairs would cost more than the whole search in 3-D).
     let chosen = &candidates[0];
-    let moved = apply(y, &chosen.rotation, &chosen.translation);
-    let centre = DVector::from_fn(d, |c, _| moved.column(c).mean());
-    let reach = (0..moved.nrows())
-        .map(|r| (moved.row(r).transpose() - &centre).norm())
-        .fold(0.0, f64::max);
-    let xw = window_rows(x, &centre, reach + options.window * size, usize::MAX);
-    let mut ro = RigidOptions {
-        scale: false,
-        ..RigidOptions::default()
+    let (rf, tf, s2f) = trim::sharpen(
+        &index,
+        x,
+        y,
+        &chosen.rotation,
+        &chosen.translation,
+        chosen.sigma2,
+        h,
+        options.sharpen_iterations,
+    );
+    let transformed = apply(y, &rf, &tf);
+    let rigid_res = RigidResult {
+        rotation: rf,
+        translation: tf,
+        scale: 1.0,
+        transformed,
+        sigma2: s2f,
+        iterations: options.sharpen_iterations,
+        converged: true,
+        p: None,
     };
-    ro.cpd.w = options.w;
-    ro.cpd.max_iterations = options.max_iterations;
-    ro.cpd.sigma2 = Some(chosen.sigma2.max(sigma2));
-    let mut rigid_res = rigid(&xw, &moved, &ro)?;
-    // x ≈ R_c (R y + t) + t_c: compose with the chosen pose.
-    let rc = rigid_res.rotation.clone();
-    rigid_res.rotation = &rc * &chosen.rotation;
-    rigid_res.translation = &rc * &chosen.translation + &rigid_res.translation;
+    let xw = {
+        let centre = DVector::from_fn(d, |c, _| rigid_res.transformed.column(c).mean());
+        let reach = (0..y.nrows())
+            .map(|r| (rigid_res.transformed.row(r).transpose() - &centre).norm())
+            .fold(0.0, f64::max);
+        window_rows(x, &centre, reach + options.window * size, usize::MAX)
+    };
     let nonrigid_res = if options.final_nonrigid {
         let mut no = options.nonrigid.clone();
         no.cpd.sigma2 = Some(rigid_res.sigma2);
@@ -474,10 +539,19 @@ fn symmetries(
     ys: &DMatrix<f64>,
     size: f64,
     radius: f64,
+    sigma2_0: f64,
     o: &GlobalRegisterOptions,
 ) -> Result<Vec<(DMatrix<f64>, DVector<f64>)>> {
     let d = ys.ncols();
     let self_votes = global_voting(ys, ys, &o.voting)?;
+    // A symmetry maps every template point onto the template, so it collects about as many
+    // distinct-point votes as the identity; a self-map with under half of the best count
+    // cannot put `symmetry_fraction` ≥ ½ of the template on itself.
+    let top = self_votes.iter().map(|s| s.votes).max().unwrap_or(0);
+    let self_votes: Vec<RigidHypothesis> = self_votes
+        .into_iter()
+        .filter(|s| 2 * s.votes >= top)
+        .collect();
     let index = Index::new(ys)?;
     let eye = DMatrix::<f64>::identity(d, d);
     let mut out: Vec<(DMatrix<f64>, DVector<f64>)> = Vec::new();
@@ -489,6 +563,7 @@ fn symmetries(
         };
         ro.cpd.max_iterations = o.max_iterations;
         ro.cpd.w = 0.1;
+        ro.cpd.sigma2 = Some(sigma2_0);
         let Ok(res) = rigid(ys, &moved, &ro) else {
             continue;
         };

@@ -37,24 +37,25 @@ impl Index {
         })
     }
 
-    /// Squared distance from row `r` of `q` to its nearest indexed point.
-    fn nearest_sq(&self, q: &DMatrix<f64>, r: usize) -> f64 {
+    /// Index of, and squared distance to, the indexed point nearest to row `r` of `q`.
+    pub(super) fn nearest(&self, q: &DMatrix<f64>, r: usize) -> (usize, f64) {
         match self {
             Self::Two(t, _) => {
                 let p = [q[(r, 0)], q[(r, 1)]];
-                t.query(&p)
-                    .nearest_one::<SquaredEuclidean<f64>>()
-                    .execute()
-                    .distance
+                let n = t.query(&p).nearest_one::<SquaredEuclidean<f64>>().execute();
+                (n.item as usize, n.distance)
             }
             Self::Three(t, _) => {
                 let p = [q[(r, 0)], q[(r, 1)], q[(r, 2)]];
-                t.query(&p)
-                    .nearest_one::<SquaredEuclidean<f64>>()
-                    .execute()
-                    .distance
+                let n = t.query(&p).nearest_one::<SquaredEuclidean<f64>>().execute();
+                (n.item as usize, n.distance)
             }
         }
+    }
+
+    /// Squared distance from row `r` of `q` to its nearest indexed point.
+    fn nearest_sq(&self, q: &DMatrix<f64>, r: usize) -> f64 {
+        self.nearest(q, r).1
     }
 
     /// `(index, squared distance)` of every indexed point within `radius` of row `r` of `q`.
