@@ -125,12 +125,12 @@ class GlobalRegistration:
 def global_register(
     X: ArrayLike,
     Y: ArrayLike,
-    k: int = 12,
+    k: int = 8,
     criterion: CriterionName = "explained",
     count: Literal["y", "pairs"] = "y",
     w: float = 0.5,
-    max_iterations: int = 50,
-    max_refine_points: int = 300,
+    max_iterations: int = 10,
+    max_refine_points: int = 100,
     window: float = 0.25,
     energy_all: bool = False,
     nonrigid: bool = False,
@@ -141,7 +141,7 @@ def global_register(
     angle_bin: float = 0.2,
     translation_bin: float | None = None,
     min_votes: int = 3,
-    max_points: int = 400,
+    max_points: int = 200,
 ) -> GlobalRegistration:
     """Register a template ``Y`` into a cluttered scene ``X`` (module docs).
 

@@ -125,10 +125,10 @@ impl PyGlobalRegistration {
 
 /// Global registration of `y` (M, D) into `x` (N, D) (issue 29; seed §3.4).
 #[pyfunction]
-#[pyo3(name = "global_register", signature = (x, y, k = 12, criterion = "explained", count = "y", w = 0.5,
-    max_iterations = 50, max_refine_points = 300, window = 0.25, energy_all = false,
+#[pyo3(name = "global_register", signature = (x, y, k = 8, criterion = "explained", count = "y", w = 0.5,
+    max_iterations = 10, max_refine_points = 100, window = 0.25, energy_all = false,
     nonrigid = false, beta = 2.0, lam = 2.0, symmetry_fraction = 0.9, neighbours = 10,
-    angle_bin = 0.2, translation_bin = None, min_votes = 3, max_points = 400))]
+    angle_bin = 0.2, translation_bin = None, min_votes = 3, max_points = 200))]
 #[allow(clippy::too_many_arguments)]
 fn global_register_py(
     py: Python<'_>,

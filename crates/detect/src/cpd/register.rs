@@ -58,17 +58,18 @@ pub enum Criterion {
 /// Options of [`global_register`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct GlobalRegisterOptions {
-    /// Global voting; `top_k` is the number of suppressed hypotheses refined (default 12).
+    /// Global voting; `top_k` is the number of suppressed hypotheses refined (default 8;
+    /// `max_points` default 200).
     pub voting: VotingOptions,
     /// Outlier weight `w` of the CPD runs and of the likelihood (default 0.5).
     pub w: f64,
-    /// Maximum iterations of each rigid CPD refinement (default 30).
+    /// Maximum iterations of each rigid CPD refinement (default 10; the sharpening finishes).
     pub max_iterations: usize,
     /// Iterations of the trimmed nearest-neighbour sharpening after each CPD (default 10; see
     /// the `trim` module).
     pub sharpen_iterations: usize,
     /// At most this many template points are refined and scored per hypothesis (uniform stride;
-    /// default 300); the scene window is capped at four times as many.
+    /// default 100); the scene window is capped at four times as many.
     pub max_refine_points: usize,
     /// Scene window around a moved template: its bounding sphere grown by this fraction of the
     /// shape size (default 0.25).
@@ -92,14 +93,14 @@ impl Default for GlobalRegisterOptions {
         nonrigid.cpd.w = 0.5;
         Self {
             voting: VotingOptions {
-                top_k: 12,
-                max_points: 400,
+                top_k: 8,
+                max_points: 200,
                 ..VotingOptions::default()
             },
             w: 0.5,
-            max_iterations: 30,
+            max_iterations: 10,
             sharpen_iterations: 10,
-            max_refine_points: 300,
+            max_refine_points: 100,
             window: 0.25,
             criterion: Criterion::Explained,
             energy_all: false,
