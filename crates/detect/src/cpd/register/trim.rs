@@ -15,6 +15,7 @@ use super::scoring::Index;
 
 /// Sharpens the pose `(r, t)` of `y` in the scene indexed by `index` (rows of `x`); returns the
 /// new pose and its per-coordinate σ² over the kept pairs. `h` is the template's point spacing.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn sharpen(
     index: &Index,
     x: &DMatrix<f64>,
