@@ -100,13 +100,13 @@ fn bench(c: &mut Criterion) {
     let o = GlobalRegisterOptions::default();
     let (x2, y2) = scene_2d(1);
     c.bench_function("global_register 2-D 150/500", |b| {
-        b.iter(|| global_register(black_box(&x2), black_box(&y2), &o).unwrap())
+        b.iter(|| global_register(black_box(&x2), black_box(&y2), &o).expect("2-D scene registers"))
     });
     let (x3, y3) = scene_3d(2);
     let mut g = c.benchmark_group("global_register 3-D");
     g.sample_size(10);
     g.bench_function("2000/3000", |b| {
-        b.iter(|| global_register(black_box(&x3), black_box(&y3), &o).unwrap())
+        b.iter(|| global_register(black_box(&x3), black_box(&y3), &o).expect("3-D scene registers"))
     });
     g.finish();
 }

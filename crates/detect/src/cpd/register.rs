@@ -228,6 +228,9 @@ fn window_rows(x: &DMatrix<f64>, centre: &DVector<f64>, radius: f64, cap: usize)
     DMatrix::from_fn(keep.len(), x.ncols(), |r, c| x[(rows[keep[r]], c)])
 }
 
+/// A refined pose `(R, t, σ²)`.
+type Pose = (DMatrix<f64>, DVector<f64>, f64);
+
 /// Shared inputs of the per-hypothesis refinement.
 struct Refiner<'a> {
     x: &'a DMatrix<f64>,
@@ -246,11 +249,7 @@ impl Refiner<'_> {
     /// Rigid CPD (no scale) of the template moved by `(r0, t0)` onto the scene window around it,
     /// then trimmed sharpening ([`trim::sharpen`]); the composed pose and its σ². `None` when
     /// the window holds too few points or the CPD fails on them.
-    fn refine(
-        &self,
-        r0: &DMatrix<f64>,
-        t0: &DVector<f64>,
-    ) -> Result<Option<(DMatrix<f64>, DVector<f64>, f64)>> {
+    fn refine(&self, r0: &DMatrix<f64>, t0: &DVector<f64>) -> Result<Option<Pose>> {
         let (y, o) = (self.ys, self.o);
         let d = y.ncols();
         let moved = apply(y, r0, t0);
@@ -344,6 +343,7 @@ pub fn global_register(
         sigma2_0,
         o: options,
     };
+    #[allow(clippy::type_complexity)]
     let refined: Vec<Result<Option<(RigidHypothesis, DMatrix<f64>, DVector<f64>, f64)>>> = hyps
         .into_par_iter()
         .map(|hy| {
