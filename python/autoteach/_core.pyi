@@ -1628,3 +1628,61 @@ def plan_sample(
     knots: object, control_points: object, times: object
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]: ...
 def plan_inverse_dynamics(q: object, dq: object, ddq: object, wafer: bool = True) -> NDArray[np.float64]: ...
+
+# --- global registration (issue 29): autoteach.global_registration ---
+class GlobalRegistration:
+    @property
+    def candidates(
+        self,
+    ) -> list[
+        tuple[
+            NDArray[np.float64],
+            NDArray[np.float64],
+            float,
+            float,
+            float,
+            float | None,
+            bool,
+            NDArray[np.float64],
+            NDArray[np.float64],
+            int,
+            int,
+        ]
+    ]:
+        """``(R, t, sigma2, explained, log_likelihood, energy, equivalent, R0, t0, votes, pair_votes)``."""
+    @property
+    def symmetries(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]: ...
+    @property
+    def ambiguous(self) -> bool: ...
+    @property
+    def inlier_radius(self) -> float: ...
+    @property
+    def sigma2(self) -> float: ...
+    @property
+    def rigid(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float]: ...
+    @property
+    def nonrigid(self) -> tuple[NDArray[np.float64], float] | None: ...
+
+def global_register(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    k: int = 8,
+    criterion: str = "explained",
+    count: str = "y",
+    w: float = 0.5,
+    max_iterations: int = 10,
+    max_refine_points: int = 100,
+    window: float = 0.25,
+    energy_all: bool = False,
+    nonrigid: bool = False,
+    beta: float = 2.0,
+    lam: float = 2.0,
+    symmetry_fraction: float = 0.9,
+    neighbours: int = 10,
+    angle_bin: float = 0.2,
+    translation_bin: float | None = None,
+    min_votes: int = 3,
+    max_points: int = 200,
+) -> GlobalRegistration: ...
+
+# --- end global registration ---

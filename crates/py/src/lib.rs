@@ -31,6 +31,8 @@ mod wafers;
 mod fusion;
 mod uncertainty;
 mod validate;
+// issue 29: global registration with a distractor-proof selection
+mod global_register;
 
 /// The compiled module `autoteach._core`.
 #[pymodule]
@@ -56,6 +58,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     uncertainty::register(m)?;
     fusion::register(m)?;
     plan::register(m)?;
+    global_register::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -19,7 +19,7 @@ use crate::errors;
 
 /// Reads a point set `(N, D)` as a matrix (finiteness and D are checked by the core, which
 /// names the offending index).
-fn points_arg(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<DMatrix<f64>> {
+pub(crate) fn points_arg(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<DMatrix<f64>> {
     let arr = Array::new(obj, name)?;
     let shape = arr.shape().to_vec();
     if shape.len() != 2 {
@@ -33,13 +33,19 @@ fn points_arg(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<DMatrix<f6
 }
 
 /// A matrix as a row-major NumPy array.
-fn matrix_out<'py>(py: Python<'py>, m: &DMatrix<f64>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+pub(crate) fn matrix_out<'py>(
+    py: Python<'py>,
+    m: &DMatrix<f64>,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let data: Vec<f64> = m.transpose().as_slice().to_vec();
     convert::to_numpy(py, data, &[m.nrows(), m.ncols()])
 }
 
 /// A vector as a NumPy array.
-fn vector_out<'py>(py: Python<'py>, v: &DVector<f64>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+pub(crate) fn vector_out<'py>(
+    py: Python<'py>,
+    v: &DVector<f64>,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     convert::to_numpy(py, v.as_slice().to_vec(), &[v.len()])
 }
 

@@ -53,6 +53,7 @@ mod fgt;
 mod global;
 mod lowrank;
 mod pcg;
+mod register;
 #[cfg(test)]
 mod tests;
 
@@ -61,6 +62,9 @@ use nalgebra::{DMatrix, DVector};
 pub use estep::EStep;
 pub(crate) use estep::{EStepSums, EStepWork, posterior_matrix};
 pub use global::{GlobalCpdOptions, GlobalHypothesis, global_cpd};
+pub use register::{
+    Criterion, GlobalRegisterOptions, GlobalRegistration, RegistrationCandidate, global_register,
+};
 
 use crate::{DetectError, Result};
 
