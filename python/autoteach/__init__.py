@@ -14,7 +14,10 @@ Submodules (each imported on first access, so ``import autoteach`` stays cheap a
 - :mod:`autoteach.calib` -- guided camera calibration with Max ERE.
 - :mod:`autoteach.active` -- active auto-teaching (Fisher information, next-pose planning).
 - :mod:`autoteach.polygon`, :mod:`autoteach.registration` -- chamber openings, CPD and global
-  registration (also re-exported by :mod:`autoteach.detect`).
+  registration (also re-exported by :mod:`autoteach.detect`); :mod:`autoteach.global_registration`
+  -- global registration that reports every candidate and template symmetries.
+- :mod:`autoteach.radio`, :mod:`autoteach.radio_tuning` -- radio signal-strength prediction and its
+  meta-parameter search.
 - :mod:`autoteach.report`, :mod:`autoteach.cli` -- the report writer and the command line.
 
 Only numpy, mcap and tqdm are needed at run time; plots need the ``plot`` extra
@@ -47,6 +50,7 @@ if TYPE_CHECKING:
         ellipse_detection,
         estimate,
         geometry,
+        global_registration,
         io,
         mapping,
         pipeline,
@@ -72,6 +76,7 @@ SUBMODULES = (
     "estimate",
     "fusion",
     "geometry",
+    "global_registration",
     "io",
     "mapping",
     "pipeline",
@@ -112,6 +117,7 @@ __all__ = [
     "estimate",
     "fusion",
     "geometry",
+    "global_registration",
     "io",
     "mapping",
     "pipeline",
