@@ -371,3 +371,15 @@ def test_calibrate_refuses_an_image_size_that_is_not_pixels(tmp_path, capsys):
     assert main(["calibrate", str(path)]) == 2
     err = capsys.readouterr().err
     assert "image_size" in err and len(err.strip().splitlines()) == 1
+
+
+def test_simulate_opening_names_bad_integer_arguments():
+    from autoteach import polygon
+
+    for kwargs, name in (({"width": -1}, "width"), ({"height": 2**70}, "height"), ({"n_lines": -2}, "n_lines")):
+        with pytest.raises(InvalidInputError, match=name):
+            polygon.simulate_opening(1, **kwargs)
+    with pytest.raises(InvalidInputError, match="seed"):
+        polygon.simulate_opening(-1)
+    with pytest.raises(InvalidInputError, match="blur_sigma"):
+        polygon.simulate_opening(1, blur_sigma=float("nan"))

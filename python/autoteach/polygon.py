@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
-from autoteach._convert import as_f64, as_int
+from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
 
 __all__ = [
@@ -388,6 +388,10 @@ def simulate_opening(
     distractor (:data:`BAR_TEMPLATE`, the cross without its centre part) beside it; ``n_lines``
     dark clutter lines across the image; a grey occluder over one arm; blur and noise.
     """
+    seed, width, height, n_lines = (
+        as_int(v, name) for v, name in ((seed, "seed"), (width, "width"), (height, "height"), (n_lines, "n_lines"))
+    )
+    blur_sigma, noise_sigma = as_float(blur_sigma, "blur_sigma"), as_float(noise_sigma, "noise_sigma")
     rng = np.random.default_rng(seed)
     psi, k = rng.uniform(-0.3, 0.3), rng.uniform(0.85, 1.15)
     c, s = np.cos(psi), np.sin(psi)
