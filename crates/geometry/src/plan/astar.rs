@@ -49,7 +49,8 @@ pub struct AStarConfig {
     pub weights: Joints,
     /// Required clearance (m).
     pub margin: f64,
-    /// Budget of node expansions.
+    /// Budget of nodes popped from the open set (expanded, or found not free or blocked by
+    /// the edge to their parent).
     pub max_expansions: usize,
 }
 
@@ -326,6 +327,7 @@ pub fn astar(
         parent: start_key,
     });
     let mut expansions = 0usize;
+    let mut pops = 0usize;
     let mut found = false;
     let mut nb = vec![0i64; lat.joints.len()];
     let in_bounds = |nb: &[i64]| (0..nb.len()).all(|k| nb[k] >= lat.lo[k] && nb[k] <= lat.hi[k]);
@@ -333,6 +335,12 @@ pub fn astar(
         let node = nodes[&key];
         if node.closed || g != node.g || parent != node.parent {
             continue;
+        }
+        // The budget counts every entry that costs checks, blocked ones included: a search
+        // whose pops are mostly blocked edges must stop too.
+        pops += 1;
+        if pops > cfg.max_expansions {
+            break;
         }
         let idx = lat.unpack(key);
         let q = lat.config(&idx);
@@ -402,9 +410,6 @@ pub fn astar(
             break;
         }
         expansions += 1;
-        if expansions > cfg.max_expansions {
-            break;
-        }
         for off in &stencil {
             for k in 0..idx.len() {
                 nb[k] = idx[k] + off[k];
@@ -440,7 +445,7 @@ pub fn astar(
         return Err(PlanError::NoPath {
             method: "a*",
             reason: format!(
-                "{expansions} nodes expanded (budget {}), {} lattice nodes seen, no lattice path to the goal node",
+                "{expansions} nodes expanded, {pops} popped (budget {}), {} lattice nodes seen, no lattice path to the goal node",
                 cfg.max_expansions,
                 nodes.len()
             ),
@@ -673,6 +678,29 @@ pub(crate) mod tests {
         let c_ref = reference_cost(&ws, &start, &goal, &cfg);
         let r = r.unwrap_or_else(|e| panic!("{e} (reference {c_ref})"));
         assert!((r.cost - c_ref).abs() < 1e-9, "{} vs {}", r.cost, c_ref);
+    }
+
+    /// The budget bounds the popped entries (blocked ones included), not only the expansions.
+    #[test]
+    fn budget_bounds_every_pop() {
+        let ws = pillars();
+        let start = Joints::new(-0.6, 0.4, 0.2, 0.3, 0.1);
+        let goal = Joints::new(2.4, -0.4, -0.3, 0.3, 0.1);
+        let d = 10f64.to_radians();
+        let cfg = AStarConfig {
+            joints: vec![0, 1, 2],
+            step: Joints::new(d, d, d, d, 0.05),
+            max_expansions: 7,
+            ..AStarConfig::default()
+        };
+        let err = astar(&ws, &start, &goal, &cfg).unwrap_err().to_string();
+        let popped: usize = err
+            .split(" popped")
+            .next()
+            .and_then(|s| s.rsplit(", ").next())
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(usize::MAX);
+        assert!(popped <= 8, "{err}");
     }
 
     #[test]
