@@ -4,8 +4,9 @@ Run: ``RAYON_NUM_THREADS=1 PYTHONPATH=python /work/venv/bin/python benchmarks/as
 
 The goals are the 3-joint lattice at 1° and the 5-joint lattice at 5° (lift 25 mm), each in
 ≤ 3 s. The transfers are the default scene's (margin 20 mm, `plan_path`'s default). In the
-3-joint runs joints 3 and 4 are held at the goal's values (the lattice plans joints 0-2 only). The optimal cost is checked
-against a plain Dijkstra by the Rust tests (`plan::astar::tests`), on coarser lattices.
+3-joint runs joints 3 and 4 are held at the goal's values (the lattice plans joints 0-2 only).
+The optimal cost is checked against a plain Dijkstra by the Rust tests (`plan::astar::tests`),
+on coarser lattices.
 """
 
 from __future__ import annotations
