@@ -4,13 +4,12 @@
 use autoteach_detect::cpd::{
     Criterion, GlobalRegisterOptions, GlobalRegistration, RegistrationCandidate, global_register,
 };
-use autoteach_detect::voting::{VoteCount, VotingOptions};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 
 use crate::convert;
 use crate::errors;
-use crate::registration::{matrix_out, points_arg, vector_out};
+use crate::registration::{matrix_out, points_arg, vector_out, voting_options};
 
 /// Result of `global_register`: candidates, symmetries and the final rigid (and optional
 /// non-rigid) CPD.
@@ -153,15 +152,6 @@ fn global_register_py(
     max_points: usize,
 ) -> PyResult<PyGlobalRegistration> {
     let (xm, ym) = (points_arg(x, "X")?, points_arg(y, "Y")?);
-    let count = match count {
-        "y" => VoteCount::YCount,
-        "pairs" => VoteCount::Pairs,
-        other => {
-            return Err(errors::invalid_input(format!(
-                "count must be 'y' or 'pairs', got {other:?}"
-            )));
-        }
-    };
     let criterion = match criterion {
         "explained" => Criterion::Explained,
         "likelihood" => Criterion::Likelihood,
@@ -173,16 +163,15 @@ fn global_register_py(
         }
     };
     let mut options = GlobalRegisterOptions {
-        voting: VotingOptions {
+        voting: voting_options(
             neighbours,
             angle_bin,
             translation_bin,
-            top_k: k,
+            k,
             count,
             min_votes,
             max_points,
-            ..VotingOptions::default()
-        },
+        )?,
         w,
         max_iterations,
         max_refine_points,

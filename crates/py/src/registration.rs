@@ -375,26 +375,16 @@ fn global_cpd(
     max_points: usize,
 ) -> PyResult<Vec<PyGlobalHypothesis>> {
     let (xm, ym) = (points_arg(x, "X")?, points_arg(y, "Y")?);
-    let count = match count {
-        "y" => VoteCount::YCount,
-        "pairs" => VoteCount::Pairs,
-        other => {
-            return Err(errors::invalid_input(format!(
-                "count must be 'y' or 'pairs', got {other:?}"
-            )));
-        }
-    };
     let options = GlobalCpdOptions {
-        voting: VotingOptions {
+        voting: voting_options(
             neighbours,
             angle_bin,
             translation_bin,
-            top_k: k,
+            k,
             count,
             min_votes,
             max_points,
-            ..VotingOptions::default()
-        },
+        )?,
         nonrigid: NonrigidOptions {
             cpd: cpd_options(w, max_iterations, tolerance, sigma2, "auto", false)?,
             beta,
@@ -410,6 +400,38 @@ fn global_cpd(
         .into_iter()
         .map(|inner| PyGlobalHypothesis { inner })
         .collect())
+}
+
+/// The voting options of the global registrations (`count` is `"y"` or `"pairs"`).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn voting_options(
+    neighbours: usize,
+    angle_bin: f64,
+    translation_bin: Option<f64>,
+    top_k: usize,
+    count: &str,
+    min_votes: usize,
+    max_points: usize,
+) -> PyResult<VotingOptions> {
+    let count = match count {
+        "y" => VoteCount::YCount,
+        "pairs" => VoteCount::Pairs,
+        other => {
+            return Err(errors::invalid_input(format!(
+                "count must be 'y' or 'pairs', got {other:?}"
+            )));
+        }
+    };
+    Ok(VotingOptions {
+        neighbours,
+        angle_bin,
+        translation_bin,
+        top_k,
+        count,
+        min_votes,
+        max_points,
+        ..VotingOptions::default()
+    })
 }
 
 /// Adds the registration functions and classes to the module.

@@ -582,17 +582,23 @@ pub(crate) mod tests {
         .unwrap()
     }
 
-    #[test]
-    fn astar_cost_equals_reference_dijkstra_and_path_is_free() {
-        let ws = pillars();
-        let start = Joints::new(-0.6, 0.4, 0.2, 0.3, 0.1);
-        let goal = Joints::new(2.4, -0.4, -0.3, 0.3, 0.1);
+    /// A move between the pillars on a 10° lattice of joints 0–2.
+    fn pillars_move() -> (Joints, Joints, AStarConfig) {
         let d = 10f64.to_radians();
         let cfg = AStarConfig {
             joints: vec![0, 1, 2],
             step: Joints::new(d, d, d, d, 0.05),
             ..AStarConfig::default()
         };
+        let start = Joints::new(-0.6, 0.4, 0.2, 0.3, 0.1);
+        let goal = Joints::new(2.4, -0.4, -0.3, 0.3, 0.1);
+        (start, goal, cfg)
+    }
+
+    #[test]
+    fn astar_cost_equals_reference_dijkstra_and_path_is_free() {
+        let ws = pillars();
+        let (start, goal, cfg) = pillars_move();
         let r = astar(&ws, &start, &goal, &cfg).unwrap();
         let c_ref = reference_cost(&ws, &start, &goal, &cfg);
         assert!((r.cost - c_ref).abs() < 1e-9, "{} vs {}", r.cost, c_ref);
@@ -684,15 +690,8 @@ pub(crate) mod tests {
     #[test]
     fn budget_bounds_every_pop() {
         let ws = pillars();
-        let start = Joints::new(-0.6, 0.4, 0.2, 0.3, 0.1);
-        let goal = Joints::new(2.4, -0.4, -0.3, 0.3, 0.1);
-        let d = 10f64.to_radians();
-        let cfg = AStarConfig {
-            joints: vec![0, 1, 2],
-            step: Joints::new(d, d, d, d, 0.05),
-            max_expansions: 7,
-            ..AStarConfig::default()
-        };
+        let (start, goal, mut cfg) = pillars_move();
+        cfg.max_expansions = 7;
         let err = astar(&ws, &start, &goal, &cfg).unwrap_err().to_string();
         let popped: usize = err
             .split(" popped")
