@@ -40,7 +40,7 @@
 use pulp::{Simd, WithSimd};
 use rayon::prelude::*;
 
-use super::estep::{EStepSums, exp_neg};
+use super::kernel::{EStepSums, exp_neg};
 
 /// Kernel-value accuracy the node count is chosen for (1e−11: the posteriors of a row keep a
 /// relative error below 1e−6 through the exact-row threshold of [`Plan::estep`], and a whole

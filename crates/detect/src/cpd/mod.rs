@@ -51,6 +51,7 @@
 mod estep;
 mod fgt;
 mod global;
+mod kernel;
 mod lowrank;
 mod pcg;
 mod register;

@@ -14,7 +14,7 @@
 
 use super::band;
 use super::joint::{self, OffsetPrior};
-use super::pair::{front_side, joint_covariance};
+use super::joint_refit::{JOINT_REFIT_RESIDUAL_FACTOR, front_side, joint_covariance};
 use super::refine::{is_band, level_set_normal};
 use super::{Candidate, DetectParams, GrayView, Pixel, RimKind, Vector2, WaferEdge, median};
 use autoteach_geometry::conic::Ellipse;
@@ -139,7 +139,7 @@ pub(super) fn seek_partner<T: Pixel>(
         .map(|d| d.abs())
         .sum::<f64>()
         / far.len() as f64;
-    if !(residual < super::pair::JOINT_REFIT_RESIDUAL_FACTOR * params.assembly.residual_threshold) {
+    if !(residual < JOINT_REFIT_RESIDUAL_FACTOR * params.assembly.residual_threshold) {
         return None;
     }
     Some(WaferEdge {
