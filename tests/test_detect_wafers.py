@@ -195,20 +195,34 @@ def test_releases_the_gil(scene: tuple[np.ndarray, list[dict]]) -> None:
 
 
 def test_python_defaults_are_the_library_defaults() -> None:
-    """Every documented default of detect_wafers equals DetectParams::default() in Rust."""
-    import inspect
+    """Every default of WaferDetectOptions equals DetectParams::default() in Rust."""
+    import dataclasses
 
     from autoteach import _core
+    from autoteach.wafer_detect_options import WaferDetectOptions
 
     rust = _core.wafer_detect_defaults()
-    sig = inspect.signature(detect_wafers)
-    exposed = {n: p.default for n, p in sig.parameters.items() if n != "image" and p.default is not None}
-    assert set(rust) <= set(sig.parameters), set(rust) - set(sig.parameters)
+    exposed = {f.name: f.default for f in dataclasses.fields(WaferDetectOptions) if f.default is not None}
+    assert set(rust) <= set(exposed), set(rust) - set(exposed)
     for name, value in rust.items():
         if isinstance(value, str):
             assert exposed[name] == value, name
         else:
             assert exposed[name] == pytest.approx(value), name
+
+
+def test_options_object_and_keywords_agree_and_unknown_names_are_refused() -> None:
+    from autoteach.wafer_detect_options import WaferDetectOptions
+
+    image = np.zeros((40, 60), np.uint8)
+    image[10:30, 15:45] = 200
+    a = detect_wafers(image, WaferDetectOptions(canny_low=4.0))
+    b = detect_wafers(image, canny_low=4.0)
+    assert [e.ellipse for e in a] == [e.ellipse for e in b]
+    with pytest.raises(InvalidInputError, match="canny_lo"):
+        detect_wafers(image, canny_lo=4.0)
+    with pytest.raises(InvalidInputError, match="principal_point"):
+        detect_wafers(image, principal_point=(1.0, 2.0, 3.0))
 
 
 @pytest.mark.parametrize(

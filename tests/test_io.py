@@ -13,8 +13,8 @@ from mcap.writer import Writer
 
 from autoteach.errors import AutoteachError, InvalidInputError, LogReadError, LogSalvageWarning
 from autoteach.io import TOPICS, log_info, read_log, write_log
+from autoteach.session import Session
 from autoteach.sim import CameraInfo, SimConfig, simulate_session
-from autoteach.sim.session import Session
 
 SMALL = SimConfig(camera_params=(250.0, 250.0, 159.5, 89.5), width=320, height=180, supersample=2)
 
@@ -117,7 +117,7 @@ def synthetic_session(with_truth: bool = True) -> Session:
         poses = np.tile(np.eye(4), (f, 1, 1))
         poses[:, :3, 3] = rng.normal(size=(f, 3))
         poses[1, 0, 0] = -0.0
-        from autoteach.sim.session import Calibration
+        from autoteach.session import Calibration
 
         kw = {
             "seed": 123,

@@ -5,7 +5,10 @@ Submodules (each imported on first access, so ``import autoteach`` stays cheap a
 
 - :mod:`autoteach.geometry` -- rigid transforms, the wafer-handling robot, camera models, conics.
 - :mod:`autoteach.sim` -- the simulated wafer-handling robot and carrier (sessions with ground truth).
+- :mod:`autoteach.session` -- the :class:`~autoteach.session.Session` every stage consumes (logged or simulated).
 - :mod:`autoteach.io` -- MCAP session logs (write and read).
+- :mod:`autoteach.config` -- :class:`~autoteach.config.AutoteachConfig`, the options of auto-teaching.
+- :mod:`autoteach.evaluation` -- errors of a result against a simulated session's ground truth.
 - :mod:`autoteach.detect` -- wafer-rim detection, ellipse fitting, CPD, global voting, polygon detection.
 - :mod:`autoteach.ellipse_detection` -- the general a-contrario elliptic-arc detector (also in ``detect``).
 - :mod:`autoteach.track` -- multi-wafer tracking (hierarchical GMM association, track management).
@@ -46,23 +49,29 @@ if TYPE_CHECKING:
         active,
         calib,
         cli,
+        config,
         detect,
         ellipse_detection,
         estimate,
+        evaluation,
         geometry,
         global_registration,
         io,
         mapping,
         pipeline,
         polygon,
+        poses,
         radio,
         radio_tuning,
         registration,
         report,
         segment,
+        session,
         sim,
         track,
+        wafer_detect_options,
     )
+    from autoteach.config import AutoteachConfig
     from autoteach.pipeline import AutoTeachResult, autoteach
 
 #: The public submodules, imported lazily by :func:`__getattr__` (PEP 562).
@@ -70,10 +79,12 @@ SUBMODULES = (
     "active",
     "calib",
     "cli",
+    "config",
     "control",
     "detect",
     "ellipse_detection",
     "estimate",
+    "evaluation",
     "fusion",
     "geometry",
     "global_registration",
@@ -82,23 +93,27 @@ SUBMODULES = (
     "pipeline",
     "plan",
     "polygon",
+    "poses",
     "radio",
     "radio_tuning",
     "registration",
     "report",
     "segment",
+    "session",
     "sigma_points",
     "sim",
     "track",
     "uncertainty",
+    "wafer_detect_options",
 )
 
 #: Names re-exported from submodules, also imported on first access.
-_LAZY_NAMES = {"AutoTeachResult": "pipeline", "autoteach": "pipeline"}
+_LAZY_NAMES = {"AutoTeachResult": "pipeline", "AutoteachConfig": "config", "autoteach": "pipeline"}
 
 __all__ = [
     "AllocationError",
     "AutoTeachResult",
+    "AutoteachConfig",
     "AutoteachError",
     "ConvergenceError",
     "DegenerateGeometryError",
@@ -111,10 +126,12 @@ __all__ = [
     "autoteach",
     "calib",
     "cli",
+    "config",
     "control",
     "detect",
     "ellipse_detection",
     "estimate",
+    "evaluation",
     "fusion",
     "geometry",
     "global_registration",
@@ -123,15 +140,18 @@ __all__ = [
     "pipeline",
     "plan",
     "polygon",
+    "poses",
     "radio",
     "radio_tuning",
     "registration",
     "report",
     "segment",
+    "session",
     "sigma_points",
     "sim",
     "track",
     "uncertainty",
+    "wafer_detect_options",
 ]
 
 

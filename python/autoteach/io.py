@@ -51,8 +51,8 @@ from typing import Any
 import numpy as np
 
 from autoteach.errors import InvalidInputError, LogReadError, LogSalvageWarning
+from autoteach.session import Calibration, CameraInfo, Session
 from autoteach.sim.config import SimConfig
-from autoteach.sim.session import Calibration, CameraInfo, Session
 
 __all__ = [
     "FORMAT_VERSION",

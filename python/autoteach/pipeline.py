@@ -25,6 +25,17 @@ their Cramér–Rao bound (``autoteach.sim.odometry.offset_information``).
 Errors against ground truth are computed in the true reference-wafer frame after aligning the
 estimate's yaw gauge to the truth (a rotation about the reference normal), so the base rotation
 error is the error of its tilt (the yaw is the gauge).
+
+Stages
+------
+:func:`autoteach` runs stage functions that each take the previous stage's typed output, so a user
+can run one alone, swap one (their own front end, say) and inspect every intermediate result:
+:func:`load_session` → :func:`prepare` (:class:`Setup`) → :func:`run_frontend`
+(:class:`Observations` and the raw detections) → :func:`initial_guess` → :func:`run_ukf` →
+:func:`slam_mot_problem` (:class:`SlamMotProblem`) → :func:`gate_and_resolve` (detect front end) →
+the SLAM-MOT solve → :func:`assemble_result` (:class:`AutoTeachResult`), then :func:`run_baseline`
+and the errors of :mod:`autoteach.evaluation` when asked for or possible. The options are one
+:class:`~autoteach.config.AutoteachConfig`, whose module also holds every fallback number.
 """
 
 from __future__ import annotations
@@ -39,16 +50,64 @@ from typing import Any
 import numpy as np
 
 from autoteach import _core
+from autoteach.config import (
+    DEFAULT_ENCODER_NOISE,
+    DEFAULT_OFFSETS,
+    DEFAULT_SLOT_COUNT,
+    DEFAULT_SLOT_PITCH,
+    DEFAULT_WAFER_RADIUS,
+    DEFAULT_WAFER_THICKNESS,
+    JOINTS,
+    LINKS,
+    PIXEL_SIGMA_FLOOR,
+    AutoteachConfig,
+)
 from autoteach.errors import InvalidInputError
+from autoteach.evaluation import ground_truth_errors, match_truth
+from autoteach.poses import rpy as _rpy
+from autoteach.poses import wafer_params_of, wafer_pose
 
-#: Joint names in the order of the joint vector.
-JOINTS: tuple[str, ...] = ("joint1", "joint2", "joint3", "joint4", "lift")
-#: Link lengths that SLAM-MOT can calibrate (``estimate_links``).
-LINKS: tuple[str, ...] = ("l1", "l2", "l4")
+__all__ = [
+    "AutoTeachResult",
+    "AutoteachConfig",
+    "BAND_NOISE_LOWER",
+    "BAND_NOISE_UPPER",
+    "BAND_NOISE_WIDTH_PX",
+    "DEFAULT_OFFSETS",
+    "JOINTS",
+    "LINKS",
+    "Observations",
+    "Setup",
+    "SlamMotProblem",
+    "UNOBSERVABLE_REASONS",
+    "assemble_result",
+    "autoteach",
+    "band_sigma_scale",
+    "band_width",
+    "conic_distance",
+    "detect_all",
+    "detect_frontend",
+    "detector_options",
+    "gate_and_resolve",
+    "gate_detections",
+    "ground_truth_errors",
+    "initial_guess",
+    "load_session",
+    "polyline_distance",
+    "prepare",
+    "rim_conic",
+    "rim_polyline",
+    "run_baseline",
+    "run_frontend",
+    "run_ukf",
+    "simulated_frontend",
+    "slam_mot_problem",
+    "wafer_params_of",
+    "wafer_pose",
+]
+
 #: Joints whose offsets the UKF estimates.
 _UKF_JOINTS: tuple[str, ...] = ("joint1", "joint2", "joint4")
-#: Offsets SLAM-MOT estimates by default (the observable ones, see the module docs).
-DEFAULT_OFFSETS: tuple[str, ...] = ("joint2", "joint4")
 #: Why each joint offset may be unobservable by SLAM-MOT.
 UNOBSERVABLE_REASONS: dict[str, str] = {
     "joint1": "identical to a yaw of the base pose (the shoulder axis passes through the base origin)",
@@ -208,46 +267,6 @@ def _num(v: float) -> float | None:
 
 def _nan_list(a: np.ndarray) -> list[float | None]:
     return [_num(v) for v in np.asarray(a, dtype=np.float64).reshape(-1)]
-
-
-def _rpy(r: np.ndarray) -> tuple[float, float, float]:
-    return (
-        math.atan2(r[2, 1], r[2, 2]),
-        math.asin(max(-1.0, min(1.0, -r[2, 0]))),
-        math.atan2(r[1, 0], r[0, 0]),
-    )
-
-
-def _rot(axis: str, a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    if axis == "x":
-        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]], dtype=np.float64)
-    if axis == "y":
-        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]], dtype=np.float64)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], dtype=np.float64)
-
-
-def wafer_pose(w: np.ndarray) -> np.ndarray:
-    """The 4×4 frame of wafer parameters ``[cx, cy, cz, rx, ry]`` (rotation ``Ry(ry)·Rx(rx)``)."""
-    t = np.eye(4)
-    t[:3, :3] = _rot("y", w[4]) @ _rot("x", w[3])
-    t[:3, 3] = w[:3]
-    return t
-
-
-def wafer_params_of(pose: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`wafer_pose` for the centre and normal (the yaw about the normal is dropped)."""
-    n = pose[:3, 2]
-    if n[2] < 0:
-        n = -n
-    return np.array([pose[0, 3], pose[1, 3], pose[2, 3], -math.asin(max(-1.0, min(1.0, n[1]))), math.atan2(n[0], n[2])])
-
-
-def _log_so3(r: np.ndarray) -> np.ndarray:
-    c = max(-1.0, min(1.0, (np.trace(r) - 1.0) / 2.0))
-    th = math.acos(c)
-    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    return 0.5 * w if th < 1e-9 else th / (2.0 * math.sin(th)) * w
 
 
 # ---------------------------------------------------------------------------------------------
@@ -823,15 +842,22 @@ def gate_detections(
 # ---------------------------------------------------------------------------------------------
 
 
-def _load(log_or_session: Any) -> Any:
-    from autoteach.sim import Session
+def load_session(log_or_session: Any) -> Any:
+    """Stage 0: the session of a path (an MCAP log) or a :class:`~autoteach.session.Session`, checked.
 
-    if isinstance(log_or_session, Session):
-        return log_or_session
+    Raises:
+        InvalidInputError: not a session or a path; fewer than 2 frames, missing or non-finite
+            joint states, timestamps not increasing, or joints that never move.
+    """
+    from autoteach.session import Session
+
     if isinstance(log_or_session, (str, os.PathLike)):
         from autoteach.io import read_log
 
-        return read_log(Path(log_or_session))
+        log_or_session = read_log(Path(log_or_session))
+    if isinstance(log_or_session, Session):
+        _validate_session(log_or_session)
+        return log_or_session
     raise InvalidInputError(
         f"autoteach() takes a Session or the path of an MCAP log, got {type(log_or_session).__name__}"
     )
@@ -918,510 +944,458 @@ def _nominal_start_rotation(cfg: Any, params: Any, enc: np.ndarray) -> np.ndarra
     return np.asarray(WaferRobot(params=params, base=base_w).camera_pose(enc[:1]), dtype=np.float64)[0, :3, :3]
 
 
-def autoteach(
-    log_or_session: Any,
-    *,
-    frontend: str = "auto",
-    points_per_rim: int = 24,
-    pixel_noise: float = 0.3,
-    pixel_sigma: float | None = None,
-    min_axis_ratio: float = 0.05,
-    estimate_offsets: tuple[str, ...] = DEFAULT_OFFSETS,
-    window: int = 5,
-    nominal_base: np.ndarray | None = None,
-    robot_params: Any = None,
-    wafer_radius: float | None = None,
-    wafer_thickness: float | None = None,
-    odometry: np.ndarray | None = None,
-    odometry_sigma: tuple[float, ...] | None = None,
-    odometry_start: np.ndarray | None = None,
-    use_ukf: bool = True,
-    ukf_noise: Any = None,
-    ukf_odometry: str = "vo",
-    baseline: bool = False,
-    huber: float | None = 3.0,
-    encoder_sigma: tuple[float, float, float, float] | None = None,
-    max_iterations: int = 100,
-    min_track_frames: int = 5,
-    min_wafer_frames: int = 8,
-    reset_tilts: bool = True,
-    basin_search: bool = True,
-    gate_px: tuple[float, ...] = (3.0, 1.5, 1.0),
-    min_band_px: float = 2.5,
-    band_weights: bool = True,
-    slot_births: bool = True,
-    camera_mode: str = "chain",
-    motion_sigma: tuple[float, ...] = (2e-5, 2e-5, 2e-5, 2e-5, 2e-5, 2e-5),
-    estimate_mount: bool = False,
-    estimate_links: tuple[str, ...] = (),
-    rim_offset_prior: bool = True,
-    seed: int = 0,
-    progress: bool = False,
-) -> AutoTeachResult:
-    """Auto-teach the hand-eye system from a session: calibration, wafer poses, covariances.
+@dataclass
+class Setup:
+    """What the stages share about one session: its geometry and the resolved front end.
 
-    Args:
-        log_or_session: a :class:`~autoteach.sim.Session` or the path of an MCAP log.
-        frontend: ``"simulated"`` (ground-truth visible rims of a simulated session with pixel
-            noise and ground-truth association), ``"detect"`` (wafer detection + tracking on the
-            images, gated by the projected prior: the real pipeline) or ``"auto"`` (``"detect"``
-            when the session has images, else ``"simulated"`` when it has ground-truth rims).
-        points_per_rim: edge points kept per rim and frame.
-        pixel_noise: std of the noise added by the simulated front end (pixels).
-        pixel_sigma: edge-point std assumed by the solver (default: ``max(pixel_noise, 0.3)``).
-        min_axis_ratio: rims seen more edge-on than this minor/major ratio are dropped.
-        estimate_offsets: joints whose zero offsets SLAM-MOT estimates (see the module docs;
-            asking for ``joint1``, ``joint3`` or ``lift`` makes the problem unobservable, which is
-            reported in :attr:`AutoTeachResult.unobservable`).
-        window: sliding-window size in frames (0: batch only).
-        nominal_base: nominal ``T_wb`` (4×4) in the reference-wafer frame (default: the simulated
-            configuration's base pose moved into the reference frame of the nominal slot).
-        robot_params: robot geometry (default: the session's, or the default robot).
-        wafer_radius: wafer radius (default: the session's or 0.15 m).
-        wafer_thickness: wafer thickness (default: the session's or 1 mm).
-        odometry: visual-odometry increments (F−1, 6) ``[u_T; u_R]`` for the UKF; simulated
-            sessions without them get drifting simulated odometry.
-        odometry_sigma: precision of the odometry increments ``[σ_ω (3, rad); σ_ρ (3, m)]``
-            for the free-camera mode's relative-pose factors (default: the simulated odometry's
-            white noise plus its drift over the session when the pipeline simulates it, else
-            the per-step process noise of eq. (5.2): 0.2°, 30/30/1.5 mm).
-        odometry_start: orientation (3×3, or the rotation of a 4×4 pose) of the first camera
-            frame in the odometry's world frame, which the free-camera mode needs to express the
-            world-frame translation increments ``u_T`` in the camera frame (default: the nominal
-            chain's at frame 0 for given odometry; the true one for simulated odometry).
-        use_ukf: run the UKF stage (needs odometry).
-        ukf_noise: ``"seed"`` for the noise levels of eq. (5.2), 16 standard deviations (see
-            ``autoteach._core.handeye_ukf``), or ``None``: matched to the simulated odometry when
-            the pipeline simulates it, else eq. (5.2).
-        ukf_odometry: ``"vo"``: the odometry increments are world-frame, with white errors
-            (eq. (5.1) literally; simulated: the drifting visual odometry); ``"slam"``: they are
-            relative poses of a SLAM with a map (:class:`autoteach.sim.odometry.SlamConfig`;
-            simulated sessions without ``odometry`` get :func:`~autoteach.sim.odometry.simulate_slam`),
-            and the UKF models the SLAM's bounded error. Relative poses cannot see θ1 (it turns
-            the whole trajectory about the base z axis): the UKF then reports it unobservable.
-        baseline: also solve with point reprojection and nearest-point association.
-        huber: Huber threshold on whitened residuals (``None``: none).
-        encoder_sigma: encoder noise of joint1, joint2, joint4, lift modelled per frame (default:
-            the simulated session's, else 2e-5 rad / 5e-6 m; ``()`` to tie the camera rigidly
-            to the encoders).
-        max_iterations: LM iteration limit.
-        min_track_frames: detect front end: tracks registered in fewer frames are not used for
-            the first estimate.
-        reset_tilts: detect front end: also run the gating chain from level wafers after the first
-            estimate and keep the chain that explains more edges (see the code comment).
-        basin_search: after every batch solve, re-fit each wafer whose edge residuals stand out
-            (over twice the median wafer's RMS) alone from a grid of tilts and heights with the
-            camera poses fixed, and solve again from a better basin when one halves its cost
-            (``SlamMot::solve_batch_with_basins``: a wafer seen from one side in few frames can
-            stop in a second minimum of the height–tilt valley). The wafers moved by the last
-            solve are ``frontend_stats["basins_moved"]`` (slots).
-        min_wafer_frames: detect front end: wafers gated into fewer frames are reported as not
-            estimated (too few views to constrain a wafer pose; listed in ``frontend_stats``).
-        gate_px: detect front end: after each first estimate every detected edge is associated
-            with the projected prior within this gate (pixels), one round per value.
-        min_band_px: detect front end: edge points where the predicted side-face band of the
-            wafer is narrower than this (pixels) are not used (see :func:`gate_detections`;
-            0 keeps them).
-        band_weights: detect front end: in the last gate every kept point gets a standard
-            deviation ``σ·s(b)`` from the predicted side-band width ``b`` at the point
-            (:func:`band_sigma_scale`, the detector's measured edge noise) instead of the
-            common ``σ``.
-        slot_births: detect front end: give the tracker the carrier pitch so that free slots
-            next to a track are birth hypotheses (see :func:`detect_frontend`).
-        camera_mode: ``"chain"`` (camera poses through the kinematic chain, eq. (5.9)) or
-            ``"free"`` (a pose variable per frame tied to the robot by the relative motion
-            factor of eqs. (5.10)–(5.12) and to the visual odometry by relative-pose factors
-            between the same frames when the session has odometry, and a prior on the
-            calibration around the nominal values).
-        motion_sigma: free-camera mode: robot motion precision ``[σ_ω (3, rad); σ_ρ (3, m)]``
-            between consecutive frames.
-        estimate_mount: also estimate a correction of the camera mount ``T_ec`` (chain mode).
-        estimate_links: link lengths to calibrate, among ``"l1"``, ``"l2"``, ``"l4"``.
-        rim_offset_prior: detect front end: give the detector the wafer's thickness ratio and
-            the focal length (:func:`detector_options`), its prior on the offset between a
-            wafer's two rims, and the edge profile of the camera (``"pixel"`` for a simulated
-            session, whose renderer blurs on the pixel grid; ``"optical"`` for a log without
-            the simulator's configuration).
-        seed: seed of the simulated front end's noise and odometry.
-        progress: progress bars on stderr.
-
-    Raises:
-        InvalidInputError: unreadable/unsynchronised input, no images (detect front end), no
-            joint states, no wafer seen in any frame.
-        ConvergenceError: the solver failed.
-
+    Attributes:
+        session: the session being auto-taught.
+        params: the robot geometry (:class:`~autoteach.geometry.RobotParams`).
+        robot: ``params`` as the flat array the Rust core takes.
+        k: the pinhole intrinsic matrix.
+        radius: wafer radius (m).
+        thickness: wafer thickness (m).
+        pitch: carrier slot pitch (m).
+        n_slots: carrier slot count.
+        base_world: the nominal base pose ``T_wb`` in the simulator's world frame.
+        frontend: ``"simulated"`` or ``"detect"``.
+        encoders: (F, 5) encoder readings, C-contiguous.
     """
-    from tqdm import tqdm
 
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
-    session = _load(log_or_session)
-    _validate_session(session)
-    timings["load_s"] = time.perf_counter() - t0
+    session: Any
+    params: Any
+    robot: np.ndarray
+    k: np.ndarray
+    radius: float
+    thickness: float
+    pitch: float
+    n_slots: int
+    base_world: np.ndarray
+    frontend: str
+    encoders: np.ndarray
+
+
+def prepare(session: Any, config: AutoteachConfig) -> Setup:
+    """Stage 1: resolve the session's geometry, with the documented defaults where it is silent."""
+    from autoteach.geometry import RobotParams
+    from autoteach.sim.config import DEFAULT_BASE_POSE
 
     cfg = session.config
-    from autoteach.geometry import RobotParams
-
-    params = robot_params or (cfg.robot if cfg is not None else RobotParams())
-    radius = float(wafer_radius if wafer_radius is not None else (cfg.wafer_radius if cfg is not None else 0.15))
-    thickness = float(
-        wafer_thickness if wafer_thickness is not None else (cfg.wafer_thickness if cfg is not None else 0.001)
-    )
+    params = config.robot_params or (cfg.robot if cfg is not None else RobotParams())
+    radius = config.wafer_radius if config.wafer_radius is not None else (cfg.wafer_radius if cfg else None)
+    thickness = config.wafer_thickness if config.wafer_thickness is not None else (cfg.wafer_thickness if cfg else None)
     k = _pinhole_k(session.camera)
-    bad = [j for j in estimate_offsets if j not in JOINTS]
-    if bad:
-        raise InvalidInputError(f"estimate_offsets names unknown joints {bad}; joints are {JOINTS}")
+    frontend = config.frontend
     if frontend == "auto":
         has_images = session.images is not None and np.asarray(session.images).any()
         frontend = "detect" if has_images or session.rims is None else "simulated"
-    if frontend not in ("simulated", "detect"):
-        raise InvalidInputError(f"frontend must be 'auto', 'simulated' or 'detect', got {frontend!r}")
-    if not (math.isfinite(min_band_px) and min_band_px >= 0.0):
-        raise InvalidInputError(f"min_band_px must be finite and >= 0, got {min_band_px!r}")
-    if camera_mode not in ("chain", "free"):
-        raise InvalidInputError(f"camera_mode must be 'chain' or 'free', got {camera_mode!r}")
-    bad_links = [name for name in estimate_links if name not in LINKS]
-    if bad_links:
-        raise InvalidInputError(f"estimate_links names unknown links {bad_links}; links are {LINKS}")
-    if camera_mode == "free" and (estimate_mount or estimate_links):
-        raise InvalidInputError(
-            "the camera mount and link lengths are calibrated through the chain (camera_mode='chain')"
-        )
+    return Setup(
+        session=session,
+        params=params,
+        robot=_robot_array(params),
+        k=k,
+        radius=float(radius if radius is not None else DEFAULT_WAFER_RADIUS),
+        thickness=float(thickness if thickness is not None else DEFAULT_WAFER_THICKNESS),
+        pitch=cfg.slot_pitch if cfg is not None else DEFAULT_SLOT_PITCH,
+        n_slots=cfg.n_slots if cfg is not None else DEFAULT_SLOT_COUNT,
+        base_world=np.array(cfg.base_pose if cfg is not None else DEFAULT_BASE_POSE, dtype=np.float64),
+        frontend=frontend,
+        encoders=np.ascontiguousarray(session.joints_encoder, dtype=np.float64),
+    )
 
-    stages = tqdm(total=4, desc="auto-teaching", unit="stage", disable=not progress, leave=False)
-    t0 = time.perf_counter()
-    if frontend == "simulated":
+
+def run_frontend(
+    setup: Setup, config: AutoteachConfig, *, progress: bool = False, timings: dict[str, float] | None = None
+) -> tuple[Observations, list[list[Any]] | None]:
+    """Stage 2: per-frame edge observations, and the raw detections of the detect front end.
+
+    Raises:
+        InvalidInputError: no wafer edge seen, or no track long enough to use.
+    """
+    session = setup.session
+    detections = None
+    if setup.frontend == "simulated":
         obs = simulated_frontend(
-            session, points_per_rim=points_per_rim, pixel_noise=pixel_noise, min_axis_ratio=min_axis_ratio, seed=seed
+            session,
+            points_per_rim=config.points_per_rim,
+            pixel_noise=config.pixel_noise,
+            min_axis_ratio=config.min_axis_ratio,
+            seed=config.seed,
         )
     else:
         from autoteach.geometry import WaferRobot
-        from autoteach.sim.config import DEFAULT_BASE_POSE
 
-        base_world = np.array(cfg.base_pose if cfg is not None else DEFAULT_BASE_POSE, dtype=np.float64)
         nominal_cams = np.asarray(
-            WaferRobot(params=params, base=base_world).camera_pose(session.joints_encoder), dtype=np.float64
+            WaferRobot(params=setup.params, base=setup.base_world).camera_pose(session.joints_encoder),
+            dtype=np.float64,
         )
         t1 = time.perf_counter()
         # A simulated session's images come from the renderer, which blurs on the pixel grid.
-        profile = "pixel" if cfg is not None else "optical"
-        options = detector_options(k, radius, thickness, edge_profile=profile) if rim_offset_prior else {}
+        profile = "pixel" if session.config is not None else "optical"
+        options = (
+            detector_options(setup.k, setup.radius, setup.thickness, edge_profile=profile)
+            if config.rim_offset_prior
+            else {}
+        )
         detections = detect_all(session.images, progress=progress, **options)
-        timings["detect_s"] = time.perf_counter() - t1
+        if timings is not None:
+            timings["detect_s"] = time.perf_counter() - t1
         obs = detect_frontend(
             session,
             detections,
-            k=k,
+            k=setup.k,
             camera_poses=nominal_cams,
-            radius=radius,
-            thickness=thickness,
-            pitch=cfg.slot_pitch if cfg is not None else 0.010,
-            n_slots=cfg.n_slots if cfg is not None else 26,
-            points_per_rim=points_per_rim,
-            min_track_frames=min_track_frames,
-            slot_births=slot_births,
+            radius=setup.radius,
+            thickness=setup.thickness,
+            pitch=setup.pitch,
+            n_slots=setup.n_slots,
+            points_per_rim=config.points_per_rim,
+            min_track_frames=config.min_track_frames,
+            slot_births=config.slot_births,
             progress=progress,
         )
-    timings["frontend_s"] = time.perf_counter() - t0
-    stages.update()
     if len(obs) == 0:
-        n_rims = sum(len(d) for d in detections) if frontend == "detect" else 0
+        n_rims = sum(len(d) for d in detections) if detections is not None else 0
         if n_rims:
             raise InvalidInputError(
                 f"{n_rims} wafer rims were detected in {session.n_frames} frames, but no track lasted "
-                f"min_track_frames = {min_track_frames} frames, so all were dropped: record a longer session "
-                "or lower min_track_frames"
+                f"min_track_frames = {config.min_track_frames} frames, so all were dropped: record a longer "
+                "session or lower min_track_frames"
             )
         raise InvalidInputError(
             "no wafer edge was detected in any frame: nothing constrains the calibration "
-            f"({session.n_frames} frames, front end {frontend!r})"
+            f"({session.n_frames} frames, front end {setup.frontend!r})"
         )
-    seen = sorted(set(obs.wafers))
     if obs.n_wafers == 0:
         raise InvalidInputError("no wafer was tracked")
-    frontend_stats: dict[str, Any] = {"initial": dict(obs.stats)} if obs.stats else {}
+    return obs, detections
 
-    # Reference wafer: the lowest slot (or the first track) among the observed wafers.
-    if np.all(obs.slots >= 0):
-        ref = min(seen, key=lambda w: obs.slots[w])
-    else:
-        ref = seen[0]
-    pitch = cfg.slot_pitch if cfg is not None else 0.010
+
+def initial_guess(setup: Setup, obs: Observations, config: AutoteachConfig) -> tuple[int, np.ndarray, np.ndarray]:
+    """Stage 3: the reference wafer, the nominal base pose in its frame and the wafers' start.
+
+    The reference is the lowest observed slot (or the first track); the other wafers start level
+    at their slot heights relative to it.
+    """
+    seen = sorted(set(obs.wafers))
+    ref = min(seen, key=lambda w: obs.slots[w]) if np.all(obs.slots >= 0) else seen[0]
+    nominal_base = config.nominal_base
     if nominal_base is None:
-        from autoteach.sim.config import DEFAULT_BASE_POSE
-
-        base_w = np.array(cfg.base_pose if cfg is not None else DEFAULT_BASE_POSE, dtype=np.float64)
         ref_slot = int(obs.slots[ref]) if obs.slots[ref] >= 0 else 1
         t_w_ref = np.eye(4)
-        t_w_ref[2, 3] = (ref_slot - 1) * pitch
-        nominal_base = np.linalg.inv(t_w_ref) @ base_w
-    nominal_base = np.asarray(nominal_base, dtype=np.float64)
+        t_w_ref[2, 3] = (ref_slot - 1) * setup.pitch
+        nominal_base = np.linalg.inv(t_w_ref) @ setup.base_world
     init_wafers = np.zeros((obs.n_wafers, 5))
     for w in range(obs.n_wafers):
         if obs.slots[w] >= 0 and obs.slots[ref] >= 0:
-            init_wafers[w, 2] = (obs.slots[w] - obs.slots[ref]) * pitch
+            init_wafers[w, 2] = (obs.slots[w] - obs.slots[ref]) * setup.pitch
+    return int(ref), np.asarray(nominal_base, dtype=np.float64), init_wafers
 
-    enc = np.ascontiguousarray(session.joints_encoder, dtype=np.float64)
-    robot_arr = _robot_array(params)
 
-    # --- UKF (§5.2) -----------------------------------------------------------------------
-    ukf_out: dict[str, Any] | None = None
-    increments, odo_start, odo_sigma = _odometry(session, odometry, odometry_sigma, seed)
-    if use_ukf:
-        t0 = time.perf_counter()
-        from autoteach.sim.odometry import (
-            OdometryConfig,
-            SlamConfig,
-            integrate_odometry,
-            integrate_relative,
-            simulate_slam,
-        )
+def run_ukf(
+    setup: Setup, config: AutoteachConfig, nominal_base: np.ndarray, increments: np.ndarray | None
+) -> dict[str, Any] | None:
+    """Stage 4: the UKF fusion of odometry and encoders (§5.2); ``None`` without odometry."""
+    from autoteach.geometry import WaferRobot
+    from autoteach.sim.odometry import (
+        OdometryConfig,
+        SlamConfig,
+        integrate_odometry,
+        integrate_relative,
+        simulate_slam,
+    )
 
-        if ukf_odometry not in ("vo", "slam"):
-            raise InvalidInputError(f"ukf_odometry must be 'vo' or 'slam', got {ukf_odometry!r}")
-        noise = None if ukf_noise == "seed" else ukf_noise
-        ukf_inc = increments
-        slam = SlamConfig() if ukf_odometry == "slam" else None
-        if slam is not None:
-            if odometry is None and session.camera_poses is not None:
-                ukf_inc = simulate_slam(session.camera_poses, seed, slam)
-            if ukf_noise is None:
-                noise = slam.ukf_noise(cfg.encoder_noise if cfg is not None else (2e-5,) * 4 + (5e-6,))
-        elif odometry is None and ukf_noise is None and increments is not None:
-            noise = OdometryConfig().ukf_noise()
-        if ukf_inc is not None:
-            base_w = np.array(cfg.base_pose, dtype=np.float64) if cfg is not None else nominal_base
-            run = _core.handeye_ukf(
-                robot_arr,
-                base_w,
-                enc,
-                np.ascontiguousarray(ukf_inc, dtype=np.float64),
-                noise,
-                odometry=None if slam is None else slam.ukf_odometry(),
-            )
-            from autoteach.geometry import WaferRobot
+    session, cfg = setup.session, setup.session.config
+    noise = None if config.ukf_noise == "seed" else config.ukf_noise
+    ukf_inc = increments
+    slam = SlamConfig() if config.ukf_odometry == "slam" else None
+    if slam is not None:
+        if config.odometry is None and session.camera_poses is not None:
+            ukf_inc = simulate_slam(session.camera_poses, config.seed, slam)
+        if config.ukf_noise is None:
+            noise = slam.ukf_noise(cfg.encoder_noise if cfg is not None else DEFAULT_ENCODER_NOISE)
+    elif config.odometry is None and config.ukf_noise is None and increments is not None:
+        noise = OdometryConfig().ukf_noise()
+    if ukf_inc is None:
+        return None
+    base_w = setup.base_world if cfg is not None else nominal_base
+    enc = setup.encoders
+    run = _core.handeye_ukf(
+        setup.robot,
+        base_w,
+        enc,
+        np.ascontiguousarray(ukf_inc, dtype=np.float64),
+        noise,
+        odometry=None if slam is None else slam.ukf_odometry(),
+    )
+    encoder_poses = np.asarray(WaferRobot(params=setup.params, base=base_w).camera_pose(enc), dtype=np.float64)
+    chain = integrate_odometry if slam is None else integrate_relative
+    out: dict[str, Any] = {
+        "poses": np.asarray(run["poses"]),
+        "offsets": np.asarray(run["offsets"]),
+        "offset_std": np.asarray(run["offset_std"]),
+        "observable": [bool(v) for v in run["observable"]],
+        "encoder_poses": encoder_poses,
+        "odometry_poses": chain(encoder_poses[0], ukf_inc),
+    }
+    if session.calibration is not None:
+        true = np.asarray(session.calibration.joint_offsets)[[0, 1, 3]]
+        err = np.abs(out["offsets"][-1] - true)[out["observable"]]
+        out["errors"] = {"joint_offset_deg": float(np.degrees(err.max()))}
+        out["true_offsets"] = true
+    return out
 
-            robot = WaferRobot(params=params, base=base_w)
-            encoder_poses = np.asarray(robot.camera_pose(enc), dtype=np.float64)
-            chain = integrate_odometry if slam is None else integrate_relative
-            ukf_out = {
-                "poses": np.asarray(run["poses"]),
-                "offsets": np.asarray(run["offsets"]),
-                "offset_std": np.asarray(run["offset_std"]),
-                "observable": [bool(v) for v in run["observable"]],
-                "encoder_poses": encoder_poses,
-                "odometry_poses": chain(encoder_poses[0], ukf_inc),
-            }
-            if session.calibration is not None:
-                true = np.asarray(session.calibration.joint_offsets)[[0, 1, 3]]
-                err = np.abs(ukf_out["offsets"][-1] - true)[ukf_out["observable"]]
-                ukf_out["errors"] = {"joint_offset_deg": float(np.degrees(err.max()))}
-                ukf_out["true_offsets"] = true
-        timings["ukf_s"] = time.perf_counter() - t0
-    stages.update()
 
-    # --- SLAM-MOT (§5.3) ------------------------------------------------------------------
-    t0 = time.perf_counter()
+@dataclass
+class SlamMotProblem:
+    """The SLAM-MOT inputs (§5.3) that every solve of one session shares.
+
+    Attributes:
+        args: the positional arguments of ``_core.handeye_slam_mot`` (intrinsics, robot, wafer
+            size, encoders, observations, base, offsets, wafers).
+        options: its keyword options.
+        est_idx: indices of the joints whose offsets are estimated.
+        ref: the reference wafer.
+        z_top: height (m) above the highest wafer's start, the top of the basin search.
+        stats: what the stages did (front-end counts, odometry factors, gating).
+    """
+
+    args: tuple[Any, ...]
+    options: dict[str, Any]
+    est_idx: list[int]
+    ref: int
+    z_top: float
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    def with_observations(self, obs: Observations, start: tuple[Any, ...] | None = None) -> tuple[Any, ...]:
+        """The positional arguments with ``obs`` in place of the observations (and a new start)."""
+        tail = self.args[10:] if start is None else start
+        return (*self.args[:5], obs.frames, obs.wafers, obs.rims, obs.start, np.ascontiguousarray(obs.points), *tail)
+
+
+def slam_mot_problem(
+    setup: Setup,
+    config: AutoteachConfig,
+    obs: Observations,
+    ref: int,
+    nominal_base: np.ndarray,
+    init_wafers: np.ndarray,
+    ukf_out: dict[str, Any] | None,
+    odometry: tuple[np.ndarray | None, np.ndarray | None, tuple[float, ...]],
+) -> SlamMotProblem:
+    """Stage 5a: the SLAM-MOT problem: the start from the UKF, the noise model and the factors."""
+    cfg = setup.session.config
     offsets0 = np.zeros(5)
-    est_idx = [JOINTS.index(j) for j in estimate_offsets]
+    est_idx = [JOINTS.index(j) for j in config.estimate_offsets]
     if ukf_out is not None:
         for i, j in enumerate((0, 1, 3)):
             if j in est_idx:
                 offsets0[j] = ukf_out["offsets"][-1][i]
-    sigma = float(pixel_sigma if pixel_sigma is not None else max(pixel_noise, 0.3))
-    z_top = float(init_wafers[:, 2].max()) + 0.05
+    sigma = float(config.pixel_sigma if config.pixel_sigma is not None else max(config.pixel_noise, PIXEL_SIGMA_FLOOR))
+    encoder_sigma = config.encoder_sigma
     if encoder_sigma is None:
-        noise5 = cfg.encoder_noise if cfg is not None else (2e-5, 2e-5, 2e-5, 2e-5, 5e-6)
+        noise5 = cfg.encoder_noise if cfg is not None else DEFAULT_ENCODER_NOISE
         encoder_sigma = tuple(max(float(noise5[j]), 1e-9) for j in (0, 1, 3, 4))
-    extra: dict[str, Any] = {}
-    if camera_mode == "free":
-        # Relative robot motion (5.10)–(5.12) between consecutive frames and, when the session
-        # has visual odometry, its increments as relative-pose factors between the same poses.
-        rel = None
-        if increments is not None:
-            from autoteach.sim.odometry import relative_odometry
-
-            if odometry_start is not None:
-                start = np.asarray(odometry_start, dtype=np.float64)
-                start = start[:3, :3] if start.shape == (4, 4) else start
-            elif odo_start is not None:
-                start = odo_start
-            else:
-                start = _nominal_start_rotation(cfg, params, enc)
-            rel = np.ascontiguousarray(relative_odometry(increments, start))
-        extra["free_camera"] = ([float(v) for v in motion_sigma], rel, [float(v) for v in odo_sigma])
-        frontend_stats["odometry_factors"] = 0 if rel is None else len(rel)
+    options: dict[str, Any] = {}
+    stats: dict[str, Any] = {"initial": dict(obs.stats)} if obs.stats else {}
+    if config.camera_mode == "free":
+        options["free_camera"], stats["odometry_factors"] = _free_camera_factors(setup, config, odometry)
         encoder_sigma = ()
-    if estimate_mount:
-        extra["estimate_mount"] = True
-    if estimate_links:
-        extra["estimate_links"] = [LINKS.index(name) for name in estimate_links]
-    common = dict(
-        **extra,
+    if config.estimate_mount:
+        options["estimate_mount"] = True
+    if config.estimate_links:
+        options["estimate_links"] = [LINKS.index(name) for name in config.estimate_links]
+    options.update(
         encoder_sigma=tuple(encoder_sigma) if encoder_sigma else None,
         pixel_sigma=sigma,
         estimate_offsets=est_idx,
         reference_wafer=int(ref),
-        huber=huber,
-        max_iterations=int(max_iterations),
-        basin_search=bool(basin_search),
+        huber=config.huber,
+        max_iterations=int(config.max_iterations),
+        basin_search=bool(config.basin_search),
     )
-    args = (
-        k,
-        robot_arr,
-        radius,
-        thickness,
-        enc,
-        obs.frames,
-        obs.wafers,
-        obs.rims,
-        obs.start,
-        np.ascontiguousarray(obs.points),
-        nominal_base,
-        offsets0,
-        init_wafers,
-    )
-    heights = (-0.02, max(z_top, 0.05), 0.001)
-    if frontend == "detect":
-        # First estimate from the consistently tracked rims (robust loss), then re-associate
-        # every detected edge to the projected prior with shrinking gates and solve again.
-        # The tracks may mix wafers, so the first estimate can sit in a mirrored-tilt basin:
-        # the chain of gates runs from its tilts and from level wafers (the nominal carrier),
-        # and the one whose estimate explains more detected edges within the last gate wins.
-        tracked = _core.handeye_slam_mot(*args, factor="conic", window=0, init_heights=heights, **common)
-        heights = None
-        best: tuple[int, Observations, tuple[Any, ...]] | None = None
-        for reset in (False, True) if reset_tilts else (False,):
-            first, cand_obs, cand_args = tracked, obs, args
-            failed = False
-            for gi, gate in enumerate(gate_px):
-                if gi > 0:
-                    try:
-                        first = _core.handeye_slam_mot(*cand_args, factor="conic", window=0, **common)
-                    except InvalidInputError:
-                        # This chain's estimate put a rim behind a camera (its gated edges
-                        # mixed wafers): the chain is abandoned, the other may still hold.
-                        failed = True
-                        break
-                wafers_first = np.asarray(first["wafers"], dtype=np.float64).copy()
-                if gi == 0 and reset:
-                    wafers_first[:, 3:] = 0.0
-                cand_obs = gate_detections(
-                    detections,
-                    np.asarray(first["camera_poses"]),
-                    np.asarray(first["wafers"], dtype=np.float64),
-                    obs.slots,
-                    k=k,
-                    radius=radius,
-                    thickness=thickness,
-                    gate_px=gate,
-                    points_per_rim=points_per_rim,
-                    min_band_px=min_band_px if gi == len(gate_px) - 1 else 0.0,
-                    band_weights=band_weights and gi == len(gate_px) - 1,
-                )
-                if len(cand_obs) == 0:
-                    break
-                cand_args = (
-                    *args[:5],
-                    cand_obs.frames,
-                    cand_obs.wafers,
-                    cand_obs.rims,
-                    cand_obs.start,
-                    np.ascontiguousarray(cand_obs.points),
-                    np.asarray(first["base_pose"], dtype=np.float64),
-                    np.asarray(first["joint_offsets"], dtype=np.float64),
-                    wafers_first,
-                )
-            # Edges explained (before the band filter, which only thins their points).
-            n_explained = int(cand_obs.stats.get("rims_associated", len(cand_obs)))
-            if not failed and len(cand_obs) > 0 and (best is None or n_explained > best[0]):
-                best = (n_explained, cand_obs, cand_args)
-        if best is None:
-            raise InvalidInputError(
-                f"no detected edge lies within {gate_px} px of the projected wafer estimates, or every "
-                "gating chain's estimate put a rim behind a camera: the first estimate from the tracked "
-                "rims is inconsistent with the detections"
-            )
-        _, obs, args = best
-        obs = _drop_sparse_wafers(obs, min_wafer_frames)
-        # The solve gets exactly the kept observations (a wafer with too few views is reported
-        # as not estimated and does not enter the solve).
-        args = (*args[:5], obs.frames, obs.wafers, obs.rims, obs.start, np.ascontiguousarray(obs.points), *args[10:])
-        frontend_stats["gated"] = dict(obs.stats)
-        seen = sorted(set(obs.wafers))
-    sol = _core.handeye_slam_mot(
-        *args,
-        factor="conic",
-        window=int(window),
-        init_heights=heights,
-        point_sigma_scale=obs.sigma_scale,
-        **common,
-    )
-    timings["slam_mot_s"] = time.perf_counter() - t0
-    frontend_stats["basins_moved"] = [int(obs.slots[w]) for w in sol["basins_moved"]]
-    stages.update()
+    args = (setup.k, setup.robot, setup.radius, setup.thickness, setup.encoders)
+    problem = SlamMotProblem(args, options, est_idx, ref, float(init_wafers[:, 2].max()) + 0.05, stats)
+    problem.args = problem.with_observations(obs, (nominal_base, offsets0, init_wafers))
+    return problem
 
-    base_hat = np.asarray(sol["base_pose"])
+
+def _free_camera_factors(
+    setup: Setup, config: AutoteachConfig, odometry: tuple[np.ndarray | None, np.ndarray | None, tuple[float, ...]]
+) -> tuple[tuple[Any, ...], int]:
+    """The free-camera mode's motion precision, odometry relative poses and their precision.
+
+    Relative robot motion (5.10)–(5.12) ties consecutive frames; when the session has visual
+    odometry, its increments become relative-pose factors between the same poses.
+    """
+    session = setup.session
+    increments, odo_start, odo_sigma = odometry
+    rel = None
+    if increments is not None:
+        from autoteach.sim.odometry import relative_odometry
+
+        if config.odometry_start is not None:
+            start = np.asarray(config.odometry_start, dtype=np.float64)
+            start = start[:3, :3] if start.shape == (4, 4) else start
+        elif odo_start is not None:
+            start = odo_start
+        else:
+            start = _nominal_start_rotation(session.config, setup.params, setup.encoders)
+        rel = np.ascontiguousarray(relative_odometry(increments, start))
+    factors = ([float(v) for v in config.motion_sigma], rel, [float(v) for v in odo_sigma])
+    return factors, 0 if rel is None else len(rel)
+
+
+def gate_and_resolve(
+    setup: Setup,
+    config: AutoteachConfig,
+    problem: SlamMotProblem,
+    obs: Observations,
+    detections: list[list[Any]],
+) -> Observations:
+    """Stage 5b (detect front end): re-associate every detected edge with the projected estimate.
+
+    A first estimate from the consistently tracked rims (robust loss), then every detected edge
+    is associated with the projected prior with shrinking gates, solving again after each. The
+    tracks may mix wafers, so the first estimate can sit in a mirrored-tilt basin: the chain of
+    gates runs from its tilts and from level wafers (the nominal carrier), and the chain whose
+    estimate explains more detected edges within the last gate wins. Updates ``problem`` to the
+    winner's observations and start; returns the kept observations.
+
+    Raises:
+        InvalidInputError: no chain associates any edge.
+    """
+    heights = (-0.02, max(problem.z_top, 0.05), 0.001)
+    tracked = _core.handeye_slam_mot(*problem.args, factor="conic", window=0, init_heights=heights, **problem.options)
+    best: tuple[int, Observations, tuple[Any, ...]] | None = None
+    for reset in (False, True) if config.reset_tilts else (False,):
+        chain = _gating_chain(setup, config, problem, obs, detections, tracked, reset)
+        if chain is not None and (best is None or chain[0] > best[0]):
+            best = chain
+    if best is None:
+        raise InvalidInputError(
+            f"no detected edge lies within {config.gate_px} px of the projected wafer estimates, or every "
+            "gating chain's estimate put a rim behind a camera: the first estimate from the tracked "
+            "rims is inconsistent with the detections"
+        )
+    _, kept, args = best
+    kept = _drop_sparse_wafers(kept, config.min_wafer_frames)
+    # The solve gets exactly the kept observations (a wafer with too few views is reported as not
+    # estimated and does not enter the solve).
+    problem.args = problem.with_observations(kept, args[10:])
+    problem.stats["gated"] = dict(kept.stats)
+    return kept
+
+
+def _gating_chain(
+    setup: Setup,
+    config: AutoteachConfig,
+    problem: SlamMotProblem,
+    obs: Observations,
+    detections: list[list[Any]],
+    tracked: dict[str, Any],
+    reset: bool,
+) -> tuple[int, Observations, tuple[Any, ...]] | None:
+    """One chain of gates from the tracked estimate (``reset``: from level wafers).
+
+    Returns the edges it explains, its observations and its solve's arguments, or ``None`` when
+    an estimate put a rim behind a camera (its gated edges mixed wafers) or nothing was gated.
+    """
+    gates = config.gate_px
+    first, cand_obs, cand_args = tracked, obs, problem.args
+    for gi, gate in enumerate(gates):
+        if gi > 0:
+            try:
+                first = _core.handeye_slam_mot(*cand_args, factor="conic", window=0, **problem.options)
+            except InvalidInputError:
+                return None
+        wafers_first = np.asarray(first["wafers"], dtype=np.float64).copy()
+        if gi == 0 and reset:
+            wafers_first[:, 3:] = 0.0
+        last = gi == len(gates) - 1
+        cand_obs = gate_detections(
+            detections,
+            np.asarray(first["camera_poses"]),
+            np.asarray(first["wafers"], dtype=np.float64),
+            obs.slots,
+            k=setup.k,
+            radius=setup.radius,
+            thickness=setup.thickness,
+            gate_px=gate,
+            points_per_rim=config.points_per_rim,
+            min_band_px=config.min_band_px if last else 0.0,
+            band_weights=config.band_weights and last,
+        )
+        if len(cand_obs) == 0:
+            return None
+        start = (
+            np.asarray(first["base_pose"], dtype=np.float64),
+            np.asarray(first["joint_offsets"], dtype=np.float64),
+            wafers_first,
+        )
+        cand_args = problem.with_observations(cand_obs, start)
+    # Edges explained (before the band filter, which only thins their points).
+    return int(cand_obs.stats.get("rims_associated", len(cand_obs))), cand_obs, cand_args
+
+
+def assemble_result(
+    setup: Setup,
+    config: AutoteachConfig,
+    problem: SlamMotProblem,
+    obs: Observations,
+    sol: dict[str, Any],
+    ukf_out: dict[str, Any] | None,
+) -> AutoTeachResult:
+    """Stage 6: the result: estimates with their standard deviations, status of every offset.
+
+    Wafers that no observation constrains are NaN; the theoretical resolution (5.14) of each wafer
+    is evaluated at its best view (most edge points).
+    """
+    est_idx, ref = problem.est_idx, problem.ref
+    seen = sorted(set(obs.wafers))
     wafers_hat = np.asarray(sol["wafers"])
     offsets_hat = np.asarray(sol["joint_offsets"])
-    cov = sol["covariance"]
+    cov = None if sol["covariance"] is None else np.asarray(sol["covariance"])
+    d = np.sqrt(np.clip(np.diag(cov), 0.0, None)) if cov is not None else None
     n_off = len(est_idx)
-    base_std = np.full(6, np.nan)
+    base_std = d[:6] if d is not None else np.full(6, np.nan)
     offsets_std = np.full(5, np.nan)
     wafer_std = np.full((obs.n_wafers, 5), np.nan)
     wafer_std[ref] = 0.0
-    if cov is not None:
-        cov = np.asarray(cov)
-        d = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        base_std = d[:6]
+    if d is not None:
         for i, j in enumerate(est_idx):
             offsets_std[j] = d[6 + i]
         for i, w in enumerate(sol["covariance_wafers"]):
             wafer_std[w] = d[6 + n_off + 5 * i : 6 + n_off + 5 * i + 5]
-    extra_cal: dict[str, Any] = {"camera_mode": camera_mode}
+    extra_cal: dict[str, Any] = {"camera_mode": config.camera_mode}
     tail = 6 + n_off + 5 * len(sol["covariance_wafers"])
-    if estimate_mount:
-        std = d[tail : tail + 6] if cov is not None else np.full(6, np.nan)
-        tail += 6
+    if config.estimate_mount:
         extra_cal["mount_correction"] = np.asarray(sol["mount"])
-        extra_cal["mount_std"] = std
-    for i, name in enumerate(estimate_links):
-        li = LINKS.index(name)
-        std = float(d[tail + i]) if cov is not None else math.nan
-        extra_cal.setdefault("links", {})[name] = {"correction_m": float(sol["links"][li]), "std_m": std}
+        extra_cal["mount_std"] = d[tail : tail + 6] if d is not None else np.full(6, np.nan)
+        tail += 6
+    for i, name in enumerate(config.estimate_links):
+        std = float(d[tail + i]) if d is not None else math.nan
+        correction = float(sol["links"][LINKS.index(name)])
+        extra_cal.setdefault("links", {})[name] = {"correction_m": correction, "std_m": std}
     status: dict[str, str] = {}
     joint_offsets = np.full(5, np.nan)
     for j, name in enumerate(JOINTS):
+        u = (0, 1, 3).index(j) if j in (0, 1, 3) else -1
         if j in est_idx:
             status[name] = "estimated"
             joint_offsets[j] = offsets_hat[j]
-        elif ukf_out is not None and j in (0, 1, 3) and ukf_out["observable"][(0, 1, 3).index(j)]:
+        elif ukf_out is not None and u >= 0 and ukf_out["observable"][u]:
             status[name] = "ukf"
-            joint_offsets[j] = ukf_out["offsets"][-1][(0, 1, 3).index(j)]
-            offsets_std[j] = ukf_out["offset_std"][-1][(0, 1, 3).index(j)]
+            joint_offsets[j] = ukf_out["offsets"][-1][u]
+            offsets_std[j] = ukf_out["offset_std"][-1][u]
         else:
             status[name] = "unobservable: " + UNOBSERVABLE_REASONS.get(name, "not estimated")
     unobserved = [w for w in range(obs.n_wafers) if w not in seen]
     wafers_hat[unobserved] = np.nan
     wafer_std[unobserved] = np.nan
-
-    # Theoretical resolution (5.14) from each wafer's best view (most edge points).
-    t0 = time.perf_counter()
-    resolution = np.full((obs.n_wafers, 5), np.nan)
     cams = np.asarray(sol["camera_poses"])
-    counts: dict[int, tuple[int, int]] = {}
-    for i, (f, w) in enumerate(zip(obs.frames, obs.wafers, strict=True)):
-        n = obs.start[i + 1] - obs.start[i]
-        if n > counts.get(w, (-1, 0))[0]:
-            counts[w] = (n, f)
-    for w, (_, f) in counts.items():
-        try:
-            resolution[w] = _core.handeye_resolution(k, cams[f], wafers_hat[w], radius, thickness)
-        except Exception:  # noqa: BLE001 - a view where the rim crosses the camera plane: no figure
-            pass
-
-    result = AutoTeachResult(
-        base_pose=base_hat,
+    return AutoTeachResult(
+        base_pose=np.asarray(sol["base_pose"]),
         base_std=base_std,
         joint_offsets=joint_offsets,
         joint_offsets_std=offsets_std,
@@ -1435,12 +1409,11 @@ def autoteach(
         camera_poses=cams,
         history=[dict(h) for h in sol["history"]],
         ukf=ukf_out,
-        resolution=resolution,
+        resolution=_best_view_resolution(setup, obs, cams, wafers_hat),
         rms_px=float(sol["rms_px"]),
         n_observations=len(obs),
-        frontend=frontend,
-        timings=timings,
-        frontend_stats=frontend_stats,
+        frontend=setup.frontend,
+        frontend_stats=problem.stats,
         extra_calibration=extra_cal,
         observations={
             "frames": obs.frames,
@@ -1450,143 +1423,150 @@ def autoteach(
             "points": obs.points,
         },
     )
-    timings["resolution_s"] = time.perf_counter() - t0
 
-    truth_index: list[int] | None = None
-    if session.wafer_slots is not None and frontend == "detect":
-        true_slots = [int(v) for v in session.wafer_slots]
-        truth_index = [true_slots.index(int(sl)) if int(sl) in true_slots else -1 for sl in obs.slots]
-        frontend_stats["true_slots_missed"] = sorted(set(true_slots) - {int(v) for v in obs.slots[seen]})
-        frontend_stats["spurious_slots"] = [int(obs.slots[w]) for w in seen if truth_index[w] < 0]
-    if baseline:
+
+def _best_view_resolution(setup: Setup, obs: Observations, cams: np.ndarray, wafers: np.ndarray) -> np.ndarray:
+    """Theoretical resolution (5.14) of each wafer in its view with the most edge points."""
+    resolution = np.full((obs.n_wafers, 5), np.nan)
+    counts: dict[int, tuple[int, int]] = {}
+    for i, (f, w) in enumerate(zip(obs.frames, obs.wafers, strict=True)):
+        n = obs.start[i + 1] - obs.start[i]
+        if n > counts.get(w, (-1, 0))[0]:
+            counts[w] = (n, f)
+    for w, (_, f) in counts.items():
+        try:
+            resolution[w] = _core.handeye_resolution(setup.k, cams[f], wafers[w], setup.radius, setup.thickness)
+        except Exception:  # noqa: BLE001 - a view where the rim crosses the camera plane: no figure
+            pass
+    return resolution
+
+
+def run_baseline(
+    session: Any, problem: SlamMotProblem, obs: Observations, truth_index: list[int] | None
+) -> dict[str, Any]:
+    """The seed's baseline as it is: point reprojection, nearest-point association, no basin search."""
+    t0 = time.perf_counter()
+    chain_only = {k: v for k, v in problem.options.items() if k not in ("free_camera", "basin_search")}
+    sol = _core.handeye_slam_mot(
+        *problem.args,
+        factor="point",
+        window=0,
+        init_heights=(-0.02, max(problem.z_top, 0.05), 0.001),
+        point_sigma_scale=obs.sigma_scale,
+        **chain_only,
+    )
+    b: dict[str, Any] = {
+        "base_pose": np.asarray(sol["base_pose"]),
+        "wafers": np.asarray(sol["wafers"]),
+        "joint_offsets": np.asarray(sol["joint_offsets"]),
+        "rms_px": float(sol["rms_px"]),
+        "runtime_s": time.perf_counter() - t0,
+    }
+    if session.has_ground_truth:
+        seen = sorted(set(obs.wafers))
+        b["errors"] = ground_truth_errors(
+            session,
+            problem.ref,
+            b["base_pose"],
+            b["joint_offsets"],
+            b["wafers"],
+            problem.est_idx,
+            seen,
+            truth_index=truth_index,
+        )[0]
+    return b
+
+
+def autoteach(
+    log_or_session: Any, config: AutoteachConfig | None = None, *, progress: bool = False, **options: Any
+) -> AutoTeachResult:
+    """Auto-teach the hand-eye system from a session: calibration, wafer poses, covariances.
+
+    The stages run in order and each can be run alone: :func:`load_session`, :func:`prepare`,
+    :func:`run_frontend`, :func:`initial_guess`, :func:`run_ukf`, :func:`slam_mot_problem`,
+    :func:`gate_and_resolve` (detect front end), the SLAM-MOT solve, :func:`assemble_result`, then
+    :func:`run_baseline` and :func:`autoteach.evaluation.ground_truth_errors` where asked for.
+
+    Args:
+        log_or_session: a :class:`~autoteach.session.Session` or the path of an MCAP log.
+        config: the options (default :class:`~autoteach.config.AutoteachConfig`).
+        progress: progress bars on stderr.
+        **options: options that replace those of ``config`` by name (see
+            :class:`~autoteach.config.AutoteachConfig`), e.g. ``frontend="simulated"``.
+
+    Raises:
+        InvalidInputError: unreadable/unsynchronised input, no images (detect front end), no joint
+            states, no wafer seen in any frame, an unknown option.
+        ConvergenceError: the solver failed.
+    """
+    from tqdm import tqdm
+
+    config = (config or AutoteachConfig()).replace(**options) if options else (config or AutoteachConfig())
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    session = load_session(log_or_session)
+    timings["load_s"] = time.perf_counter() - t0
+    setup = prepare(session, config)
+    config.validate()
+
+    stages = tqdm(total=4, desc="auto-teaching", unit="stage", disable=not progress, leave=False)
+    t0 = time.perf_counter()
+    obs, detections = run_frontend(setup, config, progress=progress, timings=timings)
+    timings["frontend_s"] = time.perf_counter() - t0
+    stages.update()
+    ref, nominal_base, init_wafers = initial_guess(setup, obs, config)
+    odometry = _odometry(session, config.odometry, config.odometry_sigma, config.seed)
+    ukf_out = None
+    if config.use_ukf:
         t0 = time.perf_counter()
-        # The seed's baseline as it is: no basin search.
-        chain_only = {k: v for k, v in common.items() if k not in ("free_camera", "basin_search")}
-        base_sol = _core.handeye_slam_mot(
-            *args,
-            factor="point",
-            window=0,
-            init_heights=(-0.02, max(z_top, 0.05), 0.001),
-            point_sigma_scale=obs.sigma_scale,
-            **chain_only,
-        )
-        b = {
-            "base_pose": np.asarray(base_sol["base_pose"]),
-            "wafers": np.asarray(base_sol["wafers"]),
-            "joint_offsets": np.asarray(base_sol["joint_offsets"]),
-            "rms_px": float(base_sol["rms_px"]),
-            "runtime_s": time.perf_counter() - t0,
-        }
-        if session.has_ground_truth:
-            b["errors"] = ground_truth_errors(
-                session, ref, b["base_pose"], b["joint_offsets"], b["wafers"], est_idx, seen, truth_index=truth_index
-            )[0]
-        result.baseline = b
-        timings["baseline_s"] = b["runtime_s"]
+        ukf_out = run_ukf(setup, config, nominal_base, odometry[0])
+        timings["ukf_s"] = time.perf_counter() - t0
+    stages.update()
+
+    t0 = time.perf_counter()
+    problem = slam_mot_problem(setup, config, obs, ref, nominal_base, init_wafers, ukf_out, odometry)
+    heights: tuple[float, float, float] | None = (-0.02, max(problem.z_top, 0.05), 0.001)
+    if detections is not None:
+        obs = gate_and_resolve(setup, config, problem, obs, detections)
+        heights = None
+    sol = _core.handeye_slam_mot(
+        *problem.args,
+        factor="conic",
+        window=int(config.window),
+        init_heights=heights,
+        point_sigma_scale=obs.sigma_scale,
+        **problem.options,
+    )
+    timings["slam_mot_s"] = time.perf_counter() - t0
+    problem.stats["basins_moved"] = [int(obs.slots[w]) for w in sol["basins_moved"]]
+    stages.update()
+
+    t0 = time.perf_counter()
+    result = assemble_result(setup, config, problem, obs, sol, ukf_out)
+    result.timings = timings
+    timings["resolution_s"] = time.perf_counter() - t0
+    seen = sorted(set(obs.wafers))
+    truth_index: list[int] | None = None
+    if session.wafer_slots is not None and setup.frontend == "detect":
+        truth_index, report = match_truth(session, obs.slots, seen)
+        problem.stats.update(report)
+    if config.baseline:
+        result.baseline = run_baseline(session, problem, obs, truth_index)
+        timings["baseline_s"] = result.baseline["runtime_s"]
     stages.update()
     stages.close()
-
     if session.has_ground_truth and session.calibration is not None:
-        errs, sig = ground_truth_errors(
+        result.errors, result.within_3sigma = ground_truth_errors(
             session,
             ref,
-            base_hat,
-            offsets_hat,
-            wafers_hat,
-            est_idx,
+            result.base_pose,
+            np.asarray(sol["joint_offsets"]),
+            result.wafer_params,
+            problem.est_idx,
             seen,
-            base_std,
-            offsets_std,
-            wafer_std,
+            result.base_std,
+            result.joint_offsets_std,
+            result.wafer_std,
             truth_index=truth_index,
         )
-        result.errors = errs
-        result.within_3sigma = sig
     return result
-
-
-def _yaw(r: np.ndarray) -> float:
-    return math.atan2(r[1, 0], r[0, 0])
-
-
-def ground_truth_errors(
-    session: Any,
-    ref: int,
-    base_hat: np.ndarray,
-    offsets_hat: np.ndarray,
-    wafers_hat: np.ndarray,
-    est_idx: list[int],
-    seen: list[int],
-    base_std: np.ndarray | None = None,
-    offsets_std: np.ndarray | None = None,
-    wafer_std: np.ndarray | None = None,
-    truth_index: list[int] | None = None,
-) -> tuple[dict[str, float], dict[str, bool]]:
-    """Absolute errors of the estimates against a simulated session's ground truth.
-
-    The truth is moved into the true reference-wafer frame; the effective base is
-    ``T_wb·Rz(−δ1)·Tz(−δh)``; the estimate's yaw gauge is aligned to the truth by a rotation about
-    the reference normal. Returns the errors (``joint_offset_deg`` max over the estimated
-    joints, ``base_translation_mm``, ``base_rotation_deg``, ``wafer_center_mm`` and
-    ``wafer_tilt_deg`` max over the wafers) and, when standard deviations are given, whether each
-    group's every component lies within 3σ. ``truth_index[w]`` is the ground-truth wafer of
-    estimated wafer ``w`` (default: the same index; ``-1``: a wafer the truth does not have,
-    skipped — the caller reports it).
-    """
-    cal = session.calibration
-    truth = list(range(len(session.wafer_poses))) if truth_index is None else list(truth_index)
-    if truth[ref] < 0:
-        raise InvalidInputError("the reference wafer matches no ground-truth wafer: errors cannot be computed")
-    t_ref = np.asarray(session.wafer_poses[truth[ref]], dtype=np.float64)
-    t_ref_inv = np.linalg.inv(t_ref)
-    delta = np.asarray(cal.joint_offsets, dtype=np.float64)
-    eff = np.eye(4)
-    eff[:3, :3] = _rot("z", -delta[0])
-    eff[2, 3] = -delta[4]
-    base_true = t_ref_inv @ np.asarray(cal.base_pose, dtype=np.float64) @ eff
-    # Gauge: rotate the estimate about the reference normal (z) to the true base yaw.
-    g = np.eye(4)
-    g[:3, :3] = _rot("z", _yaw(base_true[:3, :3]) - _yaw(base_hat[:3, :3]))
-    base_al = g @ base_hat
-    d_rot = _log_so3(base_true[:3, :3].T @ base_al[:3, :3])
-    d_t = base_al[:3, 3] - base_true[:3, 3]
-    errs: dict[str, float] = {
-        "joint_offset_deg": float(np.degrees(np.max(np.abs(offsets_hat[est_idx] - delta[est_idx]))))
-        if est_idx
-        else 0.0,
-        "base_translation_mm": float(np.linalg.norm(d_t) * 1e3),
-        "base_rotation_deg": float(np.degrees(np.linalg.norm(d_rot))),
-    }
-    centre_err, tilt_err = [], []
-    centre_ok, tilt_ok = True, True
-    for w in seen:
-        if w == ref or truth[w] < 0:
-            continue
-        wt = t_ref_inv @ np.asarray(session.wafer_poses[truth[w]], dtype=np.float64)
-        c_hat = (g @ np.append(wafers_hat[w, :3], 1.0))[:3]
-        n_hat = g[:3, :3] @ wafer_pose(wafers_hat[w])[:3, 2]
-        n_true = wt[:3, 2]
-        ce = c_hat - wt[:3, 3]
-        centre_err.append(float(np.linalg.norm(ce)))
-        tilt_err.append(math.degrees(math.acos(max(-1.0, min(1.0, float(n_hat @ n_true))))))
-        if wafer_std is not None:
-            s = wafer_std[w]
-            # Centre in the gauge-aligned frame: compare per axis with the (unrotated) std; the
-            # gauge rotation is a fraction of a degree, well inside the tolerance of this check.
-            centre_ok &= bool(np.all(np.abs(ce) <= 3.0 * s[:3] + 1e-12))
-            wt_par = wafer_params_of(np.linalg.inv(g) @ wt)
-            tilt_ok &= bool(np.all(np.abs(wafers_hat[w, 3:] - wt_par[3:]) <= 3.0 * s[3:] + 1e-12))
-    errs["wafer_center_mm"] = float(max(centre_err) * 1e3) if centre_err else 0.0
-    errs["wafer_tilt_deg"] = float(max(tilt_err)) if tilt_err else 0.0
-    sig: dict[str, bool] = {}
-    if base_std is not None and offsets_std is not None:
-        # Base error in the estimate's tangent [ω; ρ] (body frame of the gauge-aligned estimate).
-        r_al = base_al[:3, :3]
-        e_body = np.concatenate([-d_rot, r_al.T @ (base_true[:3, 3] - base_al[:3, 3])])
-        s = np.asarray(base_std)
-        sig["base_rotation"] = bool(np.all(np.abs(e_body[:2]) <= 3.0 * np.sqrt(s[:2] ** 2) + 1e-12))
-        sig["base_translation"] = bool(np.all(np.abs(e_body[3:]) <= 3.0 * s[3:] + 1e-12))
-        sig["joint_offsets"] = bool(np.all(np.abs(offsets_hat[est_idx] - delta[est_idx]) <= 3.0 * offsets_std[est_idx]))
-        sig["wafer_centers"] = centre_ok
-        sig["wafer_tilts"] = tilt_ok
-    return errs, sig

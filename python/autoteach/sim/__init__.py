@@ -14,6 +14,7 @@ recorded data and the ground truth. Sessions are stored as MCAP logs by :mod:`au
 
 from __future__ import annotations
 
+from autoteach.session import JOINT_NAMES, Calibration, CameraInfo, Session
 from autoteach.sim.config import DEFAULT_BASE_POSE, DEFAULT_SLOTS, Lighting, SimConfig, TrajectoryConfig
 from autoteach.sim.odometry import (
     OdometryConfig,
@@ -22,7 +23,6 @@ from autoteach.sim.odometry import (
     simulate_odometry,
     true_increments,
 )
-from autoteach.sim.session import JOINT_NAMES, Calibration, CameraInfo, Session
 from autoteach.sim.simulate import simulate_session, wafer_poses
 from autoteach.sim.trajectory import BSpline
 

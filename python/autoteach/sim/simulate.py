@@ -12,8 +12,8 @@ import numpy as np
 from autoteach import _core
 from autoteach.errors import InvalidInputError, UnreachablePoseError
 from autoteach.geometry import WaferRobot
+from autoteach.session import JOINT_NAMES, Calibration, CameraInfo, Session
 from autoteach.sim.config import SimConfig
-from autoteach.sim.session import JOINT_NAMES, Calibration, CameraInfo, Session
 from autoteach.sim.trajectory import BSpline, sweep_waypoints, unwrap_to
 
 #: Slots and pitch of the carrier drawn by the renderer (``autoteach_geometry::render::Carrier``).
