@@ -175,20 +175,9 @@ def simulate_session(
         UnreachablePoseError: a camera waypoint is out of the robot's reach.
 
     """
-    from tqdm import tqdm
-
     seed = _check_count(seed, "seed", 0)
     frames = _check_count(frames, "frames", 1, MAX_FRAMES)
-    if config is None:
-        config = SimConfig()
-    elif not isinstance(config, SimConfig):
-        raise InvalidInputError(f"config must be a SimConfig, got {type(config).__name__}")
-    if config.carrier and (config.n_slots, config.slot_pitch) != (RENDERED_CARRIER_SLOTS, RENDERED_CARRIER_PITCH):
-        raise InvalidInputError(
-            f"the rendered carrier has {RENDERED_CARRIER_SLOTS} slots at {RENDERED_CARRIER_PITCH * 1e3:g} mm pitch, "
-            f"but the config asks for {config.n_slots} slots at {config.slot_pitch * 1e3:g} mm; set carrier=False "
-            "to simulate other layouts without the carrier"
-        )
+    config = _check_config(config)
     children = np.random.SeedSequence(seed).spawn(len(_STREAMS))
     rngs = {name: np.random.default_rng(child) for name, child in zip(_STREAMS, children, strict=True)}
     timings: dict[str, float] = {}
@@ -200,7 +189,61 @@ def simulate_session(
     robot = WaferRobot(params=config.robot, base=config.base_pose_matrix)
     camera = CameraInfo(config.camera_model, config.camera_params, config.width, config.height)
 
-    # Trajectory: camera waypoints -> IK -> clamped cubic B-spline in joint space.
+    joints_true, timestamps = _joint_trajectory(config, robot, rngs["trajectory"], frames)
+    joints_encoder = (
+        joints_true + offsets + rngs["encoder"].normal(0.0, 1.0, (frames, 5)) * np.array(config.encoder_noise)
+    )
+    camera_poses = np.ascontiguousarray(np.asarray(robot.camera_pose(joints_true), dtype=np.float64))
+    timings["plan_s"] = time.perf_counter() - t_start
+
+    images, rims = _images_and_rims(config, poses, camera_poses, timestamps, rngs, render, progress, timings)
+    timings["total_s"] = time.perf_counter() - t_start
+
+    calibration = Calibration(
+        base_pose=config.base_pose_matrix,
+        joint_offsets=offsets,
+        camera_mount=np.asarray(robot.camera_mount(), dtype=np.float64),
+        robot_params=config.robot,
+        camera=camera,
+    )
+    return Session(
+        timestamps=timestamps,
+        joints_encoder=joints_encoder,
+        images=images,
+        camera=camera,
+        joint_names=JOINT_NAMES,
+        frame_rate_hz=config.frame_rate_hz,
+        seed=seed,
+        config=config,
+        joints_true=joints_true,
+        camera_poses=camera_poses,
+        wafer_poses=poses,
+        wafer_slots=np.array(config.slots, dtype=np.int64),
+        calibration=calibration,
+        rims=rims,
+        timings=timings,
+    )
+
+
+def _check_config(config: SimConfig | None) -> SimConfig:
+    """The configuration (default :class:`SimConfig`), checked against the rendered carrier."""
+    if config is None:
+        return SimConfig()
+    if not isinstance(config, SimConfig):
+        raise InvalidInputError(f"config must be a SimConfig, got {type(config).__name__}")
+    if config.carrier and (config.n_slots, config.slot_pitch) != (RENDERED_CARRIER_SLOTS, RENDERED_CARRIER_PITCH):
+        raise InvalidInputError(
+            f"the rendered carrier has {RENDERED_CARRIER_SLOTS} slots at {RENDERED_CARRIER_PITCH * 1e3:g} mm pitch, "
+            f"but the config asks for {config.n_slots} slots at {config.slot_pitch * 1e3:g} mm; set carrier=False "
+            "to simulate other layouts without the carrier"
+        )
+    return config
+
+
+def _joint_trajectory(
+    config: SimConfig, robot: WaferRobot, rng: np.random.Generator, frames: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """True joints and timestamps per frame: camera waypoints → IK → clamped cubic B-spline (ch. 2.4)."""
     traj = config.trajectory
     if traj.waypoints:
         waypoints = np.array(traj.waypoints, dtype=np.float64)
@@ -208,7 +251,7 @@ def simulate_session(
         heights = [config.slot_height(s) for s in config.slots]
         z_range = traj.z_range if traj.z_range is not None else (min(heights) + 0.03, max(heights) + 0.05)
         waypoints = sweep_waypoints(
-            rngs["trajectory"], traj.n_waypoints, traj.x_range, traj.y_range, z_range, traj.yaw_max, traj.sweeps
+            rng, traj.n_waypoints, traj.x_range, traj.y_range, z_range, traj.yaw_max, traj.sweeps
         )
     q_way = plan_joint_waypoints(robot, waypoints, traj.elbow)
     spline = BSpline(q_way, 0.0, 1.0, degree=3)
@@ -218,15 +261,25 @@ def simulate_session(
     timestamps = config.start_time_ns + np.round(np.arange(frames) * period_ns).astype(np.int64)
     if frames > 1 and np.any(np.diff(timestamps) <= 0):
         raise InvalidInputError(f"frame_rate_hz={config.frame_rate_hz} is too high for nanosecond timestamps")
-    joints_encoder = (
-        joints_true + offsets + rngs["encoder"].normal(0.0, 1.0, (frames, 5)) * np.array(config.encoder_noise)
-    )
-    camera_poses = np.ascontiguousarray(np.asarray(robot.camera_pose(joints_true), dtype=np.float64))
+    return joints_true, timestamps
+
+
+def _images_and_rims(
+    config: SimConfig,
+    poses: np.ndarray,
+    camera_poses: np.ndarray,
+    timestamps: np.ndarray,
+    rngs: dict[str, np.random.Generator],
+    render: bool,
+    progress: bool,
+    timings: dict[str, float],
+) -> tuple[np.ndarray, list[list[dict[str, Any]]]]:
+    """The rendered image (zeros without ``render``) and the visible rims of every frame."""
+    from tqdm import tqdm
+
+    frames = len(timestamps)
     gains, gradients = config.lighting.schedule((timestamps - timestamps[0]) * 1e-9, rngs["lighting"])
     render_seeds = rngs["render"].integers(0, 2**63 - 1, frames, dtype=np.int64)
-    timings["plan_s"] = time.perf_counter() - t_start
-
-    # Images and visible rims.
     images = (np.empty if render else np.zeros)((frames, config.height, config.width), dtype=np.uint8)
     rims: list[list[dict[str, Any]]] = []
     params = np.asarray(config.camera_params, dtype=np.float64)
@@ -266,32 +319,7 @@ def simulate_session(
         t_vis += time.perf_counter() - t1
     timings["render_s"] = t_render
     timings["rim_visibility_s"] = t_vis
-    timings["total_s"] = time.perf_counter() - t_start
-
-    calibration = Calibration(
-        base_pose=config.base_pose_matrix,
-        joint_offsets=offsets,
-        camera_mount=np.asarray(robot.camera_mount(), dtype=np.float64),
-        robot_params=config.robot,
-        camera=camera,
-    )
-    return Session(
-        timestamps=timestamps,
-        joints_encoder=joints_encoder,
-        images=images,
-        camera=camera,
-        joint_names=JOINT_NAMES,
-        frame_rate_hz=config.frame_rate_hz,
-        seed=seed,
-        config=config,
-        joints_true=joints_true,
-        camera_poses=camera_poses,
-        wafer_poses=poses,
-        wafer_slots=slots,
-        calibration=calibration,
-        rims=rims,
-        timings=timings,
-    )
+    return images, rims
 
 
 def _normalise_rim(r: dict[str, Any], slots: np.ndarray) -> dict[str, Any]:
