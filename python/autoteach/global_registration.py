@@ -31,8 +31,9 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -40,9 +41,15 @@ from numpy.typing import ArrayLike, NDArray
 from autoteach import _core
 from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
-from autoteach.polygon import RigidHypothesis
+from autoteach.polygon import RigidHypothesis, VotingOptions
 
-__all__ = ["GlobalRegistration", "RegistrationCandidate", "global_register"]
+__all__ = [
+    "REGISTER_VOTING",
+    "GlobalRegisterOptions",
+    "GlobalRegistration",
+    "RegistrationCandidate",
+    "global_register",
+]
 
 CriterionName = Literal["explained", "likelihood", "energy"]
 
@@ -122,35 +129,11 @@ class GlobalRegistration:
         raise InvalidInputError(f"criterion must be 'explained', 'likelihood' or 'energy', got {criterion!r}")
 
 
-def global_register(
-    X: ArrayLike,
-    Y: ArrayLike,
-    k: int = 8,
-    criterion: CriterionName = "explained",
-    count: Literal["y", "pairs"] = "y",
-    w: float = 0.5,
-    max_iterations: int = 10,
-    max_refine_points: int = 100,
-    window: float = 0.25,
-    energy_all: bool = False,
-    nonrigid: bool = False,
-    beta: float = 2.0,
-    lam: float = 2.0,
-    symmetry_fraction: float = 0.9,
-    neighbours: int = 10,
-    angle_bin: float = 0.2,
-    translation_bin: float | None = None,
-    min_votes: int = 3,
-    max_points: int = 200,
-) -> GlobalRegistration:
-    """Register a template ``Y`` into a cluttered scene ``X`` (module docs).
+@dataclass(frozen=True, slots=True)
+class GlobalRegisterOptions:
+    """Options of the refinement and the choice of :func:`global_register` (module docs).
 
-    Args:
-        X: Scene points ``(N, D)``, ``D ∈ {2, 3}``.
-        Y: Template points ``(M, D)``.
-        k: Voting hypotheses refined (after suppression).
-        criterion: ``"explained"`` (default), ``"likelihood"`` or ``"energy"``.
-        count: ``"y"`` (Y-count, seed Fig. 3.13b) or ``"pairs"`` voting.
+    Attributes:
         w: Outlier weight of the CPD runs and of the likelihood, in (0, 1).
         max_iterations: Iterations per rigid CPD refinement.
         max_refine_points: Template points refined and scored per hypothesis.
@@ -160,11 +143,45 @@ def global_register(
         beta: Kernel width β of the non-rigid CPD.
         lam: Regularisation λ of the non-rigid CPD.
         symmetry_fraction: A self-map putting this fraction of the template on itself is a symmetry.
-        neighbours: Neighbours per local reference frame.
-        angle_bin: Voting bin of the rotation angle(s), radians.
-        translation_bin: Voting bin of the translation (``None``: ``angle_bin ×`` RMS radius of ``Y``).
-        min_votes: Clusters with fewer votes are discarded.
-        max_points: Points per set taking part in the vote.
+    """
+
+    w: float = 0.5
+    max_iterations: int = 10
+    max_refine_points: int = 100
+    window: float = 0.25
+    energy_all: bool = False
+    nonrigid: bool = False
+    beta: float = 2.0
+    lam: float = 2.0
+    symmetry_fraction: float = 0.9
+
+
+#: The voting defaults of :func:`global_register`: 200 points per set vote (the refinement, not
+#: the vote, decides among the hypotheses).
+REGISTER_VOTING = VotingOptions(max_points=200)
+
+
+def global_register(
+    X: ArrayLike,
+    Y: ArrayLike,
+    k: int = 8,
+    criterion: CriterionName = "explained",
+    options: GlobalRegisterOptions | None = None,
+    voting: VotingOptions | None = None,
+    **overrides: Any,
+) -> GlobalRegistration:
+    """Register a template ``Y`` into a cluttered scene ``X`` (module docs).
+
+    Args:
+        X: Scene points ``(N, D)``, ``D ∈ {2, 3}``.
+        Y: Template points ``(M, D)``.
+        k: Voting hypotheses refined (after suppression).
+        criterion: ``"explained"`` (default), ``"likelihood"`` or ``"energy"``.
+        options: Refinement and choice (default :class:`GlobalRegisterOptions`).
+        voting: The global vote (default :data:`REGISTER_VOTING`; ``neighbours``, ``angle_bin``,
+            ``translation_bin``, ``count``, ``min_votes`` and ``max_points`` apply).
+        **overrides: Fields of either that replace them by name, e.g. ``beta=0.5`` or
+            ``count="pairs"``.
 
     Returns:
         The registration.
@@ -176,33 +193,34 @@ def global_register(
     """
     if criterion not in ("explained", "likelihood", "energy"):
         raise InvalidInputError(f"criterion must be 'explained', 'likelihood' or 'energy', got {criterion!r}")
-    if count not in ("y", "pairs"):
-        raise InvalidInputError(f"count must be 'y' or 'pairs', got {count!r}")
+    o, v = _split_overrides(options or GlobalRegisterOptions(), voting or REGISTER_VOTING, overrides)
+    if v.count not in ("y", "pairs"):
+        raise InvalidInputError(f"count must be 'y' or 'pairs', got {v.count!r}")
     kk = as_int(k, "k")
     if kk < 1:
         raise InvalidInputError(f"k must be ≥ 1, got {kk}")
     y = as_f64(Y, "Y")
-    tb = None if translation_bin is None else as_float(translation_bin, "translation_bin")
+    tb = None if v.translation_bin is None else as_float(v.translation_bin, "translation_bin")
     r = _core.global_register(
         as_f64(X, "X"),
         y,
         kk,
         criterion,
-        count,
-        as_float(w, "w"),
-        as_int(max_iterations, "max_iterations"),
-        as_int(max_refine_points, "max_refine_points"),
-        as_float(window, "window"),
-        bool(energy_all),
-        bool(nonrigid),
-        as_float(beta, "beta"),
-        as_float(lam, "lam"),
-        as_float(symmetry_fraction, "symmetry_fraction"),
-        as_int(neighbours, "neighbours"),
-        as_float(angle_bin, "angle_bin"),
+        v.count,
+        as_float(o.w, "w"),
+        as_int(o.max_iterations, "max_iterations"),
+        as_int(o.max_refine_points, "max_refine_points"),
+        as_float(o.window, "window"),
+        bool(o.energy_all),
+        bool(o.nonrigid),
+        as_float(o.beta, "beta"),
+        as_float(o.lam, "lam"),
+        as_float(o.symmetry_fraction, "symmetry_fraction"),
+        as_int(v.neighbours, "neighbours"),
+        as_float(v.angle_bin, "angle_bin"),
         tb,
-        as_int(min_votes, "min_votes"),
-        as_int(max_points, "max_points"),
+        as_int(v.min_votes, "min_votes"),
+        as_int(v.max_points, "max_points"),
     )
     cands = []
     for rot, tr, s2, expl, ll, en, eq, r0, t0, votes, pv in r.candidates:
@@ -224,3 +242,19 @@ def global_register(
         transformed,
         energy,
     )
+
+
+def _split_overrides(
+    options: GlobalRegisterOptions, voting: VotingOptions, overrides: dict[str, Any]
+) -> tuple[GlobalRegisterOptions, VotingOptions]:
+    """``options`` and ``voting`` with each override applied to the one that has its name."""
+    own = {f.name for f in dataclasses.fields(GlobalRegisterOptions)}
+    votes = {f.name for f in dataclasses.fields(VotingOptions)}
+    unknown = sorted(set(overrides) - own - votes)
+    if unknown:
+        raise InvalidInputError(f"unknown option(s) {unknown}; the options are {sorted(own | votes)}")
+    fixed = [n for n in ("descriptor_tolerance", "shifted_grid", "max_pairs") if n in overrides]
+    if fixed:
+        raise InvalidInputError(f"global_register votes with the default {fixed}; they cannot be set here")
+    options = dataclasses.replace(options, **{n: x for n, x in overrides.items() if n in own})
+    return options, voting.replace(**{n: x for n, x in overrides.items() if n in votes})

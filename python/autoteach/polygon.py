@@ -30,6 +30,7 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -47,6 +48,7 @@ __all__ = [
     "PolygonPose",
     "RigidHypothesis",
     "VoteMap",
+    "VotingOptions",
     "detect_polygon",
     "detect_segments",
     "global_voting",
@@ -96,6 +98,57 @@ class RigidHypothesis:
         return p @ self.rotation.T + self.translation
 
 
+@dataclass(frozen=True, slots=True)
+class VotingOptions:
+    """Options of global voting (seed 000_3b1454b2b2194811.txt eq. (3.20)–(3.22), Algorithm 3).
+
+    Attributes:
+        neighbours: Neighbours per local reference frame.
+        angle_bin: Voting bin width of the rotation angle(s), radians.
+        translation_bin: Voting bin width of the translation; ``None`` for ``angle_bin ×`` the RMS
+            radius of the model.
+        count: ``"y"`` ranks clusters by distinct model points (the seed's Y-count, Fig. 3.13b),
+            ``"pairs"`` by pairs (classic voting).
+        min_votes: Clusters with fewer votes are discarded.
+        max_points: At most this many points per set take part in the vote.
+        descriptor_tolerance: Largest descriptor difference of a matched pair (``None``: derived
+            from the bins).
+        shifted_grid: Also vote on the grid shifted by half a bin (clusters on a bin edge).
+        max_pairs: Bound on the matched pairs (an error beyond it, not a silent cut).
+    """
+
+    neighbours: int = 10
+    angle_bin: float = 0.2
+    translation_bin: float | None = None
+    count: Literal["y", "pairs"] = "y"
+    min_votes: int = 3
+    max_points: int = 1000
+    descriptor_tolerance: float | None = None
+    shifted_grid: bool = True
+    max_pairs: int = 8_000_000
+
+    def replace(self, **changes: Any) -> VotingOptions:
+        """A copy with ``changes``; an unknown option name is an error that lists the known ones."""
+        names = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise InvalidInputError(f"unknown voting option(s) {unknown}; the options are {sorted(names)}")
+        return dataclasses.replace(self, **changes)
+
+    def core_options(self, top_k: int | None = None) -> dict[str, Any]:
+        """The options dict of the compiled voting calls (counts checked by name)."""
+        kw = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        if top_k is not None:
+            kw["top_k"] = top_k
+        return _voting_options(**kw)
+
+
+def voting_options(options: VotingOptions | None, overrides: dict[str, Any], **defaults: Any) -> VotingOptions:
+    """``options`` (default: :class:`VotingOptions` with ``defaults``) with ``overrides`` applied."""
+    base = options if options is not None else VotingOptions().replace(**defaults)
+    return base.replace(**overrides) if overrides else base
+
+
 def _voting_options(**kw: Any) -> dict[str, Any]:
     count = kw.get("count", "y")
     if count not in ("y", "pairs"):
@@ -114,66 +167,26 @@ def _hypotheses(arrays: tuple[Any, Any, Any, Any]) -> list[RigidHypothesis]:
 
 
 def global_voting(
-    X: ArrayLike,
-    Y: ArrayLike,
-    k: int = 3,
-    *,
-    neighbours: int = 10,
-    angle_bin: float = 0.2,
-    translation_bin: float | None = None,
-    count: Literal["y", "pairs"] = "y",
-    min_votes: int = 3,
-    max_points: int = 1000,
-    descriptor_tolerance: float | None = None,
-    shifted_grid: bool = True,
-    max_pairs: int = 8_000_000,
+    X: ArrayLike, Y: ArrayLike, k: int = 3, options: VotingOptions | None = None, **overrides: Any
 ) -> list[RigidHypothesis]:
     """Top-``k`` rigid transforms mapping ``Y`` onto ``X`` by global voting (Algorithm 3).
 
-    ``X`` (N, D) and ``Y`` (M, D), D ∈ {2, 3}. Local frames come from the ``neighbours`` nearest
-    points; ``angle_bin`` (rad) and ``translation_bin`` (default ``angle_bin`` × RMS radius of Y)
-    are the cell sizes; ``count="y"`` ranks clusters by distinct Y points, ``"pairs"`` by pairs.
-    Returns hypotheses best first (possibly fewer than ``k``, or none).
+    ``X`` (N, D) and ``Y`` (M, D), D ∈ {2, 3}. ``options`` (:class:`VotingOptions`; keyword
+    ``overrides`` replace its fields by name, e.g. ``count="pairs"``) set the local frames and
+    the vote bins. Returns hypotheses best first (possibly fewer than ``k``, or none).
     """
-    opts = _voting_options(
-        neighbours=neighbours,
-        angle_bin=angle_bin,
-        translation_bin=translation_bin,
-        top_k=k,
-        count=count,
-        min_votes=min_votes,
-        max_points=max_points,
-        descriptor_tolerance=descriptor_tolerance,
-        shifted_grid=shifted_grid,
-        max_pairs=max_pairs,
-    )
+    opts = voting_options(options, overrides).core_options(top_k=k)
     return _hypotheses(_core.polygon_global_voting(as_f64(X, "X"), as_f64(Y, "Y"), opts))
 
 
 def vote_cells(
-    X: ArrayLike,
-    Y: ArrayLike,
-    *,
-    neighbours: int = 10,
-    angle_bin: float = 0.2,
-    translation_bin: float | None = None,
-    count: Literal["y", "pairs"] = "y",
-    min_votes: int = 3,
-    max_points: int = 1000,
-    descriptor_tolerance: float | None = None,
-    max_pairs: int = 8_000_000,
+    X: ArrayLike, Y: ArrayLike, options: VotingOptions | None = None, **overrides: Any
 ) -> list[RigidHypothesis]:
-    """Every populated cell of the vote grid (the vote map of Fig. 3.13), sorted by ``count``."""
-    opts = _voting_options(
-        neighbours=neighbours,
-        angle_bin=angle_bin,
-        translation_bin=translation_bin,
-        count=count,
-        min_votes=min_votes,
-        max_points=max_points,
-        descriptor_tolerance=descriptor_tolerance,
-        max_pairs=max_pairs,
-    )
+    """Every populated cell of the vote grid (the vote map of Fig. 3.13), sorted by ``count``.
+
+    The grid is the unshifted one whatever ``shifted_grid`` says: a vote map has one grid.
+    """
+    opts = voting_options(options, overrides).core_options()
     return _hypotheses(_core.polygon_vote_cells(as_f64(X, "X"), as_f64(Y, "Y"), opts))
 
 

@@ -38,7 +38,7 @@ Example:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -46,7 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from autoteach import _core
 from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
-from autoteach.polygon import RigidHypothesis
+from autoteach.polygon import RigidHypothesis, VotingOptions, voting_options
 
 __all__ = [
     "AffineCpdResult",
@@ -327,6 +327,14 @@ class GlobalCpdHypothesis:
     cpd: NonrigidCpdResult
 
 
+#: The voting options global-CPD does not expose, at the values it uses.
+_VOTING_DEFAULT_OF = {
+    "descriptor_tolerance": VotingOptions().descriptor_tolerance,
+    "shifted_grid": VotingOptions().shifted_grid,
+    "max_pairs": VotingOptions().max_pairs,
+}
+
+
 def global_cpd(
     X: ArrayLike,
     Y: ArrayLike,
@@ -338,12 +346,8 @@ def global_cpd(
     max_iterations: int = 100,
     tolerance: float = 1e-3,
     sigma2: float | None = None,
-    neighbours: int = 10,
-    angle_bin: float = 0.2,
-    translation_bin: float | None = None,
-    count: Literal["y", "pairs"] = "y",
-    min_votes: int = 3,
-    max_points: int = 1000,
+    voting: VotingOptions | None = None,
+    **voting_overrides: Any,
 ) -> list[GlobalCpdHypothesis]:
     """Register a model ``Y`` into a cluttered scene ``X`` by global-CPD (seed Fig. 3.14).
 
@@ -364,14 +368,11 @@ def global_cpd(
         max_iterations: Maximum CPD iterations per hypothesis.
         tolerance: CPD tolerance on σ².
         sigma2: Initial σ² of every CPD run (see above for the default).
-        neighbours: Neighbours per local reference frame.
-        angle_bin: Voting bin width of the rotation angle(s), radians.
-        translation_bin: Voting bin width of the translation; ``None`` for
-            ``angle_bin ×`` the RMS radius of ``Y``.
-        count: ``"y"`` counts distinct model points per cluster (the seed's Y-count),
-            ``"pairs"`` counts pairs (classic voting).
-        min_votes: Clusters with fewer votes are discarded.
-        max_points: At most this many points per set take part in the vote.
+        voting: Options of the global vote (default :class:`~autoteach.polygon.VotingOptions`;
+            ``neighbours``, ``angle_bin``, ``translation_bin``, ``count``, ``min_votes``,
+            ``max_points`` are passed to global-CPD).
+        **voting_overrides: Voting options that replace those of ``voting`` by name, e.g.
+            ``count="pairs"``.
 
     Returns:
         Up to ``k`` hypotheses, least deformation energy first (empty when no cluster has
@@ -382,14 +383,20 @@ def global_cpd(
         DegenerateGeometryError: Degenerate point sets (all identical).
 
     """
-    if count not in ("y", "pairs"):
-        raise InvalidInputError(f"count must be 'y' or 'pairs', got {count!r}")
+    vote = voting_options(voting, voting_overrides)
+    unused = [
+        n for n in ("descriptor_tolerance", "shifted_grid", "max_pairs") if getattr(vote, n) != _VOTING_DEFAULT_OF[n]
+    ]
+    if unused:
+        raise InvalidInputError(f"global_cpd votes with the default {unused}; they cannot be set here")
+    if vote.count not in ("y", "pairs"):
+        raise InvalidInputError(f"count must be 'y' or 'pairs', got {vote.count!r}")
     w, max_iterations, tolerance, s2, _ = _common(w, max_iterations, tolerance, sigma2, "auto")
     kk = as_int(k, "k")
     if kk < 1:
         raise InvalidInputError(f"k must be ≥ 1, got {kk}")
     lr = None if low_rank is None else as_int(low_rank, "low_rank")
-    tb = None if translation_bin is None else as_float(translation_bin, "translation_bin")
+    tb = None if vote.translation_bin is None else as_float(vote.translation_bin, "translation_bin")
     hyps = _core.global_cpd(
         as_f64(X, "X"),
         as_f64(Y, "Y"),
@@ -401,12 +408,12 @@ def global_cpd(
         max_iterations,
         tolerance,
         s2,
-        as_int(neighbours, "neighbours"),
-        as_float(angle_bin, "angle_bin"),
+        as_int(vote.neighbours, "neighbours"),
+        as_float(vote.angle_bin, "angle_bin"),
         tb,
-        count,
-        as_int(min_votes, "min_votes"),
-        as_int(max_points, "max_points"),
+        vote.count,
+        as_int(vote.min_votes, "min_votes"),
+        as_int(vote.max_points, "max_points"),
     )
     out = []
     for h in hyps:
