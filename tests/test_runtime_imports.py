@@ -30,6 +30,9 @@ OPTIONAL = (
     "probreg",
     "open3d",
     "pytest",
+    "ray",
+    "rerun",
+    "jsonschema",
 )
 
 _BLOCKER = textwrap.dedent(

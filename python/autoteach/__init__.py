@@ -134,6 +134,10 @@ __all__ = [
     "uncertainty",
 ]
 
+# Fleets and viewers (issue 41): batch/Ray processing.
+SUBMODULES += ("fleet",)
+__all__ += ["fleet"]
+
 
 def __getattr__(name: str) -> Any:
     """Import a public submodule, or a name re-exported from one, on first access (PEP 562)."""

@@ -10,7 +10,12 @@ from pathlib import Path
 def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:  # type: ignore[type-arg]
     """Add the ``run`` sub-command."""
     p = sub.add_parser("run", parents=[common], help="auto-teach from an MCAP session log and write a report")
-    p.add_argument("log", type=Path, help="the MCAP file")
+    p.add_argument(
+        "log",
+        type=Path,
+        nargs="+",
+        help="the MCAP file; several files or folders of *.mcap logs: auto-teach a fleet (see --workers)",
+    )
     p.add_argument(
         "--out",
         type=Path,
@@ -47,16 +52,23 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
         help="detect front end: give every edge point the same standard deviation instead of one from the "
         "predicted band width at the point",
     )
+    from autoteach.commands.fleet_run import add_fleet_arguments
+
+    add_fleet_arguments(p)
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
     from autoteach.cli import _progress_enabled
+    from autoteach.commands.fleet_run import is_batch, run_fleet
     from autoteach.errors import InvalidInputError
     from autoteach.io import read_log, write_results
     from autoteach.pipeline import autoteach
     from autoteach.report import format_table, write_report
 
+    if is_batch(args):
+        return run_fleet(args)
+    args.log = args.log[0]
     if args.window < 0:
         raise InvalidInputError(f"--window must be >= 0, got {args.window}")
     if not args.min_band_px >= 0.0 or args.min_band_px == float("inf"):
