@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from autoteach.cli import main
-from autoteach.errors import InvalidInputError
+from autoteach.errors import InvalidInputError, MissingExtraError
 from autoteach.fleet import RESULT_SUFFIX, RunOptions, calibration_moves, process_log, run_batch
 from autoteach.io import read_log, read_results, write_log
 from autoteach.pipeline import JOINTS, autoteach
@@ -142,3 +142,31 @@ def test_cli_batch_and_bad_inputs(fleet, tmp_path, capsys):
         run_batch([logs[0], folder / ".." / folder.name / "robot3.mcap"])
     with pytest.raises(InvalidInputError, match="window"):
         RunOptions(window=-1)
+
+
+def test_ray_engine_gives_the_single_log_results(fleet, tmp_path):
+    ray = pytest.importorskip("ray")
+    _, logs, single, _ = fleet
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        report = run_batch(logs, options=OPTIONS, engine="ray", out=tmp_path)
+    finally:
+        ray.shutdown()
+    assert [o.robot for o in report.failed] == ["robot5"] and "truncated" in report.failed[0].reason
+    for o in report.outcomes:
+        if o.ok:
+            _assert_same(o, single[o.robot + ".mcap"])
+            assert read_results(o.result_file)["calibration"]["base_pose"].shape == (4, 4)
+
+
+def test_ray_engine_without_ray_names_the_extra(fleet, monkeypatch, capsys):
+    import sys
+
+    _, logs, _, _ = fleet
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` now raises ImportError
+    with pytest.raises(MissingExtraError, match=r"autoteach\[ray\]"):
+        run_batch(logs[:1], engine="ray")
+    assert main(["run", str(logs[0]), "--engine", "ray", "--quiet"]) == 2
+    assert "pip install 'autoteach[ray]'" in capsys.readouterr().err
+    with pytest.raises(InvalidInputError, match="engine='ray'"):
+        run_batch(logs[:1], address="ray://x:10001")

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from autoteach.errors import InvalidInputError
+from autoteach.errors import InvalidInputError, MissingExtraError
 
 #: Names of the base-pose tangent components ``[ω; ρ]`` compared by the drift test.
 BASE_TANGENT = ("base_wx", "base_wy", "base_wz", "base_x", "base_y", "base_z")
@@ -361,7 +361,7 @@ def run_batch(
     Raises:
         InvalidInputError: no log, a missing path, ``workers < 1``, an unknown engine, or
             ``address`` with the process engine.
-        ImportError: ``engine="ray"`` without Ray installed (the message names the extra).
+        MissingExtraError: ``engine="ray"`` without Ray installed (the message names the extra).
 
     """
     options = options or RunOptions()
@@ -414,7 +414,7 @@ def _import_ray() -> Any:
     try:
         import ray
     except ImportError as exc:
-        raise ImportError(_RAY_HINT) from exc
+        raise MissingExtraError(_RAY_HINT) from exc
     return ray
 
 
