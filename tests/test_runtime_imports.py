@@ -21,7 +21,6 @@ OPTIONAL = (
     "filterpy",
     "pycpd",
     "motmetrics",
-    "mcap_ros2",
     "sklearn",
     "skimage",
     "shapely",

@@ -135,8 +135,8 @@ __all__ = [
 ]
 
 # Fleets and viewers (issue 41): batch/Ray processing.
-SUBMODULES += ("fleet",)
-__all__ += ["fleet"]
+SUBMODULES += ("fleet", "ros2_messages")
+__all__ += ["fleet", "ros2_messages"]
 
 
 def __getattr__(name: str) -> Any:
