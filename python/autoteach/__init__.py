@@ -134,9 +134,9 @@ __all__ = [
     "uncertainty",
 ]
 
-# Fleets and viewers (issue 41): batch/Ray processing.
-SUBMODULES += ("fleet", "ros2_messages")
-__all__ += ["fleet", "ros2_messages"]
+# Fleets and viewers (issue 41): batch/Ray processing, ROS 2 messages, Rerun recordings.
+SUBMODULES += ("fleet", "ros2_messages", "viewer")
+__all__ += ["fleet", "ros2_messages", "viewer"]
 
 
 def __getattr__(name: str) -> Any:

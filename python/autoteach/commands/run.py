@@ -55,6 +55,9 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     from autoteach.commands.fleet_run import add_fleet_arguments
 
     add_fleet_arguments(p)
+    from autoteach.commands.viewer_flag import add_rerun_argument
+
+    add_rerun_argument(p, "LOG without suffix + '.rrd'")
     p.set_defaults(func=_run)
 
 
@@ -73,6 +76,9 @@ def _run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"--window must be >= 0, got {args.window}")
     if not args.min_band_px >= 0.0 or args.min_band_px == float("inf"):
         raise InvalidInputError(f"--min-band-px must be finite and >= 0, got {args.min_band_px}")
+    from autoteach.commands.viewer_flag import rerun_target, write_rerun
+
+    rrd = rerun_target(args, args.log.with_suffix(".rrd"))
     session = read_log(args.log)
     result = autoteach(
         session,
@@ -92,15 +98,19 @@ def _run(args: argparse.Namespace) -> int:
         written.append(str(write_results(result, args.log, out_log)))
     if args.write_back:
         written.append(str(write_results(result, args.log)))
+    recording = write_rerun(rrd, result, session)
     if args.json:
         d = result.to_dict()
         d["report"] = str(out)
         d["report_files"] = files
         d["result_logs"] = written
+        d["rerun"] = recording
         print(json.dumps(d))
     else:
         print(format_table(result))
         for w in written:
             print(f"results written to {w} (channels /autoteach/*)")
         print(f"report: {out}")
+        if recording is not None:
+            print(f"Rerun recording: {recording} (open with: rerun {recording})")
     return 0
