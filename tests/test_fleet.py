@@ -47,9 +47,9 @@ def _assert_same(outcome, result):
     assert outcome.ok, outcome.reason
     assert np.array_equal(outcome.joint_offsets, result.joint_offsets, equal_nan=True)
     assert np.array_equal(outcome.joint_offsets_std, result.joint_offsets_std, equal_nan=True)
-    assert np.array_equal(outcome.base_pose, result.base_pose)
+    assert np.array_equal(outcome.base_pose, result.base_pose, equal_nan=True)
     assert np.array_equal(outcome.base_std, result.base_std, equal_nan=True)
-    assert np.array_equal(outcome.wafer_poses, result.wafer_poses)
+    assert np.array_equal(outcome.wafer_poses, result.wafer_poses, equal_nan=True)
 
 
 def test_two_workers_give_the_single_log_results_and_report_the_truncated_log(fleet, tmp_path):
