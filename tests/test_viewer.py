@@ -102,3 +102,18 @@ def test_bad_targets_and_missing_extra(run, tmp_path, monkeypatch, capsys):
     log = write_log(session, tmp_path / "s.mcap")
     assert main(["run", str(log), "--rerun", str(tmp_path / "y.rrd"), "-q"]) == 2
     assert "pip install 'autoteach[viewer]'" in capsys.readouterr().err
+
+
+def test_segment_rerun_holds_the_segmented_points(tmp_path, capsys):
+    from autoteach.segment import read_ply
+
+    out = tmp_path / "seg.ply"
+    assert main(["segment", "--simulate", "--out", str(out), "--rerun", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["rerun"] == str(tmp_path / "seg.rrd")
+    cloud = read_ply(out)
+    pos = np.array(_rows(d["rerun"], "/world/segments", "Points3D:positions")[0][1])
+    ids = np.array(_rows(d["rerun"], "/world/segments", "Points3D:class_ids")[0][1])
+    assert np.allclose(pos, cloud.points, atol=1e-5)
+    assert np.array_equal(ids, cloud.labels)
+    assert "/world/cloud" in recorded_entities(d["rerun"])

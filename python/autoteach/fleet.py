@@ -11,8 +11,9 @@ Engines:
 
 - ``"process"`` (default): a local :class:`concurrent.futures.ProcessPoolExecutor` (``spawn``
   start method, so no forked Rust thread pool), ``workers`` processes; ``workers=1`` runs in
-  this process. Each worker's Rust thread pool gets ``cpu_count // workers`` threads unless
-  ``RAYON_NUM_THREADS`` is set.
+  this process. Each worker's Rust (rayon) and BLAS/OpenMP thread pools get ``cpu_count // workers``
+  threads unless ``RAYON_NUM_THREADS`` / ``OPENBLAS_NUM_THREADS`` / ``OMP_NUM_THREADS`` /
+  ``MKL_NUM_THREADS`` are set.
 - ``"ray"``: one Ray task per log on the cluster at ``address`` (or the one this process already
   joined with ``ray.init``); needs the ``ray`` extra (``pip install 'autoteach[ray]'``).
 
@@ -289,8 +290,8 @@ def process_log(log: str, options: RunOptions, result_file: str | None = None) -
     )
 
 
-def _init_worker(threads: int) -> None:
-    os.environ.setdefault("RAYON_NUM_THREADS", str(threads))
+#: Thread-pool sizes a worker inherits: the Rust core's (rayon) and the BLAS/OpenMP ones NumPy may load.
+_THREAD_VARIABLES = ("RAYON_NUM_THREADS", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def _previous(path: Path) -> dict[str, Any] | None:
@@ -403,11 +404,21 @@ def _run_processes(paths: list[Path], options: RunOptions, targets: list[str | N
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    threads = max(1, (os.cpu_count() or 1) // workers)
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(threads,)) as ex:
-        futures = [ex.submit(process_log, str(p), options, t) for p, t in zip(paths, targets, strict=True)]
-        return [f.result() for f in futures]
+    # A spawned worker reads its thread-pool sizes from the environment when it imports NumPy and
+    # the core, before any initializer could run: give each worker its share of the cores through
+    # the environment it inherits (variables the user set are kept), so that N workers do not start
+    # N × cores compute threads; restore ours afterwards.
+    threads = str(max(1, (os.cpu_count() or 1) // workers))
+    added = [v for v in _THREAD_VARIABLES if v not in os.environ]
+    os.environ.update(dict.fromkeys(added, threads))
+    try:
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
+            futures = [ex.submit(process_log, str(p), options, t) for p, t in zip(paths, targets, strict=True)]
+            return [f.result() for f in futures]
+    finally:
+        for v in added:
+            os.environ.pop(v, None)
 
 
 def _import_ray() -> Any:

@@ -210,3 +210,48 @@ def recorded_entities(path: str | os.PathLike[str]) -> dict[str, list[str]]:
             out.setdefault(col.entity_path, []).append(str(col.component))
     del rr
     return {k: sorted(v) for k, v in sorted(out.items())}
+
+
+def log_segments(
+    points: np.ndarray,
+    labels: np.ndarray,
+    path: str | os.PathLike[str],
+    *,
+    colors: np.ndarray | None = None,
+    recording_id: str | None = None,
+) -> Path:
+    """Write the Rerun recording of a segmented point cloud (``autoteach segment --rerun``).
+
+    ``segments``: the points coloured per segment with the label as class id (unsegmented points,
+    label < 0, grey); ``cloud``: the points in their measured colours, when given. Points with a
+    NaN coordinate (missing returns of an organised scan) are left out, as :func:`~autoteach.segment.write_ply`
+    leaves them out.
+
+    Raises:
+        MissingExtraError: ``rerun-sdk`` is not installed.
+        InvalidInputError: a bad ``.rrd`` path or arrays whose lengths differ.
+
+    """
+    rr = require_rerun()
+    target = _check_target(Path(path))
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)  # organised scans (lines, beams, 3) too
+    lab = np.asarray(labels).reshape(-1)
+    cols = None if colors is None else np.asarray(colors).reshape(-1, 3)
+    if len(lab) != len(pts) or (cols is not None and len(cols) != len(pts)):
+        raise InvalidInputError(
+            f"points ({len(pts)}), labels ({len(lab)}) and colors ({'-' if cols is None else len(cols)}) differ"
+        )
+    from autoteach.ros2_messages import wafer_color
+
+    keep = np.isfinite(pts).all(axis=1)  # missing points of an organised scan are NaN (dropped, as in PLY)
+    pts, lab, cols = pts[keep], lab[keep], None if cols is None else cols[keep]
+    seg_colors = np.array([wafer_color(int(v)) if v >= 0 else (0.5, 0.5, 0.5) for v in lab], dtype=np.float32)
+    rec = rr.RecordingStream("autoteach", recording_id=recording_id or target.stem)
+    rec.save(str(target))
+    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    rec.log("world/segments", rr.Points3D(pts, colors=seg_colors, class_ids=lab.astype(np.int64)), static=True)
+    if cols is not None:
+        rec.log("world/cloud", rr.Points3D(pts, colors=cols), static=True)
+    rec.flush()
+    rec.disconnect()
+    return target
