@@ -120,6 +120,9 @@ def test_cli_batch_and_bad_inputs(fleet, tmp_path, capsys):
     assert [r["ok"] for r in d["robots"]] == [True, False]
     j2 = d["robots"][0]["joint_offsets"]["joint2"]["value"]
     assert j2 == single["robot3.mcap"].joint_offsets[1]
+    assert main(["run", str(logs[2]), "--workers", "1", "--json"]) == 2  # every log failed: a one-line error
+    assert capsys.readouterr().err.startswith("autoteach: error: none of the 1 logs could be auto-taught; robot5")
+    assert (folder / "autoteach-fleet" / "fleet.json").is_file()  # the default --out: beside the first log
     assert main(["run", str(tmp_path / "nope.mcap"), str(logs[0]), "--quiet"]) == 2
     assert "does not exist" in capsys.readouterr().err
     empty = tmp_path / "notlogs"

@@ -2,8 +2,10 @@
 
 The ``run`` sub-command (:mod:`autoteach.commands.run`) hands over here when it is given several
 logs, a folder, ``--workers``, ``--engine ray`` or ``--address``; :func:`autoteach.fleet.run_batch`
-does the work. The exit status is 0 when every log gave a result and :data:`EXIT_SOME_FAILED`
-when one or more failed (each is listed with its reason; the others' results are kept).
+does the work. The exit status is 0 when every log gave a result, :data:`EXIT_SOME_FAILED`
+when some failed (each is listed with its reason; the others' results are kept), and 2 (a user
+error, one line) when none gave a result. ``--out`` defaults to ``autoteach-fleet`` beside the
+first log (in it, for a folder).
 """
 
 from __future__ import annotations
@@ -59,7 +61,8 @@ def run_fleet(args: argparse.Namespace) -> int:
         )
     if getattr(args, "rerun", None) is not None:
         raise InvalidInputError("--rerun applies to a single log")
-    out = args.out if args.out is not None else Path("autoteach-fleet")
+    first = args.log[0]
+    out = args.out if args.out is not None else (first if first.is_dir() else first.parent) / "autoteach-fleet"
     if out.suffix == ".mcap":
         raise InvalidInputError(f"--out of a batch is a folder, got the MCAP name {out}")
     options = RunOptions(
@@ -79,4 +82,7 @@ def run_fleet(args: argparse.Namespace) -> int:
     else:
         print(format_fleet(report))
         print(f"results: {out}/<robot>.results.mcap, summary: {out / 'fleet.json'}")
+    if report.failed and len(report.failed) == len(report.outcomes):
+        o = report.failed[0]
+        raise InvalidInputError(f"none of the {len(report.outcomes)} logs could be auto-taught; {o.robot}: {o.reason}")
     return EXIT_SOME_FAILED if report.failed else 0

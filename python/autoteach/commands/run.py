@@ -21,7 +21,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
         type=Path,
         default=None,
         help="OUT.mcap: write a copy of the log with the results on /autoteach/* channels; any other path: the "
-        "report folder (default: LOG without suffix + '-report')",
+        "report folder (default: LOG without suffix + '-report'); a batch: the results folder (default: "
+        "autoteach-fleet beside the first log)",
     )
     p.add_argument("--report", type=Path, default=None, help="report folder (overrides the default)")
     p.add_argument(
