@@ -61,8 +61,11 @@ def main() -> None:
                 runs[name] = run_batch(logs, options=options, workers=workers)
                 rows[name].append(time.perf_counter() - t0)
         if args.ray:
+            import os
+
             import ray
 
+            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
             ray.init(num_cpus=args.workers, include_dashboard=False, log_to_driver=False)
             rows["ray"] = []
             for _ in range(args.repeats):

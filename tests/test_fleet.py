@@ -147,9 +147,10 @@ def test_cli_batch_and_bad_inputs(fleet, tmp_path, capsys):
         RunOptions(window=-1)
 
 
-def test_ray_engine_gives_the_single_log_results(fleet, tmp_path):
+def test_ray_engine_gives_the_single_log_results(fleet, tmp_path, monkeypatch):
     ray = pytest.importorskip("ray")
     _, logs, single, _ = fleet
+    monkeypatch.setenv("RAY_USAGE_STATS_ENABLED", "0")  # a local test cluster reports nothing
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         report = run_batch(logs, options=OPTIONS, engine="ray", out=tmp_path)
