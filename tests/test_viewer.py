@@ -14,7 +14,7 @@ import pytest
 from autoteach.cli import main
 from autoteach.errors import InvalidInputError, MissingExtraError
 from autoteach.io import write_log
-from autoteach.pipeline import autoteach
+from autoteach.pipeline import JOINTS, autoteach
 from autoteach.sim import simulate_session
 
 rr = pytest.importorskip("rerun")
@@ -117,3 +117,35 @@ def test_segment_rerun_holds_the_segmented_points(tmp_path, capsys):
     assert np.allclose(pos, cloud.points, atol=1e-5)
     assert np.array_equal(ids, cloud.labels)
     assert "/world/cloud" in recorded_entities(d["rerun"])
+
+
+def test_plan_rerun_holds_the_robot_motion(tmp_path):
+    from autoteach import plan
+    from autoteach.viewer import log_plan
+
+    ws, poses = plan.default_scene()
+    p = plan.plan_path(ws, poses["home"], poses["carrier_a"], method="rrt*", margin=0.02)
+    r = plan.optimize_trajectory(ws, p.path, plan.Limits())
+    rrd = log_plan([{"name": "traj01", "_result": r}], ws, tmp_path / "plan.rrd", samples=30)
+    entities = recorded_entities(rrd)
+    assert "/plan/traj01/robot" in entities and "/plan/traj01/swept/blade1" in entities
+    robot = _rows_by_time(rrd, "/plan/traj01/robot", "Points3D:positions")
+    assert len(robot) == 30
+    joints = [_rows_by_time(rrd, f"/plan/traj01/joints/{j}", "Scalars:scalars") for j in JOINTS]
+    q_end = np.array([rows[-1][1][0] for rows in joints])
+    assert np.allclose(q_end, r.trajectory.sample(np.array([r.duration]))[0][0], atol=1e-9)
+    want = np.array([c for _, c in ws.link_centres(q_end)])
+    assert np.allclose(np.array(robot[-1][1]), want, atol=1e-5)  # positions stored as float32
+    assert joints[0][-1][0] == pytest.approx(r.duration * 1e9, rel=1e-9)  # the duration timeline, in ns
+    with pytest.raises(InvalidInputError, match="samples"):
+        log_plan([], ws, tmp_path / "x.rrd", samples=1)
+
+
+def _rows_by_time(path, entity, column):
+    out = []
+    for c in RrdReader(path).stream():
+        if c.entity_path == entity:
+            b = c.to_record_batch()
+            if column in b.schema.names:
+                out += list(zip(b.column("time").cast("int64").to_pylist(), b.column(column).to_pylist(), strict=True))
+    return sorted(out, key=lambda r: r[0])

@@ -255,3 +255,45 @@ def log_segments(
     rec.flush()
     rec.disconnect()
     return target
+
+
+def log_plan(rows: list[dict[str, Any]], workspace: Any, path: str | os.PathLike[str], *, samples: int = 60) -> Path:
+    """Write the Rerun recording of planned transfers (``autoteach plan --demo --rerun``).
+
+    For each transfer ``<name>`` (the rows of :func:`autoteach.commands.plan.run_demo`, with their
+    ``_result`` trajectories), on the ``time`` timeline from 0 to the trajectory's duration at
+    ``samples`` instants: ``plan/<name>/robot`` (the link centres of the workspace's robot, labelled)
+    and ``plan/<name>/joints/<joint>`` (the joint values); statically ``plan/<name>/swept/<link>``, the
+    path of every link centre.
+
+    Raises:
+        MissingExtraError: ``rerun-sdk`` is not installed.
+        InvalidInputError: a bad ``.rrd`` path or ``samples < 2``.
+
+    """
+    rr = require_rerun()
+    target = _check_target(Path(path))
+    if isinstance(samples, bool) or not isinstance(samples, int) or samples < 2:
+        raise InvalidInputError(f"samples must be an integer >= 2, got {samples!r}")
+    from autoteach.pipeline import JOINTS
+
+    rec = rr.RecordingStream("autoteach", recording_id=target.stem)
+    rec.save(str(target))
+    rec.log("plan", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    for row in rows:
+        name, r = row["name"], row["_result"]
+        t = np.linspace(0.0, float(r.duration), samples)
+        q = np.asarray(r.trajectory.sample(t)[0], dtype=np.float64)
+        centres = [workspace.link_centres(qi) for qi in q]
+        links = [link for link, _ in centres[0]]
+        xyz = np.array([[c for _, c in cs] for cs in centres], dtype=np.float64)  # (samples, links, 3)
+        for k, link in enumerate(links):
+            rec.log(f"plan/{name}/swept/{link}", rr.LineStrips3D([xyz[:, k]]), static=True)
+        for i, ti in enumerate(t):
+            rec.set_time("time", duration=float(ti))
+            rec.log(f"plan/{name}/robot", rr.Points3D(xyz[i], labels=links, radii=0.01))
+            for j, joint in enumerate(JOINTS[: q.shape[1]]):
+                rec.log(f"plan/{name}/joints/{joint}", rr.Scalars(q[i, j]))
+    rec.flush()
+    rec.disconnect()
+    return target
