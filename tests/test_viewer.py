@@ -29,13 +29,13 @@ def run():
     return session, autoteach(session, frontend="simulated", window=3)
 
 
-def _rows(path, entity, column):
+def _rows(path, entity, column, timeline="frame"):
     out = []
     for c in RrdReader(path).stream():
         if c.entity_path == entity:
             b = c.to_record_batch()
             if column in b.schema.names:
-                frames = b.column("frame").to_pylist() if "frame" in b.schema.names else [None] * b.num_rows
+                frames = b.column(timeline).to_pylist() if timeline in b.schema.names else [None] * b.num_rows
                 out += list(zip(frames, b.column(column).to_pylist(), strict=True))
     return sorted(out, key=lambda r: -1 if r[0] is None else r[0])
 
@@ -149,3 +149,19 @@ def _rows_by_time(path, entity, column):
             if column in b.schema.names:
                 out += list(zip(b.column("time").cast("int64").to_pylist(), b.column(column).to_pylist(), strict=True))
     return sorted(out, key=lambda r: r[0])
+
+
+def test_map_rerun_records_the_grid_growing(tmp_path, capsys):
+    from autoteach.mapping import OccupancyGrid
+
+    argv = ["map", "--simulate", "--world", "small", "--graphs", "2", "--out", str(tmp_path), "--rerun", "--json", "-q"]
+    assert main(argv) == 0
+    d = json.loads(capsys.readouterr().out)
+    rrd = d["files"]["rerun"]
+    assert rrd == str(tmp_path / "map.rrd")
+    grids = _rows(rrd, "/map/grid", "Image:buffer", "graph")
+    assert [f for f, _ in grids] == [0, 1]
+    final = OccupancyGrid.load(d["files"]["yaml"]).to_image()
+    assert np.array_equal(np.asarray(grids[-1][1][0], dtype=np.uint8), final.ravel())
+    nodes = _rows(rrd, "/map/grid/nodes", "Points2D:positions", "graph")
+    assert len(nodes[-1][1]) == d["final_nodes"]

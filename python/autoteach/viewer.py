@@ -297,3 +297,47 @@ def log_plan(rows: list[dict[str, Any]], workspace: Any, path: str | os.PathLike
     rec.flush()
     rec.disconnect()
     return target
+
+
+class MapRecorder:
+    """A rasterizer wrapper that records every map it returns (``autoteach map --rerun``): the grid growing.
+
+    It forwards :meth:`update` to the wrapped :class:`~autoteach.mapping.Rasterizer` (whose own
+    update timing is what the reports hold) and logs, on the ``graph`` timeline, ``map/grid`` (the
+    map as the grey image of :meth:`~autoteach.mapping.OccupancyGrid.to_image`: free 254, occupied 0,
+    unknown 205) and ``map/grid/nodes`` (the graph's node poses in that image's pixels, class id =
+    robot). Every other attribute is the wrapped rasterizer's. Call :meth:`close` at the end.
+    """
+
+    def __init__(self, rasterizer: Any, path: str | os.PathLike[str]) -> None:
+        rr = require_rerun()
+        self._inner = rasterizer
+        self._rr = rr
+        self.path = _check_target(Path(path))
+        self._rec = rr.RecordingStream("autoteach", recording_id=self.path.stem)
+        self._rec.save(str(self.path))
+        self._graph = 0
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._inner, name)
+
+    def update(self, node_ids: Any, robot_ids: Any, poses: Any, scans: Any) -> Any:
+        """Rasterize the next graph with the wrapped rasterizer, record the map, return it."""
+        grid = self._inner.update(node_ids, robot_ids, poses, scans)
+        rr, rec = self._rr, self._rec
+        rec.set_time("graph", sequence=self._graph)
+        self._graph += 1
+        rec.log("map/grid", rr.Image(grid.to_image(), color_model="L"))
+        p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        h = grid.shape[0]
+        col = (p[:, 0] - grid.origin[0]) / grid.resolution
+        row = h - (p[:, 1] - grid.origin[1]) / grid.resolution  # the image's top row is the highest y
+        ids = np.asarray(robot_ids, dtype=np.int64).reshape(-1)
+        rec.log("map/grid/nodes", rr.Points2D(np.stack([col, row], axis=1), class_ids=ids, radii=2.0))
+        return grid
+
+    def close(self) -> Path:
+        """Flush and close the recording; returns its path."""
+        self._rec.flush()
+        self._rec.disconnect()
+        return self.path
