@@ -21,7 +21,6 @@ OPTIONAL = (
     "filterpy",
     "pycpd",
     "motmetrics",
-    "mcap_ros2",
     "sklearn",
     "skimage",
     "shapely",
@@ -30,6 +29,9 @@ OPTIONAL = (
     "probreg",
     "open3d",
     "pytest",
+    "ray",
+    "rerun",
+    "jsonschema",
 )
 
 _BLOCKER = textwrap.dedent(

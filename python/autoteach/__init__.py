@@ -154,6 +154,10 @@ __all__ = [
     "wafer_detect_options",
 ]
 
+# Fleets and viewers (issue 41): batch/Ray processing, ROS 2 messages, Rerun recordings.
+SUBMODULES += ("fleet", "ros2_messages", "viewer")
+__all__ += ["fleet", "ros2_messages", "viewer"]
+
 
 def __getattr__(name: str) -> Any:
     """Import a public submodule, or a name re-exported from one, on first access (PEP 562)."""

@@ -93,6 +93,10 @@ def _parser() -> argparse.ArgumentParser:
         "ORB-SLAM2 (default; θ1 is then reported unobservable), or world-frame visual-odometry increments",
     )
 
+    from autoteach.commands.viewer_flag import add_rerun_argument
+
+    add_rerun_argument(demo, "OUT/session_seed<SEED>.rrd")
+
     info = sub.add_parser("info", parents=[common], help="describe an MCAP session log")
     info.add_argument("log", type=Path, help="the MCAP file")
 
@@ -141,6 +145,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
+    from autoteach.commands.viewer_flag import rerun_target, write_rerun
+
+    rrd = rerun_target(args, args.out / f"session_seed{args.seed}.rrd")
     out = args.out / f"session_seed{args.seed}.mcap" if args.log else None
     t_start = time.perf_counter()
     session, summary = _simulate_and_write(args, out)
@@ -173,6 +180,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             summary["report"] = str(args.out)
             summary["report_files"] = files
             table = format_table(result)
+            recording = write_rerun(rrd, result, session)
+            if recording is not None:
+                summary["rerun"] = recording
     summary["runtime_s"] = time.perf_counter() - t_start
     if args.json:
         print(json.dumps(summary))
@@ -182,6 +192,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             print()
             print(table)
             print(f"report: {args.out}")
+            if "rerun" in summary:
+                print(f"Rerun recording: {summary['rerun']} (open with: rerun {summary['rerun']})")
         elif "autoteach" in summary:
             print(f"auto-teaching skipped: {summary['autoteach']['skipped']}")
     return 0

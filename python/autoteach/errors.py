@@ -27,6 +27,10 @@ class LogSalvageWarning(UserWarning):
     """A damaged log was read with ``allow_truncated=True``: the message says which bytes and frames were lost."""
 
 
+class MissingExtraError(AutoteachError, ImportError):
+    """An optional feature needs a package that is not installed: the message names the extra to install."""
+
+
 __all__ = [
     "AllocationError",
     "AutoteachError",
@@ -36,5 +40,6 @@ __all__ = [
     "InvalidInputError",
     "LogReadError",
     "LogSalvageWarning",
+    "MissingExtraError",
     "UnreachablePoseError",
 ]

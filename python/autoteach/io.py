@@ -41,7 +41,6 @@ import base64
 import json
 import os
 import stat
-import struct
 import warnings
 from collections import defaultdict
 from dataclasses import dataclass
@@ -51,6 +50,12 @@ from typing import Any
 import numpy as np
 
 from autoteach.errors import InvalidInputError, LogReadError, LogSalvageWarning
+from autoteach.ros2_messages import IMAGE_ANNOTATIONS_SCHEMA as _IMAGE_ANNOTATIONS_SCHEMA
+from autoteach.ros2_messages import decode_image as _decode_image
+from autoteach.ros2_messages import decode_joint_state as _decode_joint_state
+from autoteach.ros2_messages import encode_image as _encode_image
+from autoteach.ros2_messages import encode_joint_state as _encode_joint_state
+from autoteach.ros2_messages import rim_annotation_messages as _rim_annotation_messages
 from autoteach.session import Calibration, CameraInfo, Session
 from autoteach.sim.config import SimConfig
 
@@ -223,166 +228,6 @@ _METADATA_SESSION = "autoteach.session"
 # Chunks of about one frame: a log cut short (a crash while recording) loses only its last frames
 # when read with ``allow_truncated=True``, and a reader can seek to any frame.
 _CHUNK_SIZE = 128 * 1024
-
-
-# --------------------------------------------------------------------------------------------
-# CDR (little-endian, plain CDR as used by ROS 2)
-# --------------------------------------------------------------------------------------------
-
-
-class _CdrError(ValueError):
-    """A CDR message that cannot be decoded."""
-
-
-class _CdrWriter:
-    def __init__(self) -> None:
-        self.buf = bytearray(b"\x00\x01\x00\x00")  # encapsulation: CDR_LE, options 0
-
-    def _align(self, n: int) -> None:
-        self.buf += b"\x00" * ((-(len(self.buf) - 4)) % n)
-
-    def u8(self, v: int) -> None:
-        self.buf += struct.pack("<B", v)
-
-    def u32(self, v: int) -> None:
-        self._align(4)
-        self.buf += struct.pack("<I", v)
-
-    def time(self, t_ns: int) -> None:
-        sec, nsec = divmod(int(t_ns), 1_000_000_000)
-        self._align(4)
-        self.buf += struct.pack("<iI", sec, nsec)
-
-    def string(self, s: str) -> None:
-        b = s.encode("utf-8") + b"\x00"
-        self.u32(len(b))
-        self.buf += b
-
-    def strings(self, items: tuple[str, ...] | list[str]) -> None:
-        self.u32(len(items))
-        for s in items:
-            self.string(s)
-
-    def f64s(self, values: np.ndarray) -> None:
-        a = np.ascontiguousarray(values, dtype="<f8")
-        self.u32(a.size)
-        if a.size:
-            self._align(8)
-            self.buf += a.tobytes()
-
-    def u8s(self, data: bytes | memoryview) -> None:
-        self.u32(len(data))
-        self.buf += data
-
-
-class _CdrReader:
-    def __init__(self, data: bytes | memoryview) -> None:
-        self.data = memoryview(data)
-        if len(self.data) < 4:
-            raise _CdrError(f"message of {len(self.data)} bytes is shorter than the CDR encapsulation header")
-        kind = bytes(self.data[:2])
-        if kind != b"\x00\x01":
-            raise _CdrError(f"unsupported CDR encapsulation {kind.hex()} (only little-endian plain CDR 0001 is read)")
-        self.pos = 4
-
-    def _align(self, n: int) -> None:
-        self.pos += (-(self.pos - 4)) % n
-
-    def _take(self, n: int) -> memoryview:
-        if n < 0 or self.pos + n > len(self.data):
-            raise _CdrError(f"message ends at byte {len(self.data)} but {n} more bytes are needed at byte {self.pos}")
-        out = self.data[self.pos : self.pos + n]
-        self.pos += n
-        return out
-
-    def u8(self) -> int:
-        return self._take(1)[0]
-
-    def u32(self) -> int:
-        self._align(4)
-        return struct.unpack("<I", self._take(4))[0]
-
-    def time(self) -> int:
-        self._align(4)
-        sec, nsec = struct.unpack("<iI", self._take(8))
-        return sec * 1_000_000_000 + nsec
-
-    def string(self) -> str:
-        n = self.u32()
-        raw = bytes(self._take(n))
-        if n == 0 or raw[-1] != 0:
-            raise _CdrError("CDR string is not NUL-terminated")
-        return raw[:-1].decode("utf-8")
-
-    def strings(self) -> list[str]:
-        return [self.string() for _ in range(self._count(4))]
-
-    def _count(self, min_size: int) -> int:
-        n = self.u32()
-        if n * min_size > len(self.data) - self.pos:
-            raise _CdrError(f"sequence of {n} elements does not fit in the remaining {len(self.data) - self.pos} bytes")
-        return n
-
-    def f64s(self) -> np.ndarray:
-        n = self._count(8)
-        if n:
-            self._align(8)
-        return np.frombuffer(self._take(8 * n), dtype="<f8").astype(np.float64)
-
-    def u8s(self) -> memoryview:
-        return self._take(self._count(1))
-
-
-def _encode_image(t_ns: int, image: np.ndarray) -> bytes:
-    h, w = image.shape
-    c = _CdrWriter()
-    c.time(t_ns)
-    c.string("camera")
-    c.u32(h)
-    c.u32(w)
-    c.string("mono8")
-    c.u8(0)
-    c.u32(w)
-    c.u8s(np.ascontiguousarray(image, dtype=np.uint8).data.cast("B"))
-    return bytes(c.buf)
-
-
-def _decode_image(data: bytes) -> np.ndarray:
-    r = _CdrReader(data)
-    r.time()
-    r.string()
-    h, w = r.u32(), r.u32()
-    enc = r.string()
-    r.u8()
-    step = r.u32()
-    pixels = r.u8s()
-    if enc not in ("mono8", "8UC1"):
-        raise _CdrError(f"image encoding {enc!r} is not supported (need mono8)")
-    if step < w or len(pixels) != h * step:
-        raise _CdrError(f"image of {h}x{w} with step {step} cannot hold {len(pixels)} bytes")
-    return np.frombuffer(pixels, dtype=np.uint8).reshape(h, step)[:, :w]
-
-
-def _encode_joint_state(t_ns: int, names: tuple[str, ...], position: np.ndarray) -> bytes:
-    c = _CdrWriter()
-    c.time(t_ns)
-    c.string("base")
-    c.strings(names)
-    c.f64s(position)
-    c.f64s(np.zeros(0))
-    c.f64s(np.zeros(0))
-    return bytes(c.buf)
-
-
-def _decode_joint_state(data: bytes) -> tuple[list[str], np.ndarray]:
-    r = _CdrReader(data)
-    r.time()
-    r.string()
-    names = r.strings()
-    position = r.f64s()
-    if len(position) != len(names):
-        raise _CdrError(f"JointState has {len(names)} names but {len(position)} positions")
-    return names, position
 
 
 # --------------------------------------------------------------------------------------------
@@ -1199,6 +1044,7 @@ TOPIC_RESULT_CAMERA_POSE = "/autoteach/camera_pose"
 TOPIC_RESULT_UKF = "/autoteach/ukf"
 TOPIC_RESULT_HISTORY = "/autoteach/history"
 TOPIC_RESULT_EDGES = "/autoteach/edges"
+TOPIC_RESULT_RIM_ANNOTATIONS = "/autoteach/rim_annotations"
 
 #: Result channels added by :func:`write_results` (schema name, schema encoding, message encoding).
 RESULT_TOPICS: dict[str, tuple[str, str, str]] = {
@@ -1208,6 +1054,7 @@ RESULT_TOPICS: dict[str, tuple[str, str, str]] = {
     TOPIC_RESULT_UKF: ("autoteach.UkfState", "jsonschema", "json"),
     TOPIC_RESULT_HISTORY: ("autoteach.WindowEstimate", "jsonschema", "json"),
     TOPIC_RESULT_EDGES: ("autoteach.EdgeObservations", "jsonschema", "json"),
+    TOPIC_RESULT_RIM_ANNOTATIONS: ("foxglove.ImageAnnotations", "jsonschema", "json"),
 }
 _RESULT_SCHEMAS: dict[str, dict[str, Any]] = {
     "autoteach.Calibration": {
@@ -1239,6 +1086,7 @@ _RESULT_SCHEMAS: dict[str, dict[str, Any]] = {
         "description": "Per frame: the edge observations the solver used (wafer index, rim 0 upper / 1 lower, points).",
         "type": "object",
     },
+    "foxglove.ImageAnnotations": _IMAGE_ANNOTATIONS_SCHEMA,
 }
 
 
@@ -1333,6 +1181,7 @@ def _result_messages(result: Any, timestamps: np.ndarray) -> list[tuple[str, int
         for f in sorted(per_frame):
             t = int(timestamps[f])
             out.append((TOPIC_RESULT_EDGES, t, dump({"timestamp": _stamp(t), "frame": f, "edges": per_frame[f]})))
+    out += [(TOPIC_RESULT_RIM_ANNOTATIONS, t, data) for t, data in _rim_annotation_messages(result, timestamps)]
     return out
 
 

@@ -62,6 +62,9 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--compare", action="store_true", help="also run the naive methods of Table 2.1")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--out", type=Path, default=Path("map_out"), help="output folder (default ./map_out)")
+    from autoteach.commands.viewer_flag import add_rerun_argument
+
+    add_rerun_argument(p, "OUT/map.rrd")
     p.set_defaults(func=_run)
 
 
@@ -108,6 +111,14 @@ def _run(args: argparse.Namespace) -> int:
         for m in names
     }
     progress = not args.quiet and sys.stderr.isatty()
+    recorder = None
+    if getattr(args, "rerun", None) is not None:
+        from autoteach.commands.viewer_flag import rerun_target
+        from autoteach.viewer import MapRecorder
+
+        args.out.mkdir(parents=True, exist_ok=True)
+        last = list(rasterizers)[-1]
+        rasterizers[last] = recorder = MapRecorder(rasterizers[last], rerun_target(args, args.out / "map.rrd"))
     result = rasterize_stream(sim, rasterizers, progress=progress)
     args.out.mkdir(parents=True, exist_ok=True)
     main = list(rasterizers)[-1]
@@ -119,6 +130,8 @@ def _run(args: argparse.Namespace) -> int:
         files["runtime_plot"] = str(plot_runtimes(result, args.out / "runtime.png", f"{args.world}: runtime per graph"))
     except ImportError as err:
         files["runtime_plot"] = f"not written: {err}"
+    if recorder is not None:
+        files["rerun"] = str(recorder.close())
     summary = _summary(result, sim, args, files)
     if args.json:
         print(json.dumps(summary))

@@ -24,6 +24,9 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p = sub.add_parser("plan", parents=[common], help="collision-free time-optimal transfers: Table 2.1")
     p.add_argument("--demo", action="store_true", help="plan and optimise the default scene's transfers (required)")
     p.add_argument("--plot", type=Path, default=None, help="folder for the plots (needs matplotlib)")
+    from autoteach.commands.viewer_flag import add_rerun_argument
+
+    add_rerun_argument(p, "autoteach-plan.rrd")
     p.set_defaults(func=_run)
 
 
@@ -89,7 +92,15 @@ def _run(args: argparse.Namespace) -> int:
     if not args.demo:
         print("autoteach plan: only --demo is available", file=sys.stderr)
         return 2
+    from autoteach.commands.viewer_flag import rerun_target
+
+    rrd = rerun_target(args, Path("autoteach-plan.rrd"))
     rows = run_demo()
+    if rrd is not None:
+        from autoteach import plan
+        from autoteach.viewer import log_plan
+
+        print(f"Rerun recording: {log_plan(rows, plan.default_scene()[0], rrd)}", file=sys.stderr)
     if args.plot is not None:
         from autoteach import plan
 

@@ -44,6 +44,9 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--k", type=int, default=8, help="neighbours of the k-NN graph for PLY input (default 8)")
     p.add_argument("--out", type=Path, default=Path("segments.ply"), help="output PLY (default segments.ply)")
     p.add_argument("--png", type=Path, default=None, help="also write a PNG view (needs the plot extra)")
+    from autoteach.commands.viewer_flag import add_rerun_argument
+
+    add_rerun_argument(p, "OUT with suffix .rrd")
     p.set_defaults(func=run)
 
 
@@ -58,6 +61,9 @@ def run(args: argparse.Namespace) -> int:
         "min_size": args.min_size,
         "criteria": args.criteria,
     }
+    from autoteach.commands.viewer_flag import rerun_target
+
+    rrd = rerun_target(args, args.out.with_suffix(".rrd"))
     summary: dict[str, object] = {}
     truth = None
     if args.simulate:
@@ -96,6 +102,10 @@ def run(args: argparse.Namespace) -> int:
     if args.png is not None:
         seg.plot_segments(points, res.labels, args.png, colors=colors, title=f"{res.num_segments} segments")
         summary["png"] = str(args.png)
+    if rrd is not None:
+        from autoteach.viewer import log_segments
+
+        summary["rerun"] = str(log_segments(points, res.labels, rrd, colors=colors))
     if args.json:
         print(json.dumps(summary))
     else:
