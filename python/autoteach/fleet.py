@@ -108,8 +108,8 @@ class LogOutcome:
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-compatible row of the fleet table (NaN as ``None``)."""
+        from autoteach.config import JOINTS
         from autoteach.io import _clean
-        from autoteach.pipeline import JOINTS
 
         d: dict[str, Any] = {
             "log": self.log,
@@ -316,8 +316,8 @@ def calibration_moves(previous: dict[str, Any], now: LogOutcome, nsigma: float =
     pose; ``σ = sqrt(σ_prev² + σ_now²)``. Parameters without a finite, positive σ in both runs
     (not estimated, unobservable, the reference) are not compared.
     """
+    from autoteach.config import JOINTS
     from autoteach.geometry import se3_minus
-    from autoteach.pipeline import JOINTS
 
     if "unreadable" in previous or not now.ok:
         return {}
@@ -444,7 +444,7 @@ def _run_ray(
 
 def format_fleet(report: FleetReport) -> str:
     """The fleet table: one row per robot (joint offsets ± σ in degrees, lift in mm, base position, wafers, runtime)."""
-    from autoteach.pipeline import JOINTS
+    from autoteach.config import JOINTS
 
     lines = [
         f"{len(report.outcomes)} logs, {len(report.failed)} failed, {len(report.moved)} moved beyond 3σ; "

@@ -51,6 +51,8 @@ import numpy as np
 
 from autoteach.errors import InvalidInputError, LogReadError, LogSalvageWarning
 from autoteach.ros2_messages import IMAGE_ANNOTATIONS_SCHEMA as _IMAGE_ANNOTATIONS_SCHEMA
+from autoteach.ros2_messages import IMAGE_DEFINITION as _IMAGE_MSG
+from autoteach.ros2_messages import JOINT_STATE_DEFINITION as _JOINT_STATE_MSG
 from autoteach.ros2_messages import decode_image as _decode_image
 from autoteach.ros2_messages import decode_joint_state as _decode_joint_state
 from autoteach.ros2_messages import encode_image as _encode_image
@@ -100,17 +102,6 @@ TOPICS: dict[str, tuple[str, str, str]] = {
 REQUIRED_TOPICS = (TOPIC_SESSION, TOPIC_IMAGE, TOPIC_JOINTS)
 GROUND_TRUTH_FRAME_TOPICS = (TOPIC_JOINTS_TRUE, TOPIC_CAMERA_POSE, TOPIC_RIMS)
 
-_SEP = "=" * 80
-_TIME_MSG = "int32 sec\nuint32 nanosec\n"
-_HEADER_MSG = "builtin_interfaces/Time stamp\nstring frame_id\n"
-_ROS2_DEPS = f"\n{_SEP}\nMSG: std_msgs/Header\n{_HEADER_MSG}\n{_SEP}\nMSG: builtin_interfaces/Time\n{_TIME_MSG}"
-_IMAGE_MSG = (
-    "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\n"
-    "uint8[] data\n" + _ROS2_DEPS
-)
-_JOINT_STATE_MSG = (
-    "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n" + _ROS2_DEPS
-)
 _TIME_SCHEMA = {
     "type": "object",
     "title": "time",
@@ -739,6 +730,16 @@ def _scan(path: Path, *, salvage: bool = False) -> _Scan:
             f"MCAP log {path} is truncated: reading stopped at byte offset {good} of {n} after "
             f"{len(messages)} messages without reaching the footer"
         )
+    _file_messages(path, scan, messages)
+    return scan
+
+
+def _file_messages(path: Path, scan: _Scan, messages: list[tuple[int, int, int, bytes]]) -> None:
+    """File each read message (channel id, log time, sequence, data) under its channel's topic.
+
+    A message whose channel definition was lost (in a damaged chunk, with an unreadable summary)
+    is dropped, and the drop is noted.
+    """
     orphans = 0
     for channel_id, log_time, sequence, payload in messages:
         ch = scan.channels.get(channel_id)
@@ -753,7 +754,6 @@ def _scan(path: Path, *, salvage: bool = False) -> _Scan:
         scan.n_messages += 1
     if orphans:
         scan.notes.append(f"{orphans} messages on channels whose definition was lost were dropped")
-    return scan
 
 
 def _stop_message(path: Path, n: int, good: int, truncated: bool, data_end: bool, n_msgs: int, detail: str) -> str:
@@ -836,6 +836,39 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
         raise LogReadError(scan.error)
     notes = list(scan.notes)
     topics = scan.topics()
+    _check_channels(path, scan, topics)
+    camera, joint_names, frame_rate, n_expected = _session_metadata(path, scan, notes)
+
+    # Ground truth present?
+    scene = None
+    if TOPIC_SCENE in topics and scan.messages.get(TOPIC_SCENE):
+        scene = _decode_json(path, TOPIC_SCENE, 0, scan.messages[TOPIC_SCENE][0][1])
+    elif scan.error is not None and TOPIC_SCENE in topics:
+        notes.append(f"the ground-truth scene ({TOPIC_SCENE}) was lost: the session has no ground truth")
+    by_topic, keep = _frame_times(path, scan, scene is not None, allow_truncated, n_expected)
+    frames = _decode_frames(path, scan, by_topic, keep, camera, joint_names, scene is not None, allow_truncated, notes)
+    session_kw = _ground_truth(path, scene, frames) if scene is not None else {}
+    try:
+        session = Session(
+            timestamps=np.asarray(frames.times, dtype=np.int64),
+            joints_encoder=frames.joints,
+            images=frames.images,
+            camera=camera,
+            joint_names=joint_names,
+            frame_rate_hz=frame_rate,
+            source=str(path),
+            **session_kw,
+        )
+    except InvalidInputError as exc:
+        raise LogReadError(f"{path}: the log does not form a valid session: {exc}") from exc
+    if scan.error is not None:
+        session.damage = _damage(path, scan, by_topic[TOPIC_IMAGE], frames.times, n_expected, notes)
+        warnings.warn(str(session.damage), LogSalvageWarning, stacklevel=3)
+    return session, scan
+
+
+def _check_channels(path: Path, scan: _Scan, topics: dict[str, tuple[str, str, str]]) -> None:
+    """The session channels are there, each with the schema and encoding this version writes."""
     missing = [t for t in REQUIRED_TOPICS if t not in topics]
     if missing:
         want = ", ".join(f"{t} ({TOPICS[t][0]})" for t in missing)
@@ -851,6 +884,11 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
                 f"expected {TOPICS[topic][0]!r} ({TOPICS[topic][1]}) with {TOPICS[topic][2]} messages"
             )
 
+
+def _session_metadata(
+    path: Path, scan: _Scan, notes: list[str]
+) -> tuple[CameraInfo, tuple[str, ...], float | None, int]:
+    """The camera, joint names, frame rate and announced frame count of the session message."""
     if scan.messages.get(TOPIC_SESSION):
         meta = _decode_json(path, TOPIC_SESSION, 0, scan.messages[TOPIC_SESSION][0][1])
     elif "json" in scan.metadata.get(_METADATA_SESSION, {}):
@@ -879,12 +917,18 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise LogReadError(f"{path}: the {TOPIC_SESSION} message is invalid: {exc}") from exc
 
-    # Ground truth present?
-    scene = None
-    if TOPIC_SCENE in topics and scan.messages.get(TOPIC_SCENE):
-        scene = _decode_json(path, TOPIC_SCENE, 0, scan.messages[TOPIC_SCENE][0][1])
-    elif scan.error is not None and TOPIC_SCENE in topics:
-        notes.append(f"the ground-truth scene ({TOPIC_SCENE}) was lost: the session has no ground truth")
+    return camera, joint_names, frame_rate, n_expected
+
+
+def _frame_times(
+    path: Path, scan: _Scan, ground_truth: bool, allow_truncated: bool, n_expected: int
+) -> tuple[dict[str, dict[int, tuple[int, bytes]]], list[int]]:
+    """Every frame topic's messages by log time, and the times of the frames that are complete.
+
+    Raises:
+        LogReadError: two messages at one time, a frame lacking a message (strict reads), or a
+            frame count other than the announced one.
+    """
 
     def by_time(topic: str) -> dict[int, tuple[int, bytes]]:
         out: dict[int, tuple[int, bytes]] = {}
@@ -894,10 +938,11 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
             out[t] = (idx, data)
         return out
 
-    images_t = by_time(TOPIC_IMAGE)
-    joints_t = by_time(TOPIC_JOINTS)
-    gt_t = {topic: by_time(topic) for topic in GROUND_TRUTH_FRAME_TOPICS} if scene is not None else {}
-    times = sorted(images_t)
+    by_topic = {topic: by_time(topic) for topic in (TOPIC_IMAGE, TOPIC_JOINTS)}
+    gt_t = {topic: by_time(topic) for topic in GROUND_TRUTH_FRAME_TOPICS} if ground_truth else {}
+    by_topic.update(gt_t)
+    joints_t = by_topic[TOPIC_JOINTS]
+    times = sorted(by_topic[TOPIC_IMAGE])
     keep: list[int] = []
     for t in times:
         lacking = [TOPIC_JOINTS] if t not in joints_t else []
@@ -914,33 +959,60 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
             f"{path}: the log holds {len(keep)} frames but its {TOPIC_SESSION} message announces {n_expected}"
         )
 
+    return by_topic, keep
+
+
+@dataclass
+class _Frames:
+    """The decoded frames of a log (ground-truth fields ``None`` without a scene)."""
+
+    times: list[int]
+    images: np.ndarray
+    joints: np.ndarray
+    joints_true: np.ndarray | None
+    poses: np.ndarray | None
+    rims: list[list[dict[str, Any]]] | None
+
+
+def _decode_frames(
+    path: Path,
+    scan: _Scan,
+    by_topic: dict[str, dict[int, tuple[int, bytes]]],
+    keep: list[int],
+    camera: CameraInfo,
+    joint_names: tuple[str, ...],
+    ground_truth: bool,
+    allow_truncated: bool,
+    notes: list[str],
+) -> _Frames:
+    """Decode the kept frames; a salvage read drops (and notes) a frame it cannot decode."""
     images = np.empty((len(keep), camera.height, camera.width), dtype=np.uint8)
     joints = np.empty((len(keep), len(joint_names)), dtype=np.float64)
-    joints_true = np.empty_like(joints) if scene is not None else None
-    poses = np.empty((len(keep), 4, 4)) if scene is not None else None
-    rims: list[list[dict[str, Any]]] | None = [] if scene is not None else None
+    joints_true = np.empty_like(joints) if ground_truth else None
+    poses = np.empty((len(keep), 4, 4)) if ground_truth else None
+    rims: list[list[dict[str, Any]]] | None = [] if ground_truth else None
     n_ok = 0
     ok_times: list[int] = []
     for t in keep:
         i = n_ok
-        topic, idx = TOPIC_IMAGE, images_t[t][0]
+        topic, idx = TOPIC_IMAGE, by_topic[TOPIC_IMAGE][t][0]
         try:
-            img = _decode_image(images_t[t][1])
+            img = _decode_image(by_topic[TOPIC_IMAGE][t][1])
             if img.shape != images.shape[1:]:
                 raise ValueError(
                     f"image is {img.shape[1]}x{img.shape[0]}, the camera is {camera.width}x{camera.height}"
                 )
             images[i] = img
-            topic, idx = TOPIC_JOINTS, joints_t[t][0]
-            joints[i] = _joint_positions(joint_names, *_decode_joint_state(joints_t[t][1]))
-            if scene is not None:
-                topic, idx = TOPIC_JOINTS_TRUE, gt_t[TOPIC_JOINTS_TRUE][t][0]
-                joints_true[i] = _joint_positions(joint_names, *_decode_joint_state(gt_t[TOPIC_JOINTS_TRUE][t][1]))
-                topic, idx = TOPIC_CAMERA_POSE, gt_t[TOPIC_CAMERA_POSE][t][0]
-                pose = json.loads(gt_t[TOPIC_CAMERA_POSE][t][1])
+            topic, idx = TOPIC_JOINTS, by_topic[TOPIC_JOINTS][t][0]
+            joints[i] = _joint_positions(joint_names, *_decode_joint_state(by_topic[TOPIC_JOINTS][t][1]))
+            if ground_truth:
+                topic, idx = TOPIC_JOINTS_TRUE, by_topic[TOPIC_JOINTS_TRUE][t][0]
+                joints_true[i] = _joint_positions(joint_names, *_decode_joint_state(by_topic[TOPIC_JOINTS_TRUE][t][1]))
+                topic, idx = TOPIC_CAMERA_POSE, by_topic[TOPIC_CAMERA_POSE][t][0]
+                pose = json.loads(by_topic[TOPIC_CAMERA_POSE][t][1])
                 poses[i] = np.asarray(pose["matrix"], dtype=np.float64).reshape(4, 4)
-                topic, idx = TOPIC_RIMS, gt_t[TOPIC_RIMS][t][0]
-                msg = json.loads(gt_t[TOPIC_RIMS][t][1])
+                topic, idx = TOPIC_RIMS, by_topic[TOPIC_RIMS][t][0]
+                msg = json.loads(by_topic[TOPIC_RIMS][t][1])
                 rims.append([_rim_from_json(r) for r in msg["rims"]])
         except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
             if allow_truncated and scan.error is not None:
@@ -950,41 +1022,34 @@ def _read(path: Path, allow_truncated: bool) -> tuple[Session, _Scan]:
         n_ok += 1
         ok_times.append(t)
 
-    session_kw: dict[str, Any] = {}
-    if scene is not None:
-        try:
-            cfg = scene.get("config")
-            cal = scene.get("calibration")
-            slots = np.asarray(scene["wafer_slots"], dtype=np.int64)
-            session_kw = {
-                "seed": None if scene.get("seed") is None else int(scene["seed"]),
-                "config": None if cfg is None else SimConfig.from_dict(cfg),
-                "wafer_slots": slots,
-                "wafer_poses": np.asarray(scene["wafer_poses"], dtype=np.float64).reshape(len(slots), 4, 4),
-                "calibration": None if cal is None else Calibration.from_dict(cal),
-                "joints_true": joints_true[:n_ok],
-                "camera_poses": poses[:n_ok],
-                "rims": rims[:n_ok],
-            }
-        except (KeyError, TypeError, ValueError) as exc:
-            raise LogReadError(f"{path}: the {TOPIC_SCENE} message is invalid: {exc}") from exc
+    return _Frames(
+        ok_times,
+        images[:n_ok],
+        joints[:n_ok],
+        None if joints_true is None else joints_true[:n_ok],
+        None if poses is None else poses[:n_ok],
+        rims,
+    )
+
+
+def _ground_truth(path: Path, scene: dict[str, Any], frames: _Frames) -> dict[str, Any]:
+    """The ground-truth fields of the session from the scene message and the decoded frames."""
     try:
-        session = Session(
-            timestamps=np.asarray(ok_times, dtype=np.int64),
-            joints_encoder=joints[:n_ok],
-            images=images[:n_ok],
-            camera=camera,
-            joint_names=joint_names,
-            frame_rate_hz=frame_rate,
-            source=str(path),
-            **session_kw,
-        )
-    except InvalidInputError as exc:
-        raise LogReadError(f"{path}: the log does not form a valid session: {exc}") from exc
-    if scan.error is not None:
-        session.damage = _damage(path, scan, images_t, ok_times, n_expected, notes)
-        warnings.warn(str(session.damage), LogSalvageWarning, stacklevel=3)
-    return session, scan
+        cfg = scene.get("config")
+        cal = scene.get("calibration")
+        slots = np.asarray(scene["wafer_slots"], dtype=np.int64)
+        return {
+            "seed": None if scene.get("seed") is None else int(scene["seed"]),
+            "config": None if cfg is None else SimConfig.from_dict(cfg),
+            "wafer_slots": slots,
+            "wafer_poses": np.asarray(scene["wafer_poses"], dtype=np.float64).reshape(len(slots), 4, 4),
+            "calibration": None if cal is None else Calibration.from_dict(cal),
+            "joints_true": frames.joints_true,
+            "camera_poses": frames.poses,
+            "rims": frames.rims,
+        }
+    except (KeyError, TypeError, ValueError) as exc:
+        raise LogReadError(f"{path}: the {TOPIC_SCENE} message is invalid: {exc}") from exc
 
 
 def _skipped_text(scan: _Scan) -> str:

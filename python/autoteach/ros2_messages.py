@@ -33,11 +33,19 @@ IMAGE_ANNOTATIONS = "foxglove.ImageAnnotations"
 PNG_FORMAT = "mono8; png compressed"
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 _SEP = "=" * 80
-_COMPRESSED_IMAGE_MSG = (
-    "std_msgs/Header header\nstring format\nuint8[] data\n"
-    f"\n{_SEP}\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
-    f"\n{_SEP}\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+_TIME_MSG = "int32 sec\nuint32 nanosec\n"
+_HEADER_MSG = "builtin_interfaces/Time stamp\nstring frame_id\n"
+_ROS2_DEPS = f"\n{_SEP}\nMSG: std_msgs/Header\n{_HEADER_MSG}\n{_SEP}\nMSG: builtin_interfaces/Time\n{_TIME_MSG}"
+#: The concatenated ROS 2 definition of ``sensor_msgs/msg/Image`` stored as its channels' schema.
+IMAGE_DEFINITION = (
+    "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\n"
+    "uint8[] data\n" + _ROS2_DEPS
 )
+#: The concatenated ROS 2 definition of ``sensor_msgs/msg/JointState``.
+JOINT_STATE_DEFINITION = (
+    "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n" + _ROS2_DEPS
+)
+_COMPRESSED_IMAGE_MSG = "std_msgs/Header header\nstring format\nuint8[] data\n" + _ROS2_DEPS
 
 
 class Ros2DecodeError(ValueError):
@@ -46,9 +54,7 @@ class Ros2DecodeError(ValueError):
 
 def schema_text(name: str) -> str:
     """The concatenated ROS 2 message definition stored as the schema of ``name``'s channels."""
-    from autoteach.io import _IMAGE_MSG, _JOINT_STATE_MSG
-
-    texts = {IMAGE: _IMAGE_MSG, JOINT_STATE: _JOINT_STATE_MSG, COMPRESSED_IMAGE: _COMPRESSED_IMAGE_MSG}
+    texts = {IMAGE: IMAGE_DEFINITION, JOINT_STATE: JOINT_STATE_DEFINITION, COMPRESSED_IMAGE: _COMPRESSED_IMAGE_MSG}
     return texts[name]
 
 

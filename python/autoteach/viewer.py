@@ -107,7 +107,7 @@ def log_autoteach(
     n = session.n_frames
     if len(poses) != n:
         raise InvalidInputError(f"the result has {len(poses)} camera poses but the session has {n} frames")
-    from autoteach.pipeline import JOINTS
+    from autoteach.config import JOINTS
     from autoteach.ros2_messages import wafer_color
 
     rec = rr.RecordingStream("autoteach", recording_id=recording_id or target.stem)
@@ -275,7 +275,7 @@ def log_plan(rows: list[dict[str, Any]], workspace: Any, path: str | os.PathLike
     target = _check_target(Path(path))
     if isinstance(samples, bool) or not isinstance(samples, int) or samples < 2:
         raise InvalidInputError(f"samples must be an integer >= 2, got {samples!r}")
-    from autoteach.pipeline import JOINTS
+    from autoteach.config import JOINTS
 
     rec = rr.RecordingStream("autoteach", recording_id=target.stem)
     rec.save(str(target))
