@@ -107,16 +107,20 @@ def log_autoteach(
     n = session.n_frames
     if len(poses) != n:
         raise InvalidInputError(f"the result has {len(poses)} camera poses but the session has {n} frames")
-    from autoteach.config import JOINTS
-    from autoteach.ros2_messages import wafer_color
-
     rec = rr.RecordingStream("autoteach", recording_id=recording_id or target.stem)
     rec.save(str(target))
-    stamps = np.asarray(session.timestamps, dtype=np.int64)
-    cam = session.camera
-    k = np.array([[cam.params[0], 0.0, cam.params[2]], [0.0, cam.params[1], cam.params[3]], [0.0, 0.0, 1.0]])
+    _log_scene(rr, rec, result, session, poses)
+    _log_frames(rr, rec, result, session, poses, image_every)
+    _log_calibration(rr, rec, result)
+    rec.flush()
+    rec.disconnect()
+    return target
 
-    # Static: the wafer stack in 3-D and the trajectories.
+
+def _log_scene(rr: Any, rec: Any, result: Any, session: Any, poses: np.ndarray) -> None:
+    """Static entities: the wafer stack with 3σ centre ellipsoids, and the camera trajectories."""
+    from autoteach.ros2_messages import wafer_color
+
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     radius = float(session.config.wafer_radius) if getattr(session, "config", None) is not None else 0.15
     wafer_poses = np.asarray(result.wafer_poses, dtype=np.float64)
@@ -147,7 +151,15 @@ def log_autoteach(
         if t is not None and len(t) > 1:
             rec.log(f"world/trajectory/{name}", rr.LineStrips3D([t]), static=True)
 
-    # Per frame: image, rims with track ids, camera pose.
+
+def _log_frames(rr: Any, rec: Any, result: Any, session: Any, poses: np.ndarray, image_every: int) -> None:
+    """Per frame: the camera pose, the image (every ``image_every``-th) and the rims with track ids."""
+    from autoteach.ros2_messages import wafer_color
+
+    n = session.n_frames
+    stamps = np.asarray(session.timestamps, dtype=np.int64)
+    cam = session.camera
+    k = np.array([[cam.params[0], 0.0, cam.params[2]], [0.0, cam.params[1], cam.params[3]], [0.0, 0.0, 1.0]])
     obs = result.observations or {}
     by_frame: dict[int, list[int]] = {}
     for i, f in enumerate(obs.get("frames", [])):
@@ -178,7 +190,11 @@ def log_autoteach(
             if anchors:
                 rec.log("camera/image/tracks", rr.Points2D(np.array(anchors), labels=names, radii=3.0))
 
-    # Calibration over frames.
+
+def _log_calibration(rr: Any, rec: Any, result: Any) -> None:
+    """The estimated joint offsets over frames: each sliding window's, and the UKF's."""
+    from autoteach.config import JOINTS
+
     for h in result.history:
         rec.set_time("frame", sequence=int(h["last_frame"]))
         offs = np.asarray(h["joint_offsets"], dtype=np.float64)
@@ -193,9 +209,6 @@ def log_autoteach(
             for j, name in enumerate(("joint1", "joint2", "joint4")):
                 if np.isfinite(ukf_offs[f, j]):
                     rec.log(f"calibration/ukf/{name}", rr.Scalars(math.degrees(ukf_offs[f, j])))
-    rec.flush()
-    rec.disconnect()
-    return target
 
 
 def recorded_entities(path: str | os.PathLike[str]) -> dict[str, list[str]]:
