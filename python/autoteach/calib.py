@@ -21,6 +21,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Sequence
@@ -793,23 +794,75 @@ STRATEGIES = ("guided", "random", "novice")
 """Simulated view-selection strategies of :func:`simulate_session`."""
 
 
+def _session_step(
+    calib: Calibration,
+    views: int,
+    truth: Any,
+    test: tuple[F64Array, F64Array, F64Array],
+    grid_margin: float | None,
+) -> SessionStep:
+    """The Max ERE and the test-set errors of a session's calibration after ``views`` views."""
+    test_obj, test_img, test_poses = test
+    if all(calib.free):
+        st = calib.max_ere_stats(grid_margin=grid_margin)
+        ere, emax = st.value, st.expected_max
+    else:
+        ere = emax = math.inf
+    errs = calib.reference_errors(truth, test_obj, test_poses)
+    refit = calib.test_errors(test_obj, test_img)
+    return SessionStep(
+        views=views,
+        max_ere=ere,
+        expected_max=emax,
+        test_p995=float(np.percentile(errs, 99.5)),
+        test_mean=float(errs.mean()),
+        test_max=float(errs.max()),
+        refit_p995=float(np.percentile(refit, 99.5)),
+        refit_mean=float(refit.mean()),
+        rms=calib.rms,
+        params=calib.params.tolist(),
+    )
+
+
+@dataclass(frozen=True)
+class SessionOptions:
+    """Options of :func:`simulate_session` besides the lens, the strategy, the model and the seed.
+
+    Attributes:
+        threshold: Max ERE (pixels) the session aims at.
+        max_views: Views at most.
+        min_views: Views before the Max ERE may stop the session.
+        sigma: Corner noise (pixels; default ``7e-5 ×`` the image width).
+        pose_jitter: How loosely the simulated user achieves a suggested pose (radians, and
+            relative distance).
+        target: Target points (default :func:`make_target`).
+        test_views: Views of the independent test set.
+        test_noise: Add the corner noise to the test set's detections.
+        stop_at_threshold: Stop once the Max ERE is below ``threshold`` after ``min_views``.
+        grid_margin: The Max ERE test grid (default :data:`GRID_MARGIN`).
+    """
+
+    threshold: float = 0.5
+    max_views: int = 12
+    min_views: int = 3
+    sigma: float | None = None
+    pose_jitter: float = 0.03
+    target: ArrayLike | None = None
+    test_views: int = 60
+    test_noise: bool = True
+    stop_at_threshold: bool = False
+    grid_margin: float | None = None
+
+
 def simulate_session(
     lens: str = "medium",
     *,
     strategy: str = "guided",
     model: str | None = None,
-    threshold: float = 0.5,
-    max_views: int = 12,
-    min_views: int = 3,
     seed: int = 0,
-    sigma: float | None = None,
-    pose_jitter: float = 0.03,
-    target: ArrayLike | None = None,
-    test_views: int = 60,
-    test_noise: bool = True,
-    stop_at_threshold: bool = False,
+    options: SessionOptions | None = None,
     callback: Any = None,
-    grid_margin: float | None = None,
+    **overrides: Any,
 ) -> SessionResult:
     """Simulate a calibration session on a known lens (the loop of ch. 5.2 with a simulated user).
 
@@ -830,8 +883,17 @@ def simulate_session(
     reference protocol of ch. 5.5.3 / Fig. 5.6, the quantity the Max ERE predicts) and with the
     poses re-fit to detections with noise (``refit_*``: ch. 5.5's protocol for real test sets
     without ground truth; ``test_noise=False`` drops the noise). ``grid_margin`` sets the Max ERE
-    test grid (recorded and used by the guide; default :data:`GRID_MARGIN`).
+    test grid (recorded and used by the guide; default :data:`GRID_MARGIN`). The options are a
+    :class:`SessionOptions`; keyword ``overrides`` replace its fields by name.
     """
+    names = {f.name for f in dataclasses.fields(SessionOptions)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise InvalidInputError(f"unknown session option(s) {unknown}; the options are {sorted(names)}")
+    o = dataclasses.replace(options or SessionOptions(), **overrides)
+    threshold, max_views, min_views, sigma = o.threshold, o.max_views, o.min_views, o.sigma
+    pose_jitter, target, test_views, test_noise = o.pose_jitter, o.target, o.test_views, o.test_noise
+    stop_at_threshold, grid_margin = o.stop_at_threshold, o.grid_margin
     if lens not in LENSES:
         raise InvalidInputError(f"unknown lens {lens!r}: use one of {', '.join(LENSES)}")
     if strategy not in STRATEGIES:
@@ -904,29 +966,11 @@ def simulate_session(
         except Exception:  # noqa: BLE001 -- a simulated user keeps going while the model is unconstrained
             calib = None
             continue
-        if all(calib.free):
-            st = calib.max_ere_stats(grid_margin=grid_margin)
-            ere, emax = st.value, st.expected_max
-        else:
-            ere = emax = math.inf
-        errs = calib.reference_errors(truth, test_obj, test_poses)
-        refit = calib.test_errors(test_obj, test_img)
-        step = SessionStep(
-            views=len(obj),
-            max_ere=ere,
-            expected_max=emax,
-            test_p995=float(np.percentile(errs, 99.5)),
-            test_mean=float(errs.mean()),
-            test_max=float(errs.max()),
-            refit_p995=float(np.percentile(refit, 99.5)),
-            refit_mean=float(refit.mean()),
-            rms=calib.rms,
-            params=calib.params.tolist(),
-        )
+        step = _session_step(calib, len(obj), truth, (test_obj, test_img, test_poses), grid_margin)
         result.steps.append(step)
         if callback is not None:
             callback(step)
-        if stop_at_threshold and ere < threshold and len(obj) >= min_views:
+        if stop_at_threshold and step.max_ere < threshold and len(obj) >= min_views:
             break
     result.calibration = calib
     return result
