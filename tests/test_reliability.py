@@ -373,6 +373,17 @@ def test_calibrate_refuses_an_image_size_that_is_not_pixels(tmp_path, capsys):
     assert "image_size" in err and len(err.strip().splitlines()) == 1
 
 
+def test_calibrate_names_an_image_side_beyond_32_bits():
+    # Regression (property suite at 200 examples): a side of 2**62 passed the 64-bit check and
+    # reached the binding's u32 as a bare OverflowError.
+    from autoteach import calib
+
+    obj = [np.array([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [0.0, 0.05, 0.0], [0.05, 0.05, 0.0]])] * 3
+    img = [np.array([[10.0, 10.0], [20.0, 10.0], [10.0, 20.0], [20.0, 20.0]])] * 3
+    with pytest.raises(InvalidInputError, match="image_size"):
+        calib.calibrate(obj, img, "brown_conrady", (1, 2**62))
+
+
 def test_simulate_opening_names_bad_integer_arguments():
     from autoteach import polygon
 

@@ -70,7 +70,13 @@ def _size(image_size: Any) -> tuple[int, int]:
     w, h = as_int(w, "image_size[0]"), as_int(h, "image_size[1]")
     if w <= 0 or h <= 0:
         raise InvalidInputError(f"image_size must be positive, got {(w, h)}")
+    if max(w, h) > _MAX_SIDE:
+        raise InvalidInputError(f"image_size sides must be at most {_MAX_SIDE} pixels (32 bits), got {(w, h)}")
     return w, h
+
+
+#: Largest image side the compiled camera models take (a 32-bit pixel count).
+_MAX_SIDE = 2**32 - 1
 
 
 def _margin(grid_margin: float | None) -> float | None:
