@@ -264,6 +264,11 @@ def test_plan_path(scene: tuple[Any, dict[str, np.ndarray]]) -> None:
             args["joints"] = data.draw(st.lists(ints(0, 5), max_size=6))
         else:
             args["method"] = data.draw(st.sampled_from(["prm", "", "RRT*", "a"]))
+        budget = args["max_iterations"]
+        if args["method"] == "a*" and isinstance(budget, int) and budget > 5:
+            # A* pops 1000 lattice entries per unit of the budget, each with an edge check: an
+            # unreachable goal at the default budget costs a minute, which a property need not pay.
+            args["max_iterations"] = 5
         holds(lambda: plan.plan_path(ws, start, end, **args).path)
 
     check()

@@ -124,6 +124,19 @@ def plan_path(
 ) -> PathResult:
     """Plan a collision-free path with RRT* (``"rrt*"``) or A* on a joint lattice (``"a*"``).
 
+    Args:
+        workspace: the robot and its obstacles.
+        q_start: start joints (5,).
+        q_goal: goal joints (5,).
+        method: ``"rrt*"`` or ``"a*"``.
+        margin: clearance (m) every configuration on the path keeps.
+        max_iterations: RRT*: sampling iterations. A*: the search pops at most ``1000 ×`` this many
+            lattice entries, each with its edge check, so an unreachable goal ends in
+            :class:`~autoteach.errors.ConvergenceError` within a bounded time.
+        seed: RRT*'s sampling seed.
+        step_deg: A*'s lattice step of the revolute joints (degrees); the lift's step scales with it.
+        joints: the joints A* plans (the others stay at the start's values); default all.
+
     Raises:
         InvalidInputError: start or goal in collision (the message names the link and obstacle) or
             malformed input.

@@ -205,7 +205,7 @@ fn plan_path<'py>(
             let d = step_deg.to_radians();
             let mut cfg = AStarConfig {
                 margin,
-                max_expansions: max_iterations.max(1) * 1000,
+                max_expansions: max_iterations.max(1).saturating_mul(1000),
                 ..AStarConfig::default()
             };
             cfg.step = Joints::new(d, d, d, d, cfg.step[4] * step_deg / 5.0);
