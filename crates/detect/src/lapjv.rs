@@ -24,7 +24,7 @@
 //! evicted rows are left to the augmentation. Each pass is then O(n²). Without the budget, on
 //! structured costs (Euclidean distances between point sets) the reduction keeps evicting rows
 //! with tiny price decreases and costs several times the whole augmentation (measured at
-//! n = 1 000: 1.5 s against 0.2 s, docs/design/assignment_lapjv.md); on uniform costs the
+//! n = 1 000: 1.5 s against 0.2 s, docs/design/assignment-lapjv.md); on uniform costs the
 //! budget is rarely reached.
 //!
 //! ```
@@ -239,6 +239,9 @@ fn augmenting_row_reduction(
 /// Augmentation (JV 1987, procedure AUGMENT): a shortest path over reduced costs from each
 /// free row to a free column, the price update of the scanned columns, and the flip of the
 /// path. `None` if a distance is not finite.
+// The scans `for k in up..n` move columns into the band by growing `up` while they run: the
+// range is fixed when the loop starts, as in JV's `for (k = up; k < dim; k++)`.
+#[allow(clippy::mut_range_bound)]
 fn augment(
     n: usize,
     c: &[f64],

@@ -21,6 +21,7 @@ impl PyModel {
     /// Calls the vectorised `fx` or `hx` (`f`, or the per-call override in `over`) once on
     /// all `sigmas` (`n × N`, points as columns) and writes the images into the columns of
     /// `out` (`len × N`).
+    #[allow(clippy::too_many_arguments)]
     fn call_sigmas(
         &self,
         function: &'static str,
