@@ -444,8 +444,12 @@ class UkfFilter:
         draw: _Callable[[F64Array, F64Array], _Any] | None = None,
         wm: F64Array | None = None,
         wc: F64Array | None = None,
+        vectorized: bool = False,
     ) -> UkfFilter:
         """A filter on Python callables, called as filterpy calls them.
+
+        ``vectorized=True`` (additive noise only): ``fx(sigmas (N, n), dt, **fx_kwargs)`` and
+        ``hx(sigmas (N, n), **hx_kwargs)`` receive all sigma points at once and return ``(N, n)`` / ``(N, m)``.
 
         ``fx(x, dt, **fx_kwargs)`` (augmented: ``fx(x, dt, w, **fx_kwargs)``), ``hx(x, **hx_kwargs)``
         (augmented: ``hx(x, v, **hx_kwargs)``), ``x_mean(sigmas (2n+1, n), Wm)``, ``residual_x(a, b)``,

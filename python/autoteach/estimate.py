@@ -318,6 +318,13 @@ class UnscentedKalmanFilter:
             raise :class:`~autoteach.errors.ConvergenceError`).
         dim_w: Process-noise dimension in the augmented form (default ``dim_x``).
         dim_v: Measurement-noise dimension in the augmented form (default ``dim_z``).
+        vectorized: ``fx`` and ``hx`` take ALL sigma points at once: ``fx(sigmas, dt, **fx_args)``
+            with ``sigmas`` of shape ``(num_sigmas, dim_x)`` (one point per row) returns
+            ``(num_sigmas, dim_x)``, ``hx(sigmas, **hx_args)`` returns ``(num_sigmas, dim_z)``
+            (``(num_sigmas,)`` when ``dim_z == 1``). One Python call per transform instead of one
+            per sigma point; the results are those of the per-point form. Additive noise only.
+            A returned array of another shape, or with NaN/inf, raises
+            :class:`~autoteach.errors.InvalidInputError`.
 
     Attributes ``x``, ``P``, ``Q``, ``R`` are NumPy arrays you may set or modify in place (a
     scalar ``Q`` or ``R`` is broadcast as filterpy's ``P += noise`` does); ``x_prior``,
@@ -353,11 +360,21 @@ class UnscentedKalmanFilter:
         repair: bool = False,
         dim_w: int | None = None,
         dim_v: int | None = None,
+        vectorized: bool = False,
     ) -> None:
         if noise not in ("additive", "augmented"):
             raise InvalidInputError(f"noise must be 'additive' or 'augmented', got {noise!r}")
         augmented = noise == "augmented"
         self._model = fx if isinstance(fx, _BUILTIN) else None
+        if not isinstance(vectorized, bool | np.bool_):
+            raise InvalidInputError(f"vectorized must be a bool, got {type(vectorized).__name__}")
+        self.vectorized = bool(vectorized)
+        if self.vectorized and self._model is not None:
+            raise InvalidInputError("vectorized applies to Python fx/hx callbacks; a built-in model is already batched")
+        if self.vectorized and augmented:
+            raise InvalidInputError(
+                "vectorized fx/hx need noise='additive' (the augmented form passes each point's noise)"
+            )
         spec = _points_args(points, int(dim_x), builtin=self._model is not None)
         if "draw" in spec and (square_root or augmented):
             raise InvalidInputError(
@@ -414,6 +431,7 @@ class UnscentedKalmanFilter:
                 draw=spec.get("draw"),
                 wm=spec.get("wm"),
                 wc=spec.get("wc"),
+                vectorized=self.vectorized,
             )
         self._dim_x = int(dim_x)
         self._dim_z = int(dim_z)
@@ -556,10 +574,7 @@ class UnscentedKalmanFilter:
         """``hx`` of :attr:`sigmas_f` at the last :meth:`update`; ``(num_sigmas, dim_z)``."""
         if self._sigmas_h is None:
             hx, hx_args = self._last_hx
-            h = self._hx(hx)
-            self._sigmas_h = np.atleast_2d(
-                np.array([np.asarray(h(s, **hx_args), dtype=np.float64).reshape(-1) for s in self.sigmas_f])
-            )
+            self._sigmas_h = self._apply(self._hx(hx), "hx", self.sigmas_f, (), hx_args, self._dim_z)
         return self._sigmas_h
 
     @sigmas_h.setter
@@ -582,11 +597,29 @@ class UnscentedKalmanFilter:
         """``sigmas_f[i] = fx(sigma_i, dt, **fx_args)`` for the sigma points of the current (x, P), as filterpy."""
         dt = self._dt if dt is None else as_float(dt, "dt")
         f = self._fx(fx)
-        sigmas = self.points_fn.sigma_points(self.x, self.P)
-        out = np.zeros((self._num_sigmas, self._dim_x))
-        for i, s in enumerate(sigmas):
-            out[i] = np.asarray(f(s, dt, **fx_args), dtype=np.float64).reshape(-1)
-        self._sigmas_f = out
+        sigmas = np.asarray(self.points_fn.sigma_points(self.x, self.P), dtype=np.float64)
+        self._sigmas_f = self._apply(f, "fx", sigmas, (dt,), fx_args, self._dim_x)
+
+    def _apply(
+        self, f: Callable[..., ArrayLike], name: str, sigmas: F64Array, args: tuple, kwargs: dict[str, Any], dim: int
+    ) -> F64Array:
+        """``f`` of every row of ``sigmas`` as a ``(N, dim)`` array: one call when vectorised, else one per row."""
+        if not self.vectorized:
+            return np.atleast_2d(
+                np.array([np.asarray(f(s, *args, **kwargs), dtype=np.float64).reshape(-1) for s in sigmas])
+            )
+        out = np.asarray(f(sigmas, *args, **kwargs), dtype=np.float64)
+        n = sigmas.shape[0]
+        if out.shape == (n,) and dim == 1:
+            out = out.reshape(n, 1)
+        if out.shape != (n, dim):
+            raise InvalidInputError(
+                f"{name} (vectorized) returned an array of shape {out.shape}, expected ({n}, {dim}): "
+                "one row per sigma point"
+            )
+        if not np.isfinite(out).all():
+            raise InvalidInputError(f"{name} (vectorized) returned non-finite values")
+        return out
 
     def cross_variance(self, x: ArrayLike, z: ArrayLike, sigmas_f: ArrayLike, sigmas_h: ArrayLike) -> F64Array:
         """``Pxz = sum_i Wc_i residual_x(sigmas_f[i], x) residual_z(sigmas_h[i], z)^T``."""
@@ -687,9 +720,7 @@ class UnscentedKalmanFilter:
         h = self._hx(hx)
         R = _noise(self.R, self._dim_z, "R") if R is None else R  # noqa: N806
         sigmas_f = self.sigmas_f
-        sigmas_h = np.atleast_2d(
-            np.array([np.asarray(h(s, **hx_args), dtype=np.float64).reshape(-1) for s in sigmas_f])
-        )
+        sigmas_h = self._apply(h, "hx", np.asarray(sigmas_f, dtype=np.float64), (), hx_args, self._dim_z)
         zp, S = self._ut(UT, sigmas_h, R, self.z_mean, self.residual_z)  # noqa: N806
         SI = np.asarray(self.inv(S), dtype=np.float64)  # noqa: N806
         pxz = self.cross_variance(self.x, zp, sigmas_f, sigmas_h)
@@ -899,7 +930,7 @@ class UnscentedKalmanFilter:
         for k in reversed(range(n - 1)):
             f = self._fx(None if Fs is None else Fs[k])
             sigmas = np.asarray(self.points_fn.sigma_points(out_x[k], out_p[k]), dtype=np.float64)
-            sf = np.array([np.asarray(f(s, dts[k]), dtype=np.float64).reshape(-1) for s in sigmas])
+            sf = self._apply(f, "fx", sigmas, (dts[k],), {}, dim)
             xb, pb = self._ut(UT, sf, q_arr if q_arr.ndim == 2 else q_arr[k], self.x_mean, self.residual_x)
             pxb = np.zeros((dim, dim))
             for i in range(len(sigmas)):

@@ -1,9 +1,11 @@
 //! Linear assignment on random dense matrices (25×25 as in arc merging, 100×100 as in busy
-//! track association), with and without forbidden pairs and non-assignment costs.
+//! track association), with and without forbidden pairs and non-assignment costs; and the
+//! Jonker–Volgenant square solver on the families of `benchmarks/peer_rows/assignment.py`.
 
 use std::hint::black_box;
 
 use autoteach_detect::assignment::{solve_assignment, solve_assignment_with_unassigned};
+use autoteach_detect::lapjv::solve_assignment_row_major;
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
@@ -37,5 +39,34 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench);
+/// Square dense costs of the issue-36 families, solved from row-major data by Jonker–Volgenant
+/// (`lapjv::solve_assignment_row_major`): uniform, integer (ties) and geometric distances.
+fn bench_lapjv(c: &mut Criterion) {
+    let mut group = c.benchmark_group("lapjv");
+    group.sample_size(10);
+    for n in [200usize, 1000] {
+        let mut rng = Pcg64::seed_from_u64(36);
+        let uniform: Vec<f64> = (0..n * n).map(|_| rng.random::<f64>()).collect();
+        let integer: Vec<f64> = (0..n * n)
+            .map(|_| f64::from(rng.random_range(0..1000u32)))
+            .collect();
+        let a: Vec<(f64, f64)> = (0..n).map(|_| (rng.random(), rng.random())).collect();
+        let b: Vec<(f64, f64)> = (0..n).map(|_| (rng.random(), rng.random())).collect();
+        let geometric: Vec<f64> = (0..n * n)
+            .map(|k| (a[k / n].0 - b[k % n].0).hypot(a[k / n].1 - b[k % n].1))
+            .collect();
+        for (family, cost) in [
+            ("uniform", &uniform),
+            ("integer", &integer),
+            ("geometric", &geometric),
+        ] {
+            group.bench_function(format!("{n}x{n} {family}"), |bch| {
+                bch.iter(|| solve_assignment_row_major(n, n, black_box(cost)))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, bench_lapjv);
 criterion_main!(benches);

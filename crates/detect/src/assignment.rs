@@ -89,7 +89,14 @@ pub fn solve_assignment(cost: &DMatrix<f64>) -> Result<Assignment> {
             .flat_map(|i| (0..nc).map(move |j| (i, j)))
             .map(|(i, j)| entry(i, j))
             .collect();
-        shortest_augmenting_path(nr, nc, &dense)
+        // Square and far from overflow: Jonker–Volgenant (`crate::lapjv`), faster on dense
+        // matrices; otherwise the shortest augmenting path, which detects overflow exactly.
+        let max_abs = dense.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+        if nr == nc && max_abs < f64::MAX / (4.0 * nr.max(1) as f64) {
+            crate::lapjv::lapjv(nr, &dense)
+        } else {
+            shortest_augmenting_path(nr, nc, &dense)
+        }
     }
     .ok_or_else(|| DetectError::Infeasible {
         reason: format!("the costs of the {n}×{m} matrix overflow f64 in the shortest-path sums"),

@@ -37,6 +37,7 @@ pub mod ellipse;
 pub mod ellipse_detection;
 pub mod error;
 pub mod fusion;
+pub mod lapjv;
 pub mod polygon;
 pub mod track;
 pub mod uncertainty;

@@ -3,10 +3,9 @@
 //! Each function converts its NumPy inputs, calls one core function and converts the result;
 //! the friendly wrappers live in `python/autoteach/detect.py`.
 
-use autoteach_detect::assignment::{
-    Assignment, solve_assignment, solve_assignment_with_unassigned,
-};
+use autoteach_detect::assignment::{Assignment, solve_assignment_with_unassigned};
 use autoteach_detect::ellipse::{EllipseFit, FitMethod, fit_ellipse as core_fit_ellipse};
+use autoteach_detect::lapjv::solve_assignment_row_major;
 use nalgebra::{DMatrix, Vector2};
 use numpy::{IntoPyArray, PyArray1, PyArrayDyn};
 use pyo3::prelude::*;
@@ -103,6 +102,23 @@ fn matrix_arg(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<DMatrix<f6
     Ok(DMatrix::from_row_slice(shape[0], shape[1], &data))
 }
 
+/// Reads a 2-D float array as `(rows, cols, row-major data)`.
+fn matrix_rows_arg(
+    obj: &Bound<'_, PyAny>,
+    name: &'static str,
+) -> PyResult<(usize, usize, Vec<f64>)> {
+    let arr = Array::new(obj, name)?;
+    let shape = arr.shape().to_vec();
+    if shape.len() != 2 {
+        return Err(errors::invalid_input(format!(
+            "{name} must be two-dimensional (rows, cols), got shape {}",
+            convert::shape_str(&shape)
+        )));
+    }
+    let (data, _) = arr.batch(&[], "(rows, cols)")?;
+    Ok((shape[0], shape[1], data))
+}
+
 /// Fits an ellipse to points `(N, 2)` with `method` `"direct"` or `"geometric"`.
 #[pyfunction]
 #[pyo3(signature = (points, method = "geometric"))]
@@ -152,16 +168,18 @@ fn linear_sum_assignment<'py>(
     cost: &Bound<'py, PyAny>,
     maximize: bool,
 ) -> PyResult<Indices<'py>> {
-    let mut m = matrix_arg(cost, "cost")?;
+    let (rows, cols, mut m) = matrix_rows_arg(cost, "cost")?;
     if maximize {
         if let Some(v) = m.iter().find(|v| v.is_nan() || **v == f64::INFINITY) {
             return Err(errors::invalid_input(format!(
                 "cost contains {v}: with maximize=True entries must be finite or -inf (forbidden)"
             )));
         }
-        m.neg_mut();
+        m.iter_mut().for_each(|v| *v = -*v);
     }
-    let a = convert::run_batched(py, m.len(), || solve_assignment(&m).map_err(errors::detect))?;
+    let a = convert::run_batched(py, m.len(), || {
+        solve_assignment_row_major(rows, cols, &m).map_err(errors::detect)
+    })?;
     Ok(pairs(py, &a))
 }
 

@@ -30,6 +30,8 @@ use pyo3::types::{PyDict, PyTuple};
 use crate::convert::{self, to_numpy};
 use crate::errors;
 
+mod ukf_vectorized;
+
 /// Adds the estimate functions and classes to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyLinearModel>()?;
@@ -299,6 +301,8 @@ struct PyModel {
     hx: Py<PyAny>,
     hooks: Hooks,
     shared: Arc<Shared>,
+    /// `fx`/`hx` take all sigma points at once (`ukf_vectorized`).
+    vectorized: bool,
 }
 
 impl PyModel {
@@ -503,6 +507,9 @@ impl UkfModel for PyModel {
         _u: Option<&DVector<f64>>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
+        if self.vectorized {
+            return self.fx_one(x, dt, out);
+        }
         self.call_fx(
             |py| {
                 PyTuple::new(
@@ -519,7 +526,44 @@ impl UkfModel for PyModel {
         x: DVectorView<'_, f64>,
         out: &mut DVector<f64>,
     ) -> autoteach_estimate::Result<()> {
+        if self.vectorized {
+            return self.hx_one(x, out);
+        }
         self.call_hx(|py| PyTuple::new(py, [view_out(py, x)]), out)
+    }
+
+    fn fx_sigmas(
+        &self,
+        sigmas: &DMatrix<f64>,
+        dt: f64,
+        u: Option<&DVector<f64>>,
+        out: &mut DMatrix<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        if self.vectorized {
+            return self.fx_all(sigmas, dt, out);
+        }
+        let mut tmp = DVector::zeros(out.nrows());
+        for i in 0..sigmas.ncols() {
+            self.fx(sigmas.column(i), dt, u, &mut tmp)?;
+            out.set_column(i, &tmp);
+        }
+        Ok(())
+    }
+
+    fn hx_sigmas(
+        &self,
+        sigmas: &DMatrix<f64>,
+        out: &mut DMatrix<f64>,
+    ) -> autoteach_estimate::Result<()> {
+        if self.vectorized {
+            return self.hx_all(sigmas, out);
+        }
+        let mut tmp = DVector::zeros(out.nrows());
+        for i in 0..sigmas.ncols() {
+            self.hx(sigmas.column(i), &mut tmp)?;
+            out.set_column(i, &tmp);
+        }
+        Ok(())
     }
 
     fn fx_noise(
@@ -832,7 +876,7 @@ impl PyUkf {
     #[pyo3(signature = (dim_x, dim_z, fx, hx, alpha, beta, kappa, *, x_mean=None, z_mean=None,
         residual_x=None, residual_z=None, state_add=None, subtract=None, sqrt=None,
         square_root=false, augmented=false, repair=false, dim_w=None, dim_v=None, family_name="merwe",
-        draw=None, wm=None, wc=None))]
+        draw=None, wm=None, wc=None, vectorized=false))]
     #[allow(clippy::too_many_arguments)]
     fn callbacks(
         dim_x: usize,
@@ -858,7 +902,13 @@ impl PyUkf {
         draw: Option<Bound<'_, PyAny>>,
         wm: Option<&Bound<'_, PyAny>>,
         wc: Option<&Bound<'_, PyAny>>,
+        vectorized: bool,
     ) -> PyResult<Self> {
+        if vectorized && augmented {
+            return Err(errors::invalid_input(
+                "vectorized fx/hx need additive noise (the augmented form calls fx(x, dt, w) per sigma point)",
+            ));
+        }
         if dim_x == 0 || dim_z == 0 {
             return Err(errors::invalid_input(format!(
                 "dim_x and dim_z must be positive, got {dim_x} and {dim_z}"
@@ -915,6 +965,7 @@ impl PyUkf {
                 num_sigmas: points.num_sigmas(),
             },
             shared: shared.clone(),
+            vectorized,
         };
         let model: DynModel = Arc::new(model);
         let inner = build(
