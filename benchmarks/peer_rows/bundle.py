@@ -276,6 +276,11 @@ def rows(threads: int, quick: bool) -> list[dict]:
         ours_s, res = _median_time(lambda s=scene: _ours(s[0], *s[3:]), reps)
         ours_cost = res.final_cost
         out += _ceres_rows(name, scene, ours_s, ours_cost, threads, reps)
+        try:
+            import scipy  # noqa: F401
+        except ImportError:
+            out.append(_missing(name, "scipy least_squares", ours_s, ours_cost, "scipy not installed"))
+            continue
         sp = ScipyAnalytic(K, obs, pi, xi, p0, x0)
         sp_reps = 1 if (quick or big) else 3
         peer_s, r = _median_time(sp.solve, sp_reps)
