@@ -1690,3 +1690,15 @@ def global_register(
 ) -> GlobalRegistration: ...
 
 # --- end global registration ---
+
+# --- ellipse fits of many arcs in one call (issue 36) ---
+
+def fit_ellipses(
+    points: F64Array, offsets: NDArray[np.int64], method: Literal["direct", "geometric"] = "geometric"
+) -> tuple[F64Array, F64Array, F64Array, F64Array, NDArray[np.int64], NDArray[np.bool_], list[str | None]]:
+    """(params, residual_mean, residual_rms, covariance, iterations, converged, errors) of every arc.
+
+    See :func:`autoteach.detect.fit_ellipses`.
+    """
+
+# --- end ellipse fits of many arcs ---

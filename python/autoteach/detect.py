@@ -271,3 +271,8 @@ from autoteach.ellipse_detection import (  # noqa: E402
 )
 
 __all__ += ["EllipseDetectOptions", "EllipseDetection", "WaferGeometry", "detect_ellipses", "detect_wafer_rims"]
+
+# --- ellipse fits of many arcs in one call (issue 36) ---
+from autoteach.ellipse_batch import EllipseFits, fit_ellipses  # noqa: E402
+
+__all__ += ["EllipseFits", "fit_ellipses"]

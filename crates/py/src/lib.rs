@@ -33,6 +33,8 @@ mod uncertainty;
 mod validate;
 // issue 29: global registration with a distractor-proof selection
 mod global_register;
+// issue 36: ellipse fits of many arcs in one call
+mod ellipse_batch;
 
 /// The compiled module `autoteach._core`.
 #[pymodule]
@@ -59,6 +61,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     fusion::register(m)?;
     plan::register(m)?;
     global_register::register(m)?;
+    ellipse_batch::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

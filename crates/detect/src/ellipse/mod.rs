@@ -33,6 +33,7 @@
 // `!(x > y)` is deliberate throughout: it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+mod batch;
 mod direct;
 mod geometric;
 mod residual;
@@ -42,6 +43,7 @@ use nalgebra::{Matrix3, Matrix5, SymmetricEigen, Vector2};
 
 use crate::{DetectError, Result};
 
+pub use batch::{check_offsets, fit_ellipses};
 pub use direct::fit_ellipse_direct;
 pub(crate) use geometric::fit_screened;
 pub use geometric::{GeometricFitOptions, fit_ellipse_geometric, fit_ellipse_geometric_masked};
