@@ -39,6 +39,8 @@
 
 mod bundle;
 mod covariance;
+mod evals;
+mod layout;
 mod linear;
 mod loss;
 mod manifold;
