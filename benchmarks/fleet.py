@@ -7,11 +7,16 @@ printed), checks that both give bit-identical results, and prints the ratio. Opt
 Ray (``--ray``: a local ``ray.init(num_cpus=workers)``; start-up is not timed).
 
     RAYON_NUM_THREADS unset; python benchmarks/fleet.py --logs 8 --frames 20 --workers 2 [--ray]
+
+It also prints how many cores the sequential run keeps busy (CPU seconds of the process, all its
+threads, per wall second): the same CPU work on P cores cannot take less than that / P of the
+sequential wall time.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import tempfile
 import time
@@ -55,14 +60,15 @@ def main() -> None:
         ]
         rows: dict[str, list[float]] = {"sequential": [], f"{args.workers} workers": []}
         runs = {}
+        cores: list[float] = []  # CPU seconds per wall second of the sequential run (all its threads)
         for _ in range(args.repeats):
             for name, workers in (("sequential", 1), (f"{args.workers} workers", args.workers)):
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 runs[name] = run_batch(logs, options=options, workers=workers)
                 rows[name].append(time.perf_counter() - t0)
+                if workers == 1:
+                    cores.append((time.process_time() - c0) / rows[name][-1])
         if args.ray:
-            import os
-
             import ray
 
             os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
@@ -83,6 +89,12 @@ def main() -> None:
                 f"  {name:<12} median {med:7.2f} s  ratio {med / base:.2f}  {n_ok} logs auto-taught, "
                 f"identical to sequential: {ok}"
             )
+        used = statistics.median(cores)
+        n_cpu = os.cpu_count() or 1
+        print(
+            f"  the sequential run keeps {used:.2f} of {n_cpu} cores busy: with the same CPU work, no schedule "
+            f"can take less than {used / n_cpu:.2f} of its wall time"
+        )
         per_log = [o.runtime_s for o in runs["sequential"].outcomes]
         print(f"  per-log runtime (sequential): median {statistics.median(per_log):.2f} s")
 
