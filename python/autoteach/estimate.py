@@ -451,6 +451,10 @@ class UnscentedKalmanFilter:
         self.noise = noise
         self.repair = bool(repair)
         self.inv = np.linalg.inv
+        self._init_state(int(dim_x), int(dim_z))
+
+    def _init_state(self, dim_x: int, dim_z: int) -> None:
+        """The filterpy attributes of a fresh filter: state, covariances, gain, residual, buffers."""
         self.x: F64Array = np.zeros(dim_x)
         self.P: F64Array = np.eye(dim_x)
         self.Q: F64Array = np.asarray(self._inner.Q)
