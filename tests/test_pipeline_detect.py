@@ -230,9 +230,7 @@ def _gate_truth(session, detections, **kw):
         session.camera_poses,
         wafers,
         np.asarray(session.wafer_slots),
-        k=_k(session),
-        radius=cfg.wafer_radius,
-        thickness=cfg.wafer_thickness,
+        pipeline.WaferImaging(_k(session), cfg.wafer_radius, cfg.wafer_thickness),
         gate_px=1.0,
         **kw,
     )

@@ -44,6 +44,7 @@ silently.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from collections.abc import Callable, Sequence
@@ -78,6 +79,7 @@ __all__ = [
     "LinearModel",
     "MerweScaledSigmaPoints",
     "SimplexSigmaPoints",
+    "SolverOptions",
     "SolverSummary",
     "UnscentedKalmanFilter",
     "bundle_adjust",
@@ -1006,6 +1008,36 @@ class UnscentedKalmanFilter:
 _LOSSES = ("linear", "huber", "cauchy", "tukey")
 
 
+@dataclass(frozen=True)
+class SolverOptions:
+    """How a least-squares problem is solved (the Rust ``lsq::SolverOptions``).
+
+    Attributes:
+        method: ``"lm"`` (Levenberg-Marquardt) or ``"gn"`` (Gauss-Newton).
+        linear_solver: ``"auto"``, ``"dense"``, ``"sparse"`` or ``"schur"``.
+        max_iterations: iteration limit.
+        ftol: relative cost-decrease tolerance.
+        gtol: gradient (max |Jᵀr|) tolerance.
+        xtol: relative step tolerance.
+    """
+
+    method: Literal["lm", "gn"] = "lm"
+    linear_solver: Literal["auto", "dense", "sparse", "schur"] = "auto"
+    max_iterations: int = 100
+    ftol: float = 1e-10
+    gtol: float = 1e-10
+    xtol: float = 1e-10
+
+
+def _solver_options(solver: SolverOptions | None, changes: dict[str, Any]) -> SolverOptions:
+    """``solver`` (default :class:`SolverOptions`) with ``changes``; unknown names are refused."""
+    names = {f.name for f in dataclasses.fields(SolverOptions)}
+    unknown = sorted(set(changes) - names)
+    if unknown:
+        raise InvalidInputError(f"unknown solver option(s) {unknown}; the options are {sorted(names)}")
+    return dataclasses.replace(solver or SolverOptions(), **changes)
+
+
 def _solver_kwargs(
     method: str, linear_solver: str, max_iterations: int, ftol: float, gtol: float, xtol: float
 ) -> dict[str, Any]:
@@ -1157,12 +1189,8 @@ def bundle_adjust(
     fixed_poses: Sequence[int] = (),
     *,
     f_scale: float = 1.0,
-    method: Literal["lm", "gn"] = "lm",
-    linear_solver: Literal["auto", "dense", "sparse", "schur"] = "auto",
-    max_iterations: int = 100,
-    ftol: float = 1e-10,
-    gtol: float = 1e-10,
-    xtol: float = 1e-10,
+    solver: SolverOptions | None = None,
+    **solver_options: Any,
 ) -> BundleAdjustResult:
     """Bundle adjustment: refine world-to-camera poses and world points.
 
@@ -1184,12 +1212,10 @@ def bundle_adjust(
         loss: robust loss name.
         fixed_poses: indices of poses held constant.
         f_scale: loss scale (pixels).
-        method: ``"lm"`` (Levenberg-Marquardt) or ``"gn"`` (Gauss-Newton).
-        linear_solver: ``"auto"``, ``"dense"``, ``"sparse"`` or ``"schur"``.
-        max_iterations: iteration limit.
-        ftol: relative cost-decrease tolerance.
-        gtol: gradient (max |Jᵀr|) tolerance.
-        xtol: relative step tolerance.
+        solver: the solver's method, linear solver, iteration limit and tolerances (default
+            :class:`SolverOptions`).
+        **solver_options: fields of :class:`SolverOptions` that replace those of ``solver`` by
+            name, e.g. ``max_iterations=50``.
 
     Returns:
         The optimised poses and points, final cost, iterations and the solver summary.
@@ -1225,7 +1251,7 @@ def bundle_adjust(
         loss,
         float(f_scale),
         fixed,
-        **_solver_kwargs(method, linear_solver, max_iterations, ftol, gtol, xtol),
+        **_solver_kwargs(*dataclasses.astuple(_solver_options(solver, solver_options))),
     )
     poses_a = np.asarray(poses_a)
     return BundleAdjustResult(

@@ -80,6 +80,7 @@ __all__ = [
     "Setup",
     "SlamMotProblem",
     "UNOBSERVABLE_REASONS",
+    "WaferImaging",
     "assemble_result",
     "autoteach",
     "band_sigma_scale",
@@ -492,11 +493,9 @@ def _edge_kind(e: Any) -> int:
 def detect_frontend(
     session: Any,
     detections: list[list[Any]],
+    imaging: WaferImaging,
     *,
-    k: np.ndarray,
     camera_poses: np.ndarray,
-    radius: float,
-    thickness: float,
     pitch: float,
     n_slots: int,
     points_per_rim: int = 24,
@@ -523,6 +522,7 @@ def detect_frontend(
     """
     from autoteach.track import WaferTracker
 
+    k, radius, thickness = imaging.k, imaging.radius, imaging.thickness
     cam = session.camera
     tracker = WaferTracker(
         intrinsics=k,
@@ -698,10 +698,8 @@ def gate_detections(
     camera_poses: np.ndarray,
     wafers: np.ndarray,
     slots: np.ndarray,
+    imaging: WaferImaging,
     *,
-    k: np.ndarray,
-    radius: float,
-    thickness: float,
     gate_px: float = 2.0,
     min_inlier_fraction: float = 0.6,
     points_per_rim: int = 24,
@@ -732,6 +730,7 @@ def gate_detections(
     width (:func:`band_sigma_scale`; :attr:`Observations.sigma_scale`), so that the narrow-band
     points count for what they are worth instead of all or nothing.
     """
+    k, radius, thickness = imaging.k, imaging.radius, imaging.thickness
     n_w = len(wafers)
     best: dict[tuple[int, int, int], tuple[int, np.ndarray, np.ndarray | None]] = {}
     n_edges = n_rejected = n_narrow = 0
@@ -944,6 +943,21 @@ def _nominal_start_rotation(cfg: Any, params: Any, enc: np.ndarray) -> np.ndarra
     return np.asarray(WaferRobot(params=params, base=base_w).camera_pose(enc[:1]), dtype=np.float64)[0, :3, :3]
 
 
+@dataclass(frozen=True)
+class WaferImaging:
+    """What projects a wafer's rims into an image: the pinhole intrinsics and the wafer's size.
+
+    Attributes:
+        k: (3, 3) pinhole intrinsic matrix.
+        radius: wafer radius (m).
+        thickness: wafer thickness (m).
+    """
+
+    k: np.ndarray
+    radius: float
+    thickness: float
+
+
 @dataclass
 class Setup:
     """What the stages share about one session: its geometry and the resolved front end.
@@ -973,6 +987,11 @@ class Setup:
     base_world: np.ndarray
     frontend: str
     encoders: np.ndarray
+
+    @property
+    def imaging(self) -> WaferImaging:
+        """The intrinsics and wafer size the rims are projected with."""
+        return WaferImaging(self.k, self.radius, self.thickness)
 
 
 def prepare(session: Any, config: AutoteachConfig) -> Setup:
@@ -1043,10 +1062,8 @@ def run_frontend(
         obs = detect_frontend(
             session,
             detections,
-            k=setup.k,
+            setup.imaging,
             camera_poses=nominal_cams,
-            radius=setup.radius,
-            thickness=setup.thickness,
             pitch=setup.pitch,
             n_slots=setup.n_slots,
             points_per_rim=config.points_per_rim,
@@ -1318,9 +1335,7 @@ def _gating_chain(
             np.asarray(first["camera_poses"]),
             np.asarray(first["wafers"], dtype=np.float64),
             obs.slots,
-            k=setup.k,
-            radius=setup.radius,
-            thickness=setup.thickness,
+            setup.imaging,
             gate_px=gate,
             points_per_rim=config.points_per_rim,
             min_band_px=config.min_band_px if last else 0.0,
