@@ -394,3 +394,14 @@ def test_simulate_opening_names_bad_integer_arguments():
         polygon.simulate_opening(-1)
     with pytest.raises(InvalidInputError, match="blur_sigma"):
         polygon.simulate_opening(1, blur_sigma=float("nan"))
+
+
+def test_rrt_star_refuses_a_budget_whose_tree_cannot_fit_in_memory():
+    # Regression (CI trial): max_iterations = 2**31 ran RRT*'s refinement for hours; one tree
+    # node per iteration cannot fit, so the budget is refused up front.
+    from autoteach import plan
+    from autoteach.errors import AllocationError
+
+    ws, poses = plan.default_scene()
+    with pytest.raises(AllocationError, match="max_iterations"):
+        plan.plan_path(ws, poses["home"], poses["home"] + [0.2, -0.1, 0.1, 0.0, 0.01], max_iterations=2**31)

@@ -16,6 +16,7 @@ Example:
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,7 +25,7 @@ import numpy as np
 
 from autoteach import _core
 from autoteach._convert import as_f64, as_float, as_int
-from autoteach.errors import InvalidInputError
+from autoteach.errors import AllocationError, InvalidInputError
 
 __all__ = [
     "BSplineTrajectory",
@@ -111,6 +112,19 @@ class PathResult:
     extra: dict[str, float] = field(default_factory=dict)
 
 
+#: Bytes an RRT* tree node takes at least: 5 joints and a cost (f64), a parent index, and its k-d tree
+#: entry (5 coordinates and an index).
+_RRT_NODE_BYTES = 6 * 8 + 8 + 6 * 8
+
+
+def _physical_memory() -> int:
+    """Bytes of physical memory (``sysconf``); unbounded where the platform does not say."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 2**63
+
+
 def plan_path(
     workspace: Workspace,
     q_start: Any,
@@ -148,13 +162,21 @@ def plan_path(
         if isinstance(joints, (str, bytes)) or not hasattr(joints, "__iter__"):
             raise InvalidInputError(f"joints must be a list of joint indices, got {type(joints).__name__}")
         joints = [as_int(j, f"joints[{i}]") for i, j in enumerate(joints)]
+    budget = as_int(max_iterations, "max_iterations")
+    if method in ("rrt*", "rrt_star") and budget * _RRT_NODE_BYTES > _physical_memory():
+        # RRT* keeps refining until its budget is spent, one tree node per iteration: a budget whose
+        # tree cannot fit in memory would run for hours and then fail, so it is refused up front.
+        raise AllocationError(
+            f"max_iterations = {budget} would grow an RRT* tree of at least {budget * _RRT_NODE_BYTES / 1e9:.3g} GB, "
+            f"more than this machine's {_physical_memory() / 1e9:.3g} GB of memory"
+        )
     d = _core.plan_path(
         workspace._ws,
         _joints(q_start, "q_start"),
         _joints(q_goal, "q_goal"),
         method,
         as_float(margin, "margin"),
-        as_int(max_iterations, "max_iterations"),
+        budget,
         as_int(seed, "seed"),
         as_float(step_deg, "step_deg"),
         joints,
