@@ -34,19 +34,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bundle_adjust import make_scene, project, rotvec_to_matrix  # noqa: E402
+from peer_rows import median_time  # noqa: E402
 
 TOL = 1e-10
 MAX_ITER = 100
 FIXED = (0, 1)
-
-
-def _median_time(fn, repeats: int):
-    times, out = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), out
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -273,7 +265,7 @@ def rows(threads: int, quick: bool) -> list[dict]:
         K, _, _, obs, pi, xi, p0, x0 = scene
         big = len(obs) > 50_000
         reps = 3 if (quick or big) else 7
-        ours_s, res = _median_time(lambda s=scene: _ours(s[0], *s[3:]), reps)
+        ours_s, res = median_time(lambda s=scene: _ours(s[0], *s[3:]), reps)
         ours_cost = res.final_cost
         out += _ceres_rows(name, scene, ours_s, ours_cost, threads, reps)
         try:
@@ -283,7 +275,7 @@ def rows(threads: int, quick: bool) -> list[dict]:
             continue
         sp = ScipyAnalytic(K, obs, pi, xi, p0, x0)
         sp_reps = 1 if (quick or big) else 3
-        peer_s, r = _median_time(sp.solve, sp_reps)
+        peer_s, r = median_time(sp.solve, sp_reps)
         out.append(
             {
                 "workload": name,

@@ -14,9 +14,7 @@ reprojection error of each and the largest relative parameter difference.
 from __future__ import annotations
 
 import math
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from calib_vs_opencv import views  # noqa: E402
+from peer_rows import median_time  # noqa: E402
 
 N_VIEWS = 20
 SIGMA = 0.1
@@ -40,12 +39,7 @@ def rows(threads: int, quick: bool) -> list[dict]:
     img64 = [i.astype(np.float64) for i in img32]
     reps = 5 if quick else 15
     row = {"workload": f"camera calibration, {len(obj32)} views of a 10x7 board, Brown-Conrady"}
-    t_at = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        cal = calibrate(obj64, img64, "brown_conrady", size, outlier_threshold=math.inf)
-        t_at.append(time.perf_counter() - t0)
-    ours_s = statistics.median(t_at)
+    ours_s, cal = median_time(lambda: calibrate(obj64, img64, "brown_conrady", size, outlier_threshold=math.inf), reps)
     try:
         import cv2
     except ImportError:
@@ -63,12 +57,9 @@ def rows(threads: int, quick: bool) -> list[dict]:
         ]
     cv2.setNumThreads(threads)
     criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 500, 1e-16)
-    t_cv = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        rms_cv, k, d, _, _ = cv2.calibrateCamera(obj32, img32, size, None, None, criteria=criteria)
-        t_cv.append(time.perf_counter() - t0)
-    peer_s = statistics.median(t_cv)
+    peer_s, (rms_cv, k, d, _, _) = median_time(
+        lambda: cv2.calibrateCamera(obj32, img32, size, None, None, criteria=criteria), reps
+    )
     ref = np.array([k[0, 0], k[1, 1], k[0, 2], k[1, 2], *d.ravel()[:5]])
     rel = float(np.max(np.abs(cal.params - ref) / np.abs(ref)))
     return [

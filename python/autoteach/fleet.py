@@ -210,7 +210,7 @@ def write_result_file(result: Any, timestamps: np.ndarray, path: str | os.PathLi
     """
     from mcap.writer import CompressionType, Writer
 
-    from autoteach.io import _CHUNK_SIZE, _RESULT_SCHEMAS, RESULT_TOPICS, _result_messages, _writable_target
+    from autoteach.io import _CHUNK_SIZE, _writable_target, write_result_messages
 
     path = Path(path)
     part = _writable_target(path)
@@ -218,24 +218,7 @@ def write_result_file(result: Any, timestamps: np.ndarray, path: str | os.PathLi
         with open(part, "wb") as f:
             writer = Writer(f, chunk_size=_CHUNK_SIZE, compression=CompressionType.ZSTD, enable_data_crcs=True)
             writer.start(profile="", library="autoteach.fleet")
-            schemas: dict[str, int] = {}
-            channels: dict[str, int] = {}
-            seq: dict[str, int] = {}
-            for topic, t, data in _result_messages(result, np.asarray(timestamps, dtype=np.int64)):
-                if topic not in channels:
-                    name, schema_enc, msg_enc = RESULT_TOPICS[topic]
-                    if name not in schemas:
-                        schemas[name] = writer.register_schema(
-                            name=name, encoding=schema_enc, data=json.dumps(_RESULT_SCHEMAS[name]).encode()
-                        )
-                    channels[topic] = writer.register_channel(
-                        topic=topic, message_encoding=msg_enc, schema_id=schemas[name]
-                    )
-                    seq[topic] = 0
-                writer.add_message(
-                    channel_id=channels[topic], log_time=t, publish_time=t, data=data, sequence=seq[topic]
-                )
-                seq[topic] += 1
+            write_result_messages(writer, result, timestamps)
             writer.finish()
         os.replace(part, path)
     except BaseException:

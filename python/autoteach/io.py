@@ -73,6 +73,7 @@ __all__ = [
     "read_log",
     "read_results",
     "write_log",
+    "write_result_messages",
     "write_results",
 ]
 
@@ -1328,29 +1329,34 @@ def write_results(
                     media_type=att.media_type,
                     data=att.data,
                 )
-            new_schema: dict[str, int] = {}
-            new_chan: dict[str, int] = {}
-            seq: dict[str, int] = defaultdict(int)
-            for topic, t, data in _result_messages(result, np.asarray(session.timestamps, dtype=np.int64)):
-                if topic not in new_chan:
-                    name, schema_enc, msg_enc = RESULT_TOPICS[topic]
-                    if name not in new_schema:
-                        new_schema[name] = writer.register_schema(
-                            name=name, encoding=schema_enc, data=json.dumps(_RESULT_SCHEMAS[name]).encode()
-                        )
-                    new_chan[topic] = writer.register_channel(
-                        topic=topic, message_encoding=msg_enc, schema_id=new_schema[name]
-                    )
-                writer.add_message(
-                    channel_id=new_chan[topic], log_time=t, publish_time=t, data=data, sequence=seq[topic]
-                )
-                seq[topic] += 1
+            write_result_messages(writer, result, session.timestamps)
             writer.finish()
         os.replace(part, target)
     except BaseException:
         part.unlink(missing_ok=True)
         raise
     return target
+
+
+def write_result_messages(writer: Any, result: Any, timestamps: np.ndarray) -> None:
+    """Add an auto-teaching result's messages on the ``/autoteach/*`` channels to an MCAP ``writer``.
+
+    Registers each result schema and channel once (:data:`RESULT_TOPICS`); the messages are those
+    of :func:`write_results` and are read back by :func:`read_results`.
+    """
+    new_schema: dict[str, int] = {}
+    new_chan: dict[str, int] = {}
+    seq: dict[str, int] = defaultdict(int)
+    for topic, t, data in _result_messages(result, np.asarray(timestamps, dtype=np.int64)):
+        if topic not in new_chan:
+            name, schema_enc, msg_enc = RESULT_TOPICS[topic]
+            if name not in new_schema:
+                new_schema[name] = writer.register_schema(
+                    name=name, encoding=schema_enc, data=json.dumps(_RESULT_SCHEMAS[name]).encode()
+                )
+            new_chan[topic] = writer.register_channel(topic=topic, message_encoding=msg_enc, schema_id=new_schema[name])
+        writer.add_message(channel_id=new_chan[topic], log_time=t, publish_time=t, data=data, sequence=seq[topic])
+        seq[topic] += 1
 
 
 def read_results(path: str | os.PathLike[str]) -> dict[str, Any]:
