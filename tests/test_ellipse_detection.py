@@ -139,7 +139,7 @@ def test_bad_images(image: np.ndarray, match: str) -> None:
 
 def test_bad_options() -> None:
     img = np.zeros((20, 20), np.uint8)
-    with pytest.raises(InvalidInputError, match="unknown option"):
+    with pytest.raises(InvalidInputError, match="unknown ellipse-detection option"):
         detect_ellipses(img, thresh=3)
     with pytest.raises(AutoteachError, match="max_nfa"):
         detect_ellipses(img, max_nfa=-1.0)

@@ -1096,6 +1096,44 @@ def handeye_resolution(
 ) -> NDArray[np.float64]:
     """Theoretical resolution (eq. (5.14)): px/mm of cx, cy, cz and px/deg of rx, ry."""
 
+def handeye_gate(
+    k: NDArray[np.float64],
+    camera_poses: NDArray[np.float64],
+    wafers: NDArray[np.float64],
+    wafer_radius: float,
+    wafer_thickness: float,
+    edge_points: NDArray[np.float64],
+    edge_start: list[int],
+    edge_frames: list[int],
+    *,
+    gate_px: float = 2.0,
+    min_inlier_fraction: float = 0.6,
+    points_per_rim: int = 24,
+    min_points: int = 12,
+    min_band_px: float = 0.0,
+    band_weights: bool = False,
+) -> dict[str, _Any]:
+    """Gate detected edges against the projected wafer rims (``handeye::gating::gate_edges``).
+
+    Returns ``frames``, ``wafers``, ``rims``, ``start``, ``points (N, 2)``, ``sigma_scale`` (or
+    ``None``) and ``stats``.
+    """
+
+def handeye_band_width(
+    points: NDArray[np.float64],
+    h_inv: NDArray[np.float64],
+    t_co_other: NDArray[np.float64],
+    conic: NDArray[np.float64],
+    k: NDArray[np.float64],
+    radius: float,
+) -> NDArray[np.float64]:
+    """Predicted image width (pixels) of a wafer's side face at edge points of one rim."""
+
+def handeye_band_sigma_scale(band: NDArray[np.float64], rim: int) -> NDArray[np.float64]:
+    """Edge-noise factor (>= 1) at each predicted band width; ``rim`` 0 upper, 1 lower."""
+
+HANDEYE_BAND_NOISE: tuple[list[float], list[float], list[float]]
+
 # --- end handeye ---
 
 # --- active ---

@@ -21,7 +21,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from collections.abc import Sequence
@@ -36,6 +35,7 @@ from autoteach import _core
 from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
 from autoteach.geometry import Camera
+from autoteach.options import checked_replace
 
 F64Array = NDArray[np.float64]
 
@@ -892,11 +892,7 @@ def simulate_session(
     test grid (recorded and used by the guide; default :data:`GRID_MARGIN`). The options are a
     :class:`SessionOptions`; keyword ``overrides`` replace its fields by name.
     """
-    names = {f.name for f in dataclasses.fields(SessionOptions)}
-    unknown = sorted(set(overrides) - names)
-    if unknown:
-        raise InvalidInputError(f"unknown session option(s) {unknown}; the options are {sorted(names)}")
-    o = dataclasses.replace(options or SessionOptions(), **overrides)
+    o = checked_replace(options or SessionOptions(), "session", overrides)
     threshold, max_views, min_views, sigma = o.threshold, o.max_views, o.min_views, o.sigma
     pose_jitter, target, test_views, test_noise = o.pose_jitter, o.target, o.test_views, o.test_noise
     stop_at_threshold, grid_margin = o.stop_at_threshold, o.grid_margin

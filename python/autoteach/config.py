@@ -6,12 +6,12 @@ no simulator configuration) is a named constant here, with the reason for its va
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
 
 from autoteach.errors import InvalidInputError
+from autoteach.options import checked_replace
 
 __all__ = [
     "DEFAULT_ENCODER_NOISE",
@@ -157,11 +157,7 @@ class AutoteachConfig:
 
     def replace(self, **changes: Any) -> AutoteachConfig:
         """A copy with ``changes``; an unknown option name is an error that lists the known ones."""
-        names = {f.name for f in dataclasses.fields(self)}
-        unknown = sorted(set(changes) - names)
-        if unknown:
-            raise InvalidInputError(f"unknown auto-teaching option(s) {unknown}; the options are {sorted(names)}")
-        return dataclasses.replace(self, **changes)
+        return checked_replace(self, "auto-teaching", changes)
 
     def validate(self) -> None:
         """Check the options that do not depend on the session.

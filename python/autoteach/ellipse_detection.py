@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from autoteach import _core
 from autoteach.errors import InvalidInputError
 from autoteach.geometry import Ellipse
+from autoteach.options import refuse_unknown
 
 if TYPE_CHECKING:
     from autoteach.detect import WaferEdge
@@ -111,9 +112,7 @@ def _merged(options: EllipseDetectOptions | None, overrides: dict[str, object]) 
     if not isinstance(opts, EllipseDetectOptions):
         raise InvalidInputError(f"options must be an EllipseDetectOptions, got {type(opts).__name__}")
     fields = asdict(opts)
-    unknown = sorted(set(overrides) - set(fields))
-    if unknown:
-        raise InvalidInputError(f"unknown option(s) {unknown}; valid: {sorted(fields)}")
+    refuse_unknown(fields, overrides, "ellipse-detection")
     fields.update(overrides)
     out: dict[str, object] = {}
     for name, value in fields.items():

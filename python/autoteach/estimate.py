@@ -60,6 +60,7 @@ from autoteach._convert import as_f64, as_float, as_int
 from autoteach._sync import serialized
 from autoteach.errors import InvalidInputError
 from autoteach.geometry import so3_exp, so3_log
+from autoteach.options import checked_replace
 from autoteach.sigma_points import (
     JulierSigmaPoints,
     MerweScaledSigmaPoints,
@@ -1031,11 +1032,7 @@ class SolverOptions:
 
 def _solver_options(solver: SolverOptions | None, changes: dict[str, Any]) -> SolverOptions:
     """``solver`` (default :class:`SolverOptions`) with ``changes``; unknown names are refused."""
-    names = {f.name for f in dataclasses.fields(SolverOptions)}
-    unknown = sorted(set(changes) - names)
-    if unknown:
-        raise InvalidInputError(f"unknown solver option(s) {unknown}; the options are {sorted(names)}")
-    return dataclasses.replace(solver or SolverOptions(), **changes)
+    return checked_replace(solver or SolverOptions(), "solver", changes)
 
 
 def _solver_kwargs(

@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from autoteach import _core
 from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
+from autoteach.options import field_names, refuse_unknown
 from autoteach.polygon import RigidHypothesis, VotingOptions
 
 __all__ = [
@@ -248,11 +249,8 @@ def _split_overrides(
     options: GlobalRegisterOptions, voting: VotingOptions, overrides: dict[str, Any]
 ) -> tuple[GlobalRegisterOptions, VotingOptions]:
     """``options`` and ``voting`` with each override applied to the one that has its name."""
-    own = {f.name for f in dataclasses.fields(GlobalRegisterOptions)}
-    votes = {f.name for f in dataclasses.fields(VotingOptions)}
-    unknown = sorted(set(overrides) - own - votes)
-    if unknown:
-        raise InvalidInputError(f"unknown option(s) {unknown}; the options are {sorted(own | votes)}")
+    own, votes = field_names(GlobalRegisterOptions), field_names(VotingOptions)
+    refuse_unknown(own | votes, overrides, "global-registration")
     fixed = [n for n in ("descriptor_tolerance", "shifted_grid", "max_pairs") if n in overrides]
     if fixed:
         raise InvalidInputError(f"global_register votes with the default {fixed}; they cannot be set here")

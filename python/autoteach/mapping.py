@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from autoteach import _core
 from autoteach._convert import as_f64
 from autoteach.errors import InvalidInputError
+from autoteach.options import checked_replace
 
 UNKNOWN = -1
 """Cell value of unobserved space."""
@@ -231,13 +232,11 @@ def _ids(value: ArrayLike, name: str) -> NDArray[np.int64]:
     return np.ascontiguousarray(arr, dtype=np.int64)
 
 
-class Rasterizer:
-    """Rasterizes a sequence of SLAM graphs into occupancy grids (Table 2.1, Algorithm 2.1).
+@dataclass(frozen=True)
+class RasterizerOptions:
+    """The node covering, the laser and the occupancy model of a :class:`Rasterizer`.
 
-    Args:
-        method: ``"cover_composite"`` (default), ``"naive_cover_composite"`` or ``"naive_composite"``.
-        slice_size: N, sequential cover nodes of one robot per slice (CoverComposite).
-        resolution: metres per cell.
+    Attributes:
         covering: whether CoverComposite drops redundant nodes (section 2.4).
         cover_distance: a node is redundant if a covered node of its robot lies within this many
             metres ...
@@ -252,48 +251,73 @@ class Rasterizer:
         threshold: a cell is structure iff its log-odds exceeds this.
     """
 
+    covering: bool = True
+    cover_distance: float = 0.75
+    cover_angle: float = math.radians(30.0)
+    fov: float = math.radians(270.0)
+    beams: int = 1081
+    max_range: float = 30.0
+    p_hit: float = 0.7
+    p_miss: float = 0.4
+    prior: float = 0.0
+    threshold: float = 0.0
+
+    def validate(self) -> None:
+        """Check the beam count and the probabilities.
+
+        Raises:
+            InvalidInputError: fewer than 2 beams, or a probability outside (0, 1).
+        """
+        if isinstance(self.beams, bool) or not isinstance(self.beams, int) or self.beams < 2:
+            raise InvalidInputError(f"beams must be an integer >= 2, got {self.beams!r}")
+        for name, p in (("p_hit", self.p_hit), ("p_miss", self.p_miss)):
+            if not (0.0 < float(p) < 1.0):
+                raise InvalidInputError(f"{name} must be in (0, 1), got {p!r}")
+
+
+class Rasterizer:
+    """Rasterizes a sequence of SLAM graphs into occupancy grids (Table 2.1, Algorithm 2.1).
+
+    Args:
+        method: ``"cover_composite"`` (default), ``"naive_cover_composite"`` or ``"naive_composite"``.
+        slice_size: N, sequential cover nodes of one robot per slice (CoverComposite).
+        resolution: metres per cell.
+        options: the covering, laser and occupancy model (:class:`RasterizerOptions`); keyword
+            ``overrides`` replace its fields by name (``Rasterizer(beams=5, fov=...)``).
+    """
+
     def __init__(
         self,
         method: str = "cover_composite",
         slice_size: int = 4,
         resolution: float = 0.1,
         *,
-        covering: bool = True,
-        cover_distance: float = 0.75,
-        cover_angle: float = math.radians(30.0),
-        fov: float = math.radians(270.0),
-        beams: int = 1081,
-        max_range: float = 30.0,
-        p_hit: float = 0.7,
-        p_miss: float = 0.4,
-        prior: float = 0.0,
-        threshold: float = 0.0,
+        options: RasterizerOptions | None = None,
+        **overrides: Any,
     ) -> None:
         if method not in METHODS:
             raise InvalidInputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-        if not isinstance(beams, int) or beams < 2:
-            raise InvalidInputError(f"beams must be an integer >= 2, got {beams!r}")
-        for name, p in (("p_hit", p_hit), ("p_miss", p_miss)):
-            if not (0.0 < float(p) < 1.0):
-                raise InvalidInputError(f"{name} must be in (0, 1), got {p!r}")
+        o = checked_replace(options or RasterizerOptions(), "rasterizer", overrides)
+        o.validate()
         if isinstance(slice_size, bool) or not isinstance(slice_size, int) or slice_size < 1:
             raise InvalidInputError(f"slice_size must be a positive integer, got {slice_size!r}")
         self.method = method
-        self.beams = beams
+        self.options = o
+        self.beams = o.beams
         self._inner = _core.Rasterizer(
             method,
             slice_size,
             float(resolution),
-            bool(covering),
-            float(cover_distance),
-            float(cover_angle),
-            -float(fov) / 2.0,
-            float(fov) / (beams - 1),
-            float(max_range),
-            math.log(p_hit / (1.0 - p_hit)),
-            math.log(p_miss / (1.0 - p_miss)),
-            float(prior),
-            float(threshold),
+            bool(o.covering),
+            float(o.cover_distance),
+            float(o.cover_angle),
+            -float(o.fov) / 2.0,
+            float(o.fov) / (o.beams - 1),
+            float(o.max_range),
+            math.log(o.p_hit / (1.0 - o.p_hit)),
+            math.log(o.p_miss / (1.0 - o.p_miss)),
+            float(o.prior),
+            float(o.threshold),
         )
         self.last_report: UpdateReport | None = None
 
@@ -643,6 +667,7 @@ __all__ = [
     "GraphSnapshot",
     "OccupancyGrid",
     "Rasterizer",
+    "RasterizerOptions",
     "StreamResult",
     "TeamSimulator",
     "UpdateReport",

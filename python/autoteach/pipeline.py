@@ -635,21 +635,11 @@ def _drop_sparse_wafers(obs: Observations, min_frames: int) -> Observations:
     )
 
 
-#: Edge-point noise of the detector against the predicted side-band width (pixels), per rim:
-#: RMS normal offset of the detected points from the true rim, relative to that of upper-rim
-#: points on bands of at least 3 px (0.0615 px), at the centres of the bins 0–1, 1–1.5, then
-#: 0.25 px wide to 3.5 (1.5–2 measured as one bin: its value serves both entries), and 3.5–4
-#: px. Measured on the detector with its default rules (arc rules, rim screens, partner search)
-#: on the simulated sessions of seeds 0–4 (200 frames, 395 k gated points, reference RMS
-#: 0.0615 px; ``python benchmarks/autoteach_sessions.py
-#: --noise-model --seeds 0 1 2 3 4``); seeds 5–7 were not used. Where the band narrows its
-#: two blurred edges merge and the band-profile fit of the detector is biased along the edge;
-#: the lower rim, the band's far edge, is the worse one from 3 px down.
-BAND_NOISE_WIDTH_PX: tuple[float, ...] = (0.5, 1.25, 1.625, 1.875, 2.125, 2.375, 2.625, 2.875, 3.125, 3.375, 3.75)
-#: Relative noise of the upper rim at :data:`BAND_NOISE_WIDTH_PX` (clamped below at 1).
-BAND_NOISE_UPPER: tuple[float, ...] = (3.95, 2.73, 3.02, 3.02, 2.27, 1.64, 1.17, 1.05, 1.10, 0.98, 0.79)
-#: Relative noise of the lower rim at :data:`BAND_NOISE_WIDTH_PX` (clamped below at 1).
-BAND_NOISE_LOWER: tuple[float, ...] = (5.61, 4.22, 2.91, 2.91, 2.81, 2.59, 1.85, 1.62, 1.39, 1.09, 0.79)
+#: The detector's edge-point noise against the predicted side-band width, measured on simulated
+#: sessions (``python benchmarks/autoteach_sessions.py --noise-model``): the widths (pixels), and
+#: the relative noise of the upper and of the lower rim there. Defined once, in
+#: ``autoteach_estimate::handeye::gating`` (``BAND_NOISE_*``), with how they were measured.
+BAND_NOISE_WIDTH_PX, BAND_NOISE_UPPER, BAND_NOISE_LOWER = (tuple(t) for t in _core.HANDEYE_BAND_NOISE)
 
 
 def band_sigma_scale(band: np.ndarray, rim: int) -> np.ndarray:
@@ -660,9 +650,7 @@ def band_sigma_scale(band: np.ndarray, rim: int) -> np.ndarray:
     :data:`BAND_NOISE_LOWER`, linear in between, constant beyond the ends, never below 1 so
     that the best points keep the solver's ``σ``). ``rim`` 0 is the upper, 1 the lower rim.
     """
-    table = BAND_NOISE_UPPER if rim == 0 else BAND_NOISE_LOWER
-    s = np.interp(np.asarray(band, dtype=np.float64), BAND_NOISE_WIDTH_PX, table)
-    return np.maximum(s, 1.0)
+    return _core.handeye_band_sigma_scale(np.asarray(band, dtype=np.float64).reshape(-1), int(rim))
 
 
 def band_width(
@@ -675,22 +663,18 @@ def band_width(
     (``t_co_other``: the other rim's frame in the camera frame) is projected, and the width is
     the component of the displacement between the two rims' images along the unit normal of
     the rim's image conic ``conic`` at the point. This is the apparent height of the wafer's
-    side face (its thickness) there: widest at the front of the visible arc, shrinking to zero
-    where the rim's image is tangent to the line of sight.
+    side face (its thickness): widest at the front of the visible arc, shrinking to zero where
+    the rim's image is tangent to the line of sight.
     """
-    ph = np.column_stack([points, np.ones(len(points))])
-    x = ph @ h_inv.T
-    phi = np.arctan2(x[:, 1] / x[:, 2], x[:, 0] / x[:, 2])
-    local = np.stack([radius * np.cos(phi), radius * np.sin(phi), np.zeros(len(phi)), np.ones(len(phi))])
-    pc = (t_co_other @ local)[:3]
-    uvw = k @ pc
-    other = (uvw[:2] / np.where(np.abs(uvw[2]) > 1e-12, uvw[2], 1e-12)).T
-    # The rim's own image at φ: H·(r cos φ, r sin φ, 1).
-    own = np.linalg.solve(h_inv, np.stack([radius * np.cos(phi), radius * np.sin(phi), np.ones(len(phi))]))
-    own = (own[:2] / own[2]).T
-    grad = ph @ conic.T
-    n = grad[:, :2] / np.maximum(np.hypot(grad[:, 0], grad[:, 1]), 1e-300)[:, None]
-    return np.abs(((other - own) * n).sum(axis=1))
+    f64 = np.float64
+    return _core.handeye_band_width(
+        np.asarray(points, dtype=f64).reshape(-1, 2),
+        np.asarray(h_inv, dtype=f64),
+        np.asarray(t_co_other, dtype=f64),
+        np.asarray(conic, dtype=f64),
+        np.asarray(k, dtype=f64),
+        float(radius),
+    )
 
 
 def gate_detections(
@@ -729,108 +713,46 @@ def gate_detections(
     ``band_weights`` gives every kept point a standard-deviation factor from the predicted band
     width (:func:`band_sigma_scale`; :attr:`Observations.sigma_scale`), so that the narrow-band
     points count for what they are worth instead of all or nothing.
+
+    Computed by ``autoteach_estimate::handeye::gating::gate_edges``.
     """
-    k, radius, thickness = imaging.k, imaging.radius, imaging.thickness
-    n_w = len(wafers)
-    best: dict[tuple[int, int, int], tuple[int, np.ndarray, np.ndarray | None]] = {}
-    n_edges = n_rejected = n_narrow = 0
-    associated: set[tuple[int, int, int]] = set()
-    # Rim frames (world) of every finite wafer, both rims, and 72 samples of each rim circle.
-    ids = [(w, rim) for w in range(n_w) if np.all(np.isfinite(wafers[w])) for rim in (0, 1)]
-    t_rims = np.zeros((len(ids), 4, 4))
-    for i, (w, rim) in enumerate(ids):
-        t = wafer_pose(np.asarray(wafers[w], dtype=np.float64))
-        t[:3, 3] += t[:3, 2] * ((0.5 if rim == 0 else -0.5) * thickness)
-        t_rims[i] = t
-    ang = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
-    circle = np.stack([radius * np.cos(ang), radius * np.sin(ang), np.zeros(72), np.ones(72)])
-    c0 = np.diag([1.0, 1.0, -radius * radius])
+    edge_pts: list[np.ndarray] = []
+    edge_frames: list[int] = []
     for f, edges in enumerate(detections):
-        if not edges or not ids:
-            continue
-        t_co = np.linalg.inv(camera_poses[f]) @ t_rims  # (R, 4, 4)
-        pc = t_co @ circle  # (R, 4, 72)
-        ok = np.all(pc[:, 2, :] > 1e-3, axis=1)  # whole rim in front: its image is an ellipse
-        uv = np.einsum("ij,rjn->rin", k, pc[:, :3, :])
-        uv = uv[:, :2, :] / np.where(ok[:, None, None], uv[:, 2:3, :], 1.0)
-        boxes = np.stack([uv[:, 0].min(1), uv[:, 1].min(1), uv[:, 0].max(1), uv[:, 1].max(1)], axis=1)
-        h = np.einsum("ij,rjk->rik", k, t_co[:, :3, [0, 1, 3]])
-        hi = np.linalg.inv(np.where(ok[:, None, None], h, np.eye(3)))
-        conics = np.transpose(hi, (0, 2, 1)) @ c0 @ hi
-        conics /= np.linalg.norm(conics, axis=(1, 2))[:, None, None]
-        margin = 3.0 * gate_px
         for e in edges:
-            p = np.asarray(e.points, dtype=np.float64).reshape(-1, 2)
-            if len(p) < min_points:
-                continue
-            n_edges += 1
-            # Score on an even subsample (the solver keeps ``points_per_rim`` points anyway).
-            p = _subsample(p, max(2 * points_per_rim, min_points))
-            bb = _bbox(p)
-            near = (
-                ok
-                & (boxes[:, 0] - margin <= bb[2])
-                & (bb[0] - margin <= boxes[:, 2])
-                & (boxes[:, 1] - margin <= bb[3])
-                & (bb[1] - margin <= boxes[:, 3])
-            )
-            choice: tuple[int, int, int, np.ndarray | None] = (0, -1, -1, None)
-            for r in np.flatnonzero(near):
-                d = conic_distance(p, conics[r])
-                inl = d <= gate_px
-                n_in = int(inl.sum())
-                if n_in > choice[0]:
-                    choice = (n_in, ids[r][0], ids[r][1], p[inl])
-            n_in, w, rim, q = choice
-            if w < 0 or n_in < max(min_points, min_inlier_fraction * len(p)):
-                n_rejected += 1
-                continue
-            associated.add((f, w, rim))
-            scale = None
-            if (min_band_px > 0.0 or band_weights) and q is not None:
-                r = ids.index((w, rim))
-                band = band_width(q, hi[r], t_co[r ^ 1], conics[r], k, radius)
-                narrow = band < min_band_px
-                n_narrow += int(narrow.sum())
-                q = q[~narrow]
-                n_in = len(q)
-                if band_weights:
-                    scale = band_sigma_scale(band[~narrow], rim)
-                if n_in < min_points:
-                    n_rejected += 1
-                    continue
-            key = (f, w, rim)
-            if key not in best or n_in > best[key][0]:
-                best[key] = (n_in, q, scale)
-    frames, wafer_idx, rims, start, pts, scales = [], [], [], [0], [], []
-    for (f, w, rim), (_, q, scale) in sorted(best.items()):
-        if scale is not None:
-            scales.append(_subsample(scale, points_per_rim))
-        q = _subsample(q, points_per_rim)
-        frames.append(f)
-        wafer_idx.append(w)
-        rims.append(rim)
-        pts.append(q)
-        start.append(start[-1] + len(q))
+            edge_pts.append(np.asarray(e.points, dtype=np.float64).reshape(-1, 2))
+            edge_frames.append(f)
+    edge_start = np.concatenate([[0], np.cumsum([len(p) for p in edge_pts], dtype=np.int64)]).tolist()
+    g = _core.handeye_gate(
+        np.asarray(imaging.k, dtype=np.float64),
+        np.asarray(camera_poses, dtype=np.float64).reshape(-1, 4, 4),
+        np.asarray(wafers, dtype=np.float64).reshape(-1, 5),
+        imaging.radius,
+        imaging.thickness,
+        np.concatenate(edge_pts) if edge_pts else np.zeros((0, 2)),
+        edge_start,
+        edge_frames,
+        gate_px=gate_px,
+        min_inlier_fraction=min_inlier_fraction,
+        points_per_rim=points_per_rim,
+        min_points=min_points,
+        min_band_px=min_band_px,
+        band_weights=band_weights,
+    )
     obs = Observations(
-        frames,
-        wafer_idx,
-        rims,
-        start,
-        np.concatenate(pts) if pts else np.zeros((0, 2)),
-        n_w,
+        g["frames"],
+        g["wafers"],
+        g["rims"],
+        g["start"],
+        g["points"],
+        len(wafers),
         np.asarray(slots, dtype=np.int64),
-        sigma_scale=np.concatenate(scales) if band_weights and scales else None,
+        sigma_scale=g["sigma_scale"] if g["frames"] else None,
     )
     obs.stats = {
-        "edges": n_edges,
-        "edges_rejected": n_rejected,
-        "rims_used": len(frames),
-        "frames_used": len(set(frames)),
+        **g["stats"],
         "gate_px": gate_px,
         "min_band_px": min_band_px,
-        "points_narrow_band": n_narrow,
-        "rims_associated": len(associated),
         "stage": "gated",
     }
     return obs

@@ -40,6 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from autoteach import _core
 from autoteach._convert import as_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
+from autoteach.options import checked_replace
 
 __all__ = [
     "CROSS_TEMPLATE",
@@ -129,11 +130,7 @@ class VotingOptions:
 
     def replace(self, **changes: Any) -> VotingOptions:
         """A copy with ``changes``; an unknown option name is an error that lists the known ones."""
-        names = {f.name for f in dataclasses.fields(self)}
-        unknown = sorted(set(changes) - names)
-        if unknown:
-            raise InvalidInputError(f"unknown voting option(s) {unknown}; the options are {sorted(names)}")
-        return dataclasses.replace(self, **changes)
+        return checked_replace(self, "voting", changes)
 
     def core_options(self, top_k: int | None = None) -> dict[str, Any]:
         """The options dict of the compiled voting calls (counts checked by name)."""

@@ -6,11 +6,11 @@ Their defaults are ``DetectParams::default()`` of the Rust crate (``autoteach_de
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any, Literal
 
 from autoteach.errors import InvalidInputError
+from autoteach.options import checked_replace
 
 __all__ = ["WaferDetectOptions"]
 
@@ -150,11 +150,7 @@ class WaferDetectOptions:
 
     def replace(self, **changes: Any) -> WaferDetectOptions:
         """A copy with ``changes``; an unknown option name is an error that lists the known ones."""
-        names = {f.name for f in dataclasses.fields(self)}
-        unknown = sorted(set(changes) - names)
-        if unknown:
-            raise InvalidInputError(f"unknown wafer-detection option(s) {unknown}; the options are {sorted(names)}")
-        return dataclasses.replace(self, **changes)
+        return checked_replace(self, "wafer-detection", changes)
 
     def core_kwargs(self) -> dict[str, Any]:
         """The keyword arguments of ``_core.wafer_detect``, each converted to the type it takes."""

@@ -123,5 +123,49 @@ fn bench(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, bench);
+/// Gating (`handeye::gating`): a 26-wafer carrier seen in 20 frames, both rims of every wafer
+/// detected as one 60-point arc per frame, plus a 40-point clutter edge per frame.
+fn bench_gating(c: &mut Criterion) {
+    use autoteach_estimate::handeye::{DetectedEdges, GateConfig, WaferGeometry, gate_edges};
+    let (k, t_wc, _, _) = setup();
+    let geometry = WaferGeometry::new(0.15, 0.001).expect("valid bench input");
+    let wafers: Vec<Option<Vector5<f64>>> = (0..26)
+        .map(|i| Some(Vector5::new(0.0, 0.0, 0.01 * i as f64, 0.0, 0.0)))
+        .collect();
+    let cams: Vec<Isometry3<f64>> = (0..20)
+        .map(|f| {
+            Isometry3::from_parts(
+                Translation3::new(0.0, 0.0, 0.005 * f as f64),
+                UnitQuaternion::identity(),
+            ) * t_wc
+        })
+        .collect();
+    let (mut points, mut start, mut frames) = (Vec::new(), vec![0], Vec::new());
+    for (f, cam) in cams.iter().enumerate() {
+        for w in wafers.iter().flatten() {
+            for rim in [Rim::Upper, Rim::Lower] {
+                let (t_wo, _) = autoteach_estimate::handeye::rim_pose(w, rim, 0.001);
+                if let Ok(e) = project_circle(&k, &(cam.inverse() * t_wo), 0.15) {
+                    points.extend((0..60).map(|i| e.point_at(0.4 + 0.03 * i as f64)));
+                    start.push(points.len());
+                    frames.push(f);
+                }
+            }
+        }
+        points.extend((0..40).map(|i| Vector2::new(300.0 + 3.0 * i as f64, 200.0)));
+        start.push(points.len());
+        frames.push(f);
+    }
+    let edges = DetectedEdges {
+        points: &points,
+        start: &start,
+        frames: &frames,
+    };
+    let cfg = GateConfig::default();
+    c.bench_function("handeye gating 26 wafers x 20 frames", |b| {
+        b.iter(|| gate_edges(&k, &cams, black_box(&wafers), geometry, &edges, &cfg))
+    });
+}
+
+criterion_group!(benches, bench, bench_gating);
 criterion_main!(benches);

@@ -254,6 +254,11 @@ pub enum EstimateError {
         y1: f64,
     },
 
+    /// An input that is inconsistent in itself (offsets that do not index its points, an index
+    /// beyond what it refers to); the message names the input and the offending value.
+    #[error("{0}")]
+    InvalidInput(String),
+
     /// An input that must not be empty is empty (e.g. a training set with no measurement).
     #[error("{0} is empty")]
     EmptyInput(String),

@@ -894,6 +894,18 @@ pub fn circle_image_conic(
     Ok(ci.c_raw / ci.c_raw.norm())
 }
 
+/// [`circle_image_conic`] and `H⁻¹` (eq. (5.13), `H = K·[r₁ r₂ t]`), the map from the image to
+/// the circle's plane: what a caller needs to find the circle angle of an image point.
+/// Errors as [`circle_image_conic`].
+pub fn circle_image_conic_and_inverse(
+    k: &Matrix3<f64>,
+    t_co: &Isometry3<f64>,
+    radius: f64,
+) -> Result<(Matrix3<f64>, Matrix3<f64>)> {
+    let ci = circle_image(k, t_co, radius)?;
+    Ok((ci.c_raw / ci.c_raw.norm(), ci.h_inv))
+}
+
 /// [`circle_image_conic`] and its derivatives with respect to a right perturbation of the
 /// circle pose, `T_co ⊕ δ = T_co·Exp(δ)`, `δ = [ω; ρ]` (rotation first): element `i` of the
 /// array is `∂C/∂δᵢ` at `δ = 0`.

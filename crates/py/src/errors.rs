@@ -164,7 +164,8 @@ pub fn estimate(err: autoteach_estimate::EstimateError) -> PyErr {
         E::KernelNotPositiveDefinite { .. }
         | E::CoincidentLink { .. }
         | E::OutsideMap { .. }
-        | E::EmptyInput(_) => invalid_input(err.to_string()),
+        | E::EmptyInput(_)
+        | E::InvalidInput(_) => invalid_input(err.to_string()),
     }
 }
 

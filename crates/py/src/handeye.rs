@@ -3,8 +3,9 @@
 //! Python-visible names carry the `handeye_` prefix; the friendly API is
 //! `autoteach.pipeline.autoteach`.
 
+use autoteach_estimate::handeye::run::{self, SolvePlan};
 use autoteach_estimate::handeye::{
-    BasinSearch, EdgeFactor, EdgeObservation, FreeCamera, PriorSigmas, Rim, SlamMot, SlamMotConfig,
+    EdgeFactor, EdgeObservation, FreeCamera, PriorSigmas, Rim, SlamMot, SlamMotConfig,
     SlamMotSolution, SlamMotState, UkfNoise, WaferGeometry, WindowRecord, theoretical_resolution,
 };
 use autoteach_geometry::lie::se3_log;
@@ -301,44 +302,25 @@ fn handeye_slam_mot<'py>(
         }
     };
     let n_wafers = wafers.len();
-    let (sol, hist, init, moved) = convert::detached(py, move || {
+    let plan = SolvePlan {
+        init_heights,
+        window,
+        window_prior: PriorSigmas {
+            base_rotation: prior_sigmas.0,
+            base_translation: prior_sigmas.1,
+            offset: prior_sigmas.2,
+        },
+        basin_search,
+    };
+    let out = convert::detached(py, move || {
         let slam = SlamMot::new(config, enc, observations, n_wafers).map_err(errors::estimate)?;
-        let mut state = SlamMotState::new(base, offsets, wafers);
-        if let Some((lo, hi, step)) = init_heights {
-            state.wafers = slam
-                .initial_wafer_heights(&state, (lo, hi), step)
-                .map_err(errors::estimate)?;
-        }
-        let init = state.clone();
-        let mut hist = Vec::new();
-        if window > 0 {
-            let sig = PriorSigmas {
-                base_rotation: prior_sigmas.0,
-                base_translation: prior_sigmas.1,
-                offset: prior_sigmas.2,
-            };
-            hist = slam
-                .solve_sliding_window(&state, window, &sig)
-                .map_err(errors::estimate)?;
-            if let Some(last) = hist.last() {
-                state = last.state.clone();
-            }
-        }
-        let (sol, moved) = if basin_search {
-            slam.solve_batch_with_basins(&state, &BasinSearch::default())
-                .map_err(errors::estimate)?
-        } else {
-            (
-                slam.solve_batch(&state).map_err(errors::estimate)?,
-                Vec::new(),
-            )
-        };
-        Ok((sol, hist, init, moved))
+        let start = SlamMotState::new(base, offsets, wafers);
+        run::solve(&slam, &start, &plan).map_err(errors::estimate)
     })?;
-    let d = solution_dict(py, &sol)?;
-    d.set_item("basins_moved", moved)?;
-    d.set_item("history", history_list(py, &hist)?)?;
-    d.set_item("initial", state_dict(py, &init)?)?;
+    let d = solution_dict(py, &out.solution)?;
+    d.set_item("basins_moved", out.basins_moved)?;
+    d.set_item("history", history_list(py, &out.history)?)?;
+    d.set_item("initial", state_dict(py, &out.initial)?)?;
     Ok(d)
 }
 

@@ -17,6 +17,7 @@ mod estimate;
 mod geometry;
 mod gray;
 mod handeye;
+mod handeye_gate;
 mod lsq;
 mod mapping;
 mod plan;
@@ -51,6 +52,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     lsq::register(m)?;
     calib::register(m)?;
     handeye::register(m)?;
+    handeye_gate::register(m)?;
     active::register(m)?;
     radio::register(m)?;
     ellipse_detection::register(m)?;

@@ -17,7 +17,9 @@
 
 pub mod chain;
 pub mod factors;
+pub mod gating;
 pub mod motion;
+pub mod run;
 pub mod ukf_model;
 pub mod wafer;
 
@@ -25,6 +27,7 @@ pub use chain::{CameraChain, ChainEval, JOINT_NAMES, N_JOINTS};
 pub use factors::{
     EdgeJacobians, conic_edge_residuals, nearest_model_angles, point_reprojection_residuals,
 };
+pub use gating::{DetectedEdges, GateConfig, GateStats, Gated, gate_edges};
 pub use motion::{FreeCameraEdgeResidual, RobotMotionResidual};
 pub use ukf_model::{
     AutoTeachUkfModel, UKF_MEASURED_JOINTS, UKF_OFFSET_JOINTS, UkfNoise, UkfRun, run_autoteach_ukf,
