@@ -16,7 +16,6 @@ Example:
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,7 +24,7 @@ import numpy as np
 
 from autoteach import _core
 from autoteach._convert import as_f64, as_float, as_int
-from autoteach.errors import AllocationError, InvalidInputError
+from autoteach.errors import InvalidInputError
 
 __all__ = [
     "BSplineTrajectory",
@@ -112,19 +111,6 @@ class PathResult:
     extra: dict[str, float] = field(default_factory=dict)
 
 
-#: Bytes an RRT* tree node takes at least: 5 joints and a cost (f64), a parent index, and its k-d tree
-#: entry (5 coordinates and an index).
-_RRT_NODE_BYTES = 6 * 8 + 8 + 6 * 8
-
-
-def _physical_memory() -> int:
-    """Bytes of physical memory (``sysconf``); unbounded where the platform does not say."""
-    try:
-        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):
-        return 2**63
-
-
 def plan_path(
     workspace: Workspace,
     q_start: Any,
@@ -155,6 +141,9 @@ def plan_path(
         InvalidInputError: start or goal in collision (the message names the link and obstacle) or
             malformed input.
         ConvergenceError: no path within the budget.
+        AllocationError: an RRT* budget whose tree (one node per iteration) cannot fit in this
+            machine's physical memory; RRT* refines until its budget is spent, so such a budget
+            would run for hours before failing.
     """
     if not isinstance(method, str):
         raise InvalidInputError(f"method must be 'rrt*' or 'a*', got {type(method).__name__}")
@@ -163,13 +152,6 @@ def plan_path(
             raise InvalidInputError(f"joints must be a list of joint indices, got {type(joints).__name__}")
         joints = [as_int(j, f"joints[{i}]") for i, j in enumerate(joints)]
     budget = as_int(max_iterations, "max_iterations")
-    if method in ("rrt*", "rrt_star") and budget * _RRT_NODE_BYTES > _physical_memory():
-        # RRT* keeps refining until its budget is spent, one tree node per iteration: a budget whose
-        # tree cannot fit in memory would run for hours and then fail, so it is refused up front.
-        raise AllocationError(
-            f"max_iterations = {budget} would grow an RRT* tree of at least {budget * _RRT_NODE_BYTES / 1e9:.3g} GB, "
-            f"more than this machine's {_physical_memory() / 1e9:.3g} GB of memory"
-        )
     d = _core.plan_path(
         workspace._ws,
         _joints(q_start, "q_start"),

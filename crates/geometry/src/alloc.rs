@@ -45,6 +45,36 @@ pub fn try_filled<T: Clone>(
     Ok(v)
 }
 
+/// Bytes of physical memory: `MemTotal` of `/proc/meminfo` on Linux, `None` where the platform
+/// does not say.
+pub fn physical_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
+/// `Ok` when `n` elements of `bytes_each` bytes fit in physical memory (always, where the
+/// platform does not report it). For work that grows to `n` elements one at a time and runs
+/// until it has them all, such as a planner's tree: a size that cannot fit is refused up front,
+/// instead of running for hours and failing at the end. Unlike [`ensure_fits`] this does not
+/// depend on the allocator refusing a reservation (Linux's overcommit may grant one).
+pub fn ensure_within_physical_memory(
+    what: &'static str,
+    n: usize,
+    bytes_each: usize,
+) -> Result<(), GeometryError> {
+    let need = (n as u128) * (bytes_each as u128);
+    match physical_memory() {
+        Some(total) if need > u128::from(total) => Err(GeometryError::OutOfMemory {
+            what,
+            elements: n,
+            bytes_each,
+        }),
+        _ => Ok(()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -63,5 +93,25 @@ mod tests {
         assert!(checked_count("matrix", usize::MAX, 2).is_err());
         assert_eq!(checked_count("matrix", 3, 4), Ok(12));
         assert_eq!(try_filled("v", 3, 1.5).unwrap(), vec![1.5; 3]);
+    }
+
+    #[test]
+    fn a_size_beyond_physical_memory_is_refused_and_a_small_one_is_not() {
+        assert!(ensure_within_physical_memory("tree", 1000, 128).is_ok());
+        if let Some(total) = physical_memory() {
+            let n = usize::try_from(total / 64).unwrap_or(usize::MAX);
+            let e = ensure_within_physical_memory("tree", n, 128).unwrap_err();
+            assert!(matches!(
+                e,
+                GeometryError::OutOfMemory {
+                    bytes_each: 128,
+                    ..
+                }
+            ));
+        }
+        assert!(
+            ensure_within_physical_memory("tree", usize::MAX, usize::MAX).is_err()
+                || physical_memory().is_none()
+        );
     }
 }

@@ -206,6 +206,12 @@ pub fn finite_array<'py>(obj: &Bound<'py, PyAny>, name: &'static str) -> PyResul
     Array::new(obj, name)?.finite()
 }
 
+/// Reads one finite 3×3 matrix (row-major from NumPy).
+pub fn matrix3(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<nalgebra::Matrix3<f64>> {
+    let values = finite_array(obj, name)?.exact(&[3, 3])?;
+    Ok(nalgebra::Matrix3::from_row_slice(&values))
+}
+
 /// Reads a finite 4×4 homogeneous rigid transform (rotation orthonormal to 1e-6).
 pub fn isometry(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<nalgebra::Isometry3<f64>> {
     let a = finite_array(obj, name)?;

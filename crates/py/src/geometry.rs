@@ -13,12 +13,12 @@ use autoteach_geometry::camera::{Camera, CameraModel};
 use autoteach_geometry::conic::{self, Ellipse};
 use autoteach_geometry::robot::{self, Blade, Joints, RobotParams, WaferRobot};
 use autoteach_geometry::{GeometryError, lie};
-use nalgebra::{Isometry3, Matrix3, Rotation3, SMatrix, Vector3, Vector5, Vector6};
+use nalgebra::{Isometry3, Rotation3, SMatrix, Vector3, Vector5, Vector6};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{self, batched_shape, finite_batch, to_numpy};
+use crate::convert::{self, batched_shape, finite_batch, matrix3, to_numpy};
 use crate::errors;
 
 /// A float64 NumPy array returned to Python.
@@ -151,12 +151,6 @@ fn vector<const N: usize>(
 ) -> PyResult<SMatrix<f64, N, 1>> {
     let values = convert::finite_array(obj, name)?.exact(&[N])?;
     Ok(SMatrix::<f64, N, 1>::from_row_slice(&values))
-}
-
-/// Reads one finite 3×3 matrix.
-fn matrix3(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Matrix3<f64>> {
-    let values = convert::finite_array(obj, name)?.exact(&[3, 3])?;
-    Ok(Matrix3::from_row_slice(&values))
 }
 
 /// Fails unless `value` is finite.

@@ -43,8 +43,7 @@ fn rows(obj: &Bound<'_, PyAny>, name: &'static str, width: usize) -> PyResult<Ve
 }
 
 fn k_matrix(obj: &Bound<'_, PyAny>) -> PyResult<Matrix3<f64>> {
-    let v = convert::finite_array(obj, "K")?.exact(&[3, 3])?;
-    Ok(Matrix3::from_row_slice(&v))
+    convert::matrix3(obj, "K")
 }
 
 fn read_robot_params(obj: &Bound<'_, PyAny>) -> PyResult<RobotParams> {

@@ -6,11 +6,11 @@ use autoteach_estimate::handeye::gating::{
     band_sigma_scale, band_width, gate_edges,
 };
 use autoteach_estimate::handeye::{Rim, WaferGeometry};
-use nalgebra::{Matrix3, Vector2, Vector5};
+use nalgebra::{Vector2, Vector5};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{self, to_numpy};
+use crate::convert::{self, matrix3, to_numpy};
 use crate::errors;
 
 /// Adds the gating function to the module.
@@ -125,12 +125,6 @@ fn handeye_gate<'py>(
     stats.set_item("rims_associated", s.rims_associated)?;
     d.set_item("stats", stats)?;
     Ok(d)
-}
-
-fn matrix3(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Matrix3<f64>> {
-    Ok(Matrix3::from_row_slice(
-        &convert::finite_array(obj, name)?.exact(&[3, 3])?,
-    ))
 }
 
 fn points2(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<Vector2<f64>>> {

@@ -77,6 +77,14 @@ pub struct RrtStarResult {
     pub nodes: usize,
 }
 
+/// Bytes a tree node takes at least: its joints, parent and cost, its child list, and its k-d
+/// tree entry (5 coordinates and an index).
+const NODE_BYTES: usize = std::mem::size_of::<Joints>()
+    + std::mem::size_of::<usize>()
+    + std::mem::size_of::<f64>()
+    + std::mem::size_of::<Vec<usize>>()
+    + 6 * 8;
+
 fn wdist(w: &Joints, a: &Joints, b: &Joints) -> f64 {
     (a - b).component_mul(w).norm()
 }
@@ -127,6 +135,13 @@ fn rrt_star_rooted(
             ),
         });
     }
+    // RRT* refines until its budget is spent, one tree node per iteration: a budget whose tree
+    // cannot fit in memory would run for hours and fail at the end, so it is refused up front.
+    crate::alloc::ensure_within_physical_memory(
+        "an RRT* tree of max_iterations + 1 nodes",
+        cfg.max_iterations.saturating_add(1),
+        NODE_BYTES,
+    )?;
     let w = cfg.weights;
     let key = |q: &Joints| -> [f64; 5] { std::array::from_fn(|i| q[i] * w[i]) };
     let mut rng = Pcg64::seed_from_u64(cfg.seed);
@@ -323,6 +338,27 @@ mod tests {
                 assert!(ws.signed_distance(&q).unwrap() >= cfg.margin - 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn a_budget_whose_tree_cannot_fit_in_memory_is_refused_before_sampling() {
+        let (ws, poses) = default_scene().unwrap();
+        let cfg = RrtStarConfig {
+            max_iterations: usize::MAX / 2,
+            ..RrtStarConfig::default()
+        };
+        let t0 = std::time::Instant::now();
+        let e = rrt_star(&ws, &poses[0].q, &poses[1].q, &cfg).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                PlanError::Geometry(crate::GeometryError::OutOfMemory { bytes_each, .. })
+                    if bytes_each == NODE_BYTES
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains("max_iterations"), "{e}");
+        assert!(t0.elapsed().as_secs_f64() < 1.0);
     }
 
     #[test]

@@ -140,18 +140,19 @@ fn scene() -> (Vec<Isometry3<f64>>, Scene) {
     (cams, s)
 }
 
+fn gate(
+    cams: &[Isometry3<f64>],
+    w: &[Option<Vector5<f64>>],
+    e: &DetectedEdges<'_>,
+    c: &GateConfig,
+) -> Result<Gated> {
+    gate_edges(&k(), cams, w, geometry(), e, c)
+}
+
 #[test]
 fn every_rim_edge_goes_to_its_wafer_and_rim_and_clutter_is_rejected() {
     let (cams, s) = scene();
-    let g = gate_edges(
-        &k(),
-        &cams,
-        &wafers(),
-        geometry(),
-        &s.edges(),
-        &GateConfig::default(),
-    )
-    .unwrap();
+    let g = gate(&cams, &wafers(), &s.edges(), &GateConfig::default()).unwrap();
     // 6 rims × 2 frames associated; per frame the clutter line and the unknown wafer rejected,
     // the 8-point edge not scored.
     assert_eq!(g.observations.len(), 12);
@@ -191,15 +192,7 @@ fn a_wafer_without_estimate_predicts_no_rim() {
     let (cams, s) = scene();
     let mut w = wafers();
     w[2] = None;
-    let g = gate_edges(
-        &k(),
-        &cams,
-        &w,
-        geometry(),
-        &s.edges(),
-        &GateConfig::default(),
-    )
-    .unwrap();
+    let g = gate(&cams, &w, &s.edges(), &GateConfig::default()).unwrap();
     assert!(g.observations.iter().all(|o| o.wafer != 2));
     assert_eq!(g.observations.len(), 8);
 }
@@ -211,7 +204,7 @@ fn band_weights_and_the_band_floor_thin_and_weight_points() {
         band_weights: true,
         ..GateConfig::default()
     };
-    let g = gate_edges(&k(), &cams, &wafers(), geometry(), &s.edges(), &weighted).unwrap();
+    let g = gate(&cams, &wafers(), &s.edges(), &weighted).unwrap();
     for o in &g.observations {
         assert_eq!(o.sigma_scale.len(), o.points.len());
         assert!(o.sigma_scale.iter().all(|s| *s >= 1.0));
@@ -221,7 +214,7 @@ fn band_weights_and_the_band_floor_thin_and_weight_points() {
         min_band_px: 100.0,
         ..GateConfig::default()
     };
-    let g = gate_edges(&k(), &cams, &wafers(), geometry(), &s.edges(), &floor).unwrap();
+    let g = gate(&cams, &wafers(), &s.edges(), &floor).unwrap();
     assert!(g.observations.is_empty());
     assert_eq!(g.stats.rims_associated, 12);
     assert!(g.stats.points_narrow_band >= 12 * 12);
@@ -331,25 +324,9 @@ fn inconsistent_input_is_refused_with_what_is_wrong() {
         start: &start,
         frames: &s.frames,
     };
-    let err = gate_edges(
-        &k(),
-        &cams,
-        &wafers(),
-        geometry(),
-        &bad,
-        &GateConfig::default(),
-    )
-    .unwrap_err();
+    let err = gate(&cams, &wafers(), &bad, &GateConfig::default()).unwrap_err();
     assert!(err.to_string().contains("edge offsets"), "{err}");
-    let err = gate_edges(
-        &k(),
-        &cams[..1],
-        &wafers(),
-        geometry(),
-        &s.edges(),
-        &GateConfig::default(),
-    )
-    .unwrap_err();
+    let err = gate(&cams[..1], &wafers(), &s.edges(), &GateConfig::default()).unwrap_err();
     assert!(err.to_string().contains("camera poses"), "{err}");
     let mut pts = s.points.clone();
     pts[5].y = f64::NAN;
@@ -358,15 +335,7 @@ fn inconsistent_input_is_refused_with_what_is_wrong() {
         start: &s.start,
         frames: &s.frames,
     };
-    let err = gate_edges(
-        &k(),
-        &cams,
-        &wafers(),
-        geometry(),
-        &bad,
-        &GateConfig::default(),
-    )
-    .unwrap_err();
+    let err = gate(&cams, &wafers(), &bad, &GateConfig::default()).unwrap_err();
     assert!(
         matches!(err, EstimateError::NonFiniteInput { index: 5, .. }),
         "{err}"
@@ -375,23 +344,13 @@ fn inconsistent_input_is_refused_with_what_is_wrong() {
         gate_px: 0.0,
         ..GateConfig::default()
     };
-    assert!(gate_edges(&k(), &cams, &wafers(), geometry(), &s.edges(), &cfg).is_err());
+    assert!(gate(&cams, &wafers(), &s.edges(), &cfg).is_err());
     let cfg = GateConfig {
         min_inlier_fraction: 1.5,
         ..GateConfig::default()
     };
-    assert!(gate_edges(&k(), &cams, &wafers(), geometry(), &s.edges(), &cfg).is_err());
+    assert!(gate(&cams, &wafers(), &s.edges(), &cfg).is_err());
     let mut w = wafers();
     w[0] = Some(Vector5::new(f64::INFINITY, 0.0, 0.0, 0.0, 0.0));
-    assert!(
-        gate_edges(
-            &k(),
-            &cams,
-            &w,
-            geometry(),
-            &s.edges(),
-            &GateConfig::default()
-        )
-        .is_err()
-    );
+    assert!(gate(&cams, &w, &s.edges(), &GateConfig::default()).is_err());
 }
