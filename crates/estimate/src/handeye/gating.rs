@@ -243,7 +243,6 @@ pub fn gate_edges(
     for (e, f) in edges.frames.iter().enumerate() {
         by_frame.entry(*f).or_default().push(e);
     }
-    let margin = 3.0 * config.gate_px;
     let n_score = (2 * config.points_per_rim).max(config.min_points);
     for (f, edge_ids) in by_frame {
         let rims = project_rims(k, &camera_poses[f], wafers, geometry)?;
@@ -260,65 +259,26 @@ pub fn gate_edges(
                 .into_iter()
                 .map(|i| all[i])
                 .collect();
-            let bb = bbox(&p);
-            // (inliers, rim index, inlier points) of the rim with the most inliers.
-            let mut choice: Option<(usize, usize, Vec<Vector2<f64>>)> = None;
-            for (r, rim) in rims
-                .iter()
-                .enumerate()
-                .filter(|(_, r)| r.overlaps(&bb, margin))
-            {
-                let inliers: Vec<Vector2<f64>> = p
-                    .iter()
-                    .filter(|q| sampson_distance(&rim.conic, q) <= config.gate_px)
-                    .copied()
-                    .collect();
-                if inliers.len() > choice.as_ref().map_or(0, |c| c.0) {
-                    choice = Some((inliers.len(), r, inliers));
-                }
-            }
-            let Some((n_in, r, mut q)) = choice else {
+            let Some((r, q)) = best_rim(&p, &rims, config) else {
                 stats.edges_rejected += 1;
                 continue;
             };
-            if (n_in as f64)
-                < (config.min_points as f64).max(config.min_inlier_fraction * p.len() as f64)
-            {
-                stats.edges_rejected += 1;
-                continue;
-            }
             let rim = &rims[r];
             let key = (f, rim.wafer, rim.rim as u8);
             associated.insert(key);
-            let mut scale = Vec::new();
-            if config.min_band_px > 0.0 || config.band_weights {
+            let (q, scale) = if config.min_band_px > 0.0 || config.band_weights {
                 // The rims of a wafer are pushed upper then lower: the partner is r ^ 1.
-                let other = rims[r ^ 1].t_co;
-                let band = band_width(&q, &rim.h_inv, &other, &rim.conic, k, geometry.radius);
-                let keep: Vec<bool> = band
-                    .iter()
-                    .map(|b| b.is_nan() || *b >= config.min_band_px)
-                    .collect();
-                stats.points_narrow_band += keep.iter().filter(|k| !**k).count();
-                q = q
-                    .iter()
-                    .zip(&keep)
-                    .filter(|(_, k)| **k)
-                    .map(|(p, _)| *p)
-                    .collect();
-                if config.band_weights {
-                    scale = band
-                        .iter()
-                        .zip(&keep)
-                        .filter(|(_, k)| **k)
-                        .map(|(b, _)| band_sigma_scale(*b, rim.rim))
-                        .collect();
-                }
+                let (q, scale, narrow) =
+                    band_filter(q, rim, &rims[r ^ 1], k, geometry.radius, config);
+                stats.points_narrow_band += narrow;
                 if q.len() < config.min_points {
                     stats.edges_rejected += 1;
                     continue;
                 }
-            }
+                (q, scale)
+            } else {
+                (q, Vec::new())
+            };
             if best.get(&key).is_none_or(|b| q.len() > b.0) {
                 best.insert(key, (q.len(), q, scale));
             }
@@ -350,6 +310,64 @@ pub fn gate_edges(
         observations,
         stats,
     })
+}
+
+/// The rim (index into `rims`) with the most inliers among the points `p` of one edge, and those
+/// inliers; `None` when no rim whose image box meets the edge's has enough of them (at least
+/// `min_points` and `min_inlier_fraction` of `p`).
+fn best_rim(
+    p: &[Vector2<f64>],
+    rims: &[ProjectedRim],
+    config: &GateConfig,
+) -> Option<(usize, Vec<Vector2<f64>>)> {
+    let bb = bbox(p);
+    let margin = 3.0 * config.gate_px;
+    let mut choice: Option<(usize, Vec<Vector2<f64>>)> = None;
+    for (r, rim) in rims
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| r.overlaps(&bb, margin))
+    {
+        let inliers: Vec<Vector2<f64>> = p
+            .iter()
+            .filter(|q| sampson_distance(&rim.conic, q) <= config.gate_px)
+            .copied()
+            .collect();
+        if inliers.len() > choice.as_ref().map_or(0, |c| c.1.len()) {
+            choice = Some((r, inliers));
+        }
+    }
+    let needed = (config.min_points as f64).max(config.min_inlier_fraction * p.len() as f64);
+    choice.filter(|(_, q)| q.len() as f64 >= needed)
+}
+
+/// The points of `q` (on `rim`) where the predicted side band is at least `min_band_px` wide,
+/// their σ factors when `band_weights` is set (else empty), and how many were dropped.
+fn band_filter(
+    q: Vec<Vector2<f64>>,
+    rim: &ProjectedRim,
+    other: &ProjectedRim,
+    k: &Matrix3<f64>,
+    radius: f64,
+    config: &GateConfig,
+) -> (Vec<Vector2<f64>>, Vec<f64>, usize) {
+    let band = band_width(&q, &rim.h_inv, &other.t_co, &rim.conic, k, radius);
+    // A NaN width is not known to be narrow: the point stays (with the largest σ factor).
+    let keep: Vec<bool> = band
+        .iter()
+        .map(|b| b.is_nan() || *b >= config.min_band_px)
+        .collect();
+    let narrow = keep.iter().filter(|k| !**k).count();
+    let kept = |i: &usize| keep[*i];
+    let idx: Vec<usize> = (0..q.len()).filter(kept).collect();
+    let scale = if config.band_weights {
+        idx.iter()
+            .map(|i| band_sigma_scale(band[*i], rim.rim))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    (idx.iter().map(|i| q[*i]).collect(), scale, narrow)
 }
 
 /// The best edge of each (frame, wafer, rim): its inlier count, points and σ factors.
