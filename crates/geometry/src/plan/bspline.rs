@@ -173,6 +173,13 @@ pub fn clamped_knots(spans: &[f64]) -> Vec<f64> {
     knots
 }
 
+/// Most samples per knot span in a check of a trajectory ([`BSplineTrajectory::check_times`]).
+/// A cubic span's velocity, acceleration and torque vary smoothly within it; a grid of 1 000
+/// points per span finds a quadratic's extremum to 1e-6 of its range, so a finer grid only
+/// follows a longer duration, not a different shape. Trajectories of a few seconds at the 1 ms
+/// step of the checks stay below it and are sampled as before.
+pub const MAX_CHECK_SAMPLES_PER_SPAN: usize = 1000;
+
 /// A time-parametrised joint trajectory: a clamped cubic B-spline (eqs. 2.11, 2.14) with its
 /// velocity, acceleration and jerk splines (eq. 2.12) precomputed.
 #[derive(Debug, Clone, PartialEq)]
@@ -246,6 +253,29 @@ impl BSplineTrajectory {
     /// Duration `T = t_{n+1} − t_4`.
     pub fn duration(&self) -> f64 {
         self.position.t_end() - self.position.t_start()
+    }
+
+    /// The times of a check sampled every `dt` seconds from 0 to `T` (both included), coarsened
+    /// to at most [`MAX_CHECK_SAMPLES_PER_SPAN`] per knot span: the cost of a check follows the
+    /// trajectory's shape, not its duration. (A jerk limit of 1e-300 rad/s³ stretches a move to
+    /// 1e99 s; sampling it every millisecond would never end.) A non-positive or non-finite
+    /// `dt` gives the coarsened grid.
+    pub fn check_times(&self, dt: f64) -> impl Iterator<Item = f64> + use<> {
+        let t_end = self.duration();
+        let spans = self
+            .position
+            .ctrl
+            .len()
+            .saturating_sub(self.position.degree)
+            .max(1);
+        let cap = spans.saturating_mul(MAX_CHECK_SAMPLES_PER_SPAN);
+        let fine = t_end / dt;
+        let (n, step) = if dt > 0.0 && fine.is_finite() && fine.ceil() <= cap as f64 {
+            (fine.ceil() as usize, dt)
+        } else {
+            (cap, t_end / cap as f64)
+        };
+        (0..=n).map(move |k| (k as f64 * step).min(t_end))
     }
 
     /// Knots `t_1..t_{n+4}`.

@@ -170,19 +170,17 @@ pub fn verify(
             reason: format!("{dt} must be positive"),
         });
     }
-    let t_end = traj.duration();
-    let n = (t_end / dt).ceil() as usize;
+    let times: Vec<f64> = traj.check_times(dt).collect();
     let mut v = Verification {
         velocity_ratio: 0.0,
         acceleration_ratio: 0.0,
         jerk_ratio: 0.0,
         torque_ratio: 0.0,
         min_clearance: f64::INFINITY,
-        samples: n + 1,
+        samples: times.len(),
     };
     let ratio = |x: &Joints, l: &Joints| (0..5).map(|i| x[i].abs() / l[i]).fold(0.0, f64::max);
-    for k in 0..=n {
-        let t = (k as f64 * dt).min(t_end);
+    for t in times {
         let s = traj.sample(t);
         v.velocity_ratio = v.velocity_ratio.max(ratio(&s.dq, &limits.velocity));
         v.acceleration_ratio = v
