@@ -218,10 +218,15 @@ fn bad_inputs_give_errors() {
 /// reads are checked apart): both kinds are reported with their flat index, in both directions.
 #[test]
 fn non_finite_features_are_reported_whether_gathered_or_not() {
-    let p = projection();
+    // Pixel (u, v) = (x, y): the point hits image cell (2, 1) and BEV cell (1, 2).
+    let p = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
     let ig = ImageGrid::new(4, 4, 1.0).unwrap();
     let bg = BevGrid::new(0.0, 0.0, 1.0, 4, 4).unwrap();
-    let op = SparsePooling::build(&[[1.0, 0.0, 0.0]], &p, ig, bg, 1).unwrap();
+    let op = SparsePooling::build(&[[1.5, 2.5, 0.0]], &p, ig, bg, 1).unwrap();
     let read = op.image_to_bev.indices[0] as usize;
     let unread = (read + 1) % 16;
     let ch = 3;
