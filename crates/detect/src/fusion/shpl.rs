@@ -414,18 +414,18 @@ impl Csr {
                 .iter()
                 .fold(true, |ok, v| ok & v.to_f64().is_finite())
         });
-        if !(finite_out && finite_unread) {
-            if let Some((index, v)) = input
+        // A finite input whose sum overflows gives ∞ as its answer, not an error.
+        if !(finite_out && finite_unread)
+            && let Some((index, v)) = input
                 .iter()
                 .enumerate()
                 .find(|(_, v)| !v.to_f64().is_finite())
-            {
-                return Err(DetectError::NonFinite {
-                    what: "input features",
-                    index,
-                    value: v.to_f64(),
-                });
-            }
+        {
+            return Err(DetectError::NonFinite {
+                what: "input features",
+                index,
+                value: v.to_f64(),
+            });
         }
         Ok(())
     }
