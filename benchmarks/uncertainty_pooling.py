@@ -3,7 +3,9 @@
 SHPL (seed eq. 7.4-7.8) at the issue's size: 20 000 LiDAR points, 512 channels, 155x46 image
 cells -> 75x75 BEV cells. Peer: ``scipy.sparse`` in its strongest configuration (CSR times a
 C-contiguous dense matrix forward; a pre-transposed CSR for the backward pass), on the same
-kernel and the same features; both are checked to agree to 1e-5 first. Timings are medians.
+kernel and the same features; both are checked to agree to 1e-5 first. Timings are medians. The
+memory floor of each pass (read the gathered input once, write the output once, measured with
+NumPy in the same run) bounds what any implementation can reach on the machine.
 
 JIoU (eq. 8.4): a 15 000-pair evaluation of Gaussian boxes on 900-cell grids with ``p_G``
 (eq. 8.3) evaluated per pair; 10 000 deterministic pairs against ``shapely`` polygons (accuracy
@@ -67,9 +69,30 @@ def shpl(repeats):
                 median_ms(lambda s=St, g=grad: s @ g, repeats),
             ),
         }
+        kind = np.dtype(dtype).name
         for name, (ours, peer) in rows.items():
-            kind = np.dtype(dtype).name
             print(f"  {kind} {name}: autoteach {ours:.2f} ms, scipy.sparse {peer:.2f} ms, ratio {ours / peer:.2f}")
+        memory_floor(kind, feats, grad, indptr, indices, shape, repeats)
+
+
+def memory_floor(kind, feats, grad, indptr, indices, shape, repeats):
+    """Time floor of a pooling pass in the same run: read each gathered input row once, write the output once.
+
+    The read is a NumPy reduction over the input rows the kernel gathers (forward: the image cells
+    with an entry; backward: the BEV cells with an entry); the write fills a freshly allocated
+    output, as both the operator and ``scipy.sparse`` return a new array.
+    """
+    gathered = np.ascontiguousarray(feats[np.unique(indices)])
+    grad = np.ascontiguousarray(grad[np.flatnonzero(np.diff(indptr))])
+    read_fwd = median_ms(lambda: gathered.sum(axis=0), repeats)
+    read_bwd = median_ms(lambda: grad.sum(axis=0), repeats)
+    write_fwd = median_ms(lambda: np.ones((shape[0], feats.shape[1]), feats.dtype), repeats)
+    write_bwd = median_ms(lambda: np.ones((shape[1], feats.shape[1]), feats.dtype), repeats)
+    print(
+        f"  {kind} memory floor: forward read {gathered.nbytes / 1e6:.1f} MB {read_fwd:.2f} ms + write "
+        f"{write_fwd:.2f} ms = {read_fwd + write_fwd:.2f} ms; backward read {grad.nbytes / 1e6:.1f} MB "
+        f"{read_bwd:.2f} ms + write {write_bwd:.2f} ms = {read_bwd + write_bwd:.2f} ms"
+    )
 
 
 def jiou(repeats):

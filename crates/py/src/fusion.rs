@@ -64,16 +64,22 @@ impl<'py> Feat<'py> {
     }
 }
 
+/// The contiguous data of `a` (finiteness unchecked: the SHPL product checks it itself, fused
+/// with the gather, so the features are not read twice).
+fn contiguous<'a, T: Element>(a: &'a PyReadonlyArrayDyn<'_, T>, name: &str) -> PyResult<&'a [T]> {
+    a.as_slice().map_err(|_| {
+        errors::invalid_input(format!(
+            "{name} must be C-contiguous (use numpy.ascontiguousarray)"
+        ))
+    })
+}
+
 /// The contiguous data of `a`, checked finite.
 fn slice<'a, T: Element + Feature>(
     a: &'a PyReadonlyArrayDyn<'_, T>,
     name: &str,
 ) -> PyResult<&'a [T]> {
-    let s = a.as_slice().map_err(|_| {
-        errors::invalid_input(format!(
-            "{name} must be C-contiguous (use numpy.ascontiguousarray)"
-        ))
-    })?;
+    let s = contiguous(a, name)?;
     // A branch-free pass per chunk (vectorised) first; the index is searched only on failure.
     let finite = s
         .chunks(4096)
@@ -135,7 +141,7 @@ impl PySparsePooling {
             ch: usize,
             backward: bool,
         ) -> PyResult<Bound<'py, PyAny>> {
-            let s = slice(a, name)?;
+            let s = contiguous(a, name)?;
             let out = detached(py, || {
                 let mut out = vec![T::ZERO; nout * ch];
                 let r = if backward {

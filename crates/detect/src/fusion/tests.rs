@@ -214,6 +214,49 @@ fn bad_inputs_give_errors() {
     assert!(matches!(err, DetectError::WrongLength { .. }), "{err}");
 }
 
+/// The product checks finiteness itself (a gathered NaN/∞ reaches the output; cells no row
+/// reads are checked apart): both kinds are reported with their flat index, in both directions.
+#[test]
+fn non_finite_features_are_reported_whether_gathered_or_not() {
+    // Pixel (u, v) = (x, y): the point hits image cell (2, 1) and BEV cell (1, 2).
+    let p = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    let ig = ImageGrid::new(4, 4, 1.0).unwrap();
+    let bg = BevGrid::new(0.0, 0.0, 1.0, 4, 4).unwrap();
+    let op = SparsePooling::build(&[[1.5, 2.5, 0.0]], &p, ig, bg, 1).unwrap();
+    let read = op.image_to_bev.indices[0] as usize;
+    let unread = (read + 1) % 16;
+    let ch = 3;
+    for (cell, bad) in [
+        (read, f32::NAN),
+        (unread, f32::INFINITY),
+        (unread, f32::NAN),
+    ] {
+        let mut x = vec![1.0f32; 16 * ch];
+        x[cell * ch + 2] = bad;
+        let mut out = vec![0.0f32; 16 * ch];
+        let err = op
+            .forward(Direction::ImageToBev, &x, ch, &mut out)
+            .unwrap_err();
+        assert!(
+            matches!(err, DetectError::NonFinite { index, .. } if index == cell * ch + 2),
+            "{err}"
+        );
+        let err = op
+            .backward(Direction::BevToImage, &x, ch, &mut out)
+            .unwrap_err();
+        assert!(matches!(err, DetectError::NonFinite { .. }), "{err}");
+    }
+    // Finite values too large for f32 overflow to ∞ in the sum: that is the answer, not an error.
+    let mut x = vec![0.0f32; 16 * ch];
+    x[read * ch] = f32::MAX;
+    let mut out = vec![0.0f32; 16 * ch];
+    op.forward(Direction::ImageToBev, &x, ch, &mut out).unwrap();
+}
+
 /// An 8×8 input in the spirit of Fig. 7.6 (two clusters on a −9 background; the figure's own
 /// values are not in the text): three poolings give the 1×1×8 output below, which holds the
 /// cluster edges 2, 1, −1, −2 besides the extremes 3 and −9, as the caption says.

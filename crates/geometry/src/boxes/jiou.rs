@@ -17,7 +17,7 @@
 use rayon::prelude::*;
 
 use super::spatial::{
-    Grid2, RasterScratch, Weighting, normal_table, rasterize_into, sample_boxes_into,
+    Grid2, RasterScratch, Weighting, normal_table, rasterize_into, sample_boxes_into, trig_into,
 };
 use super::{BEV_PARAMS, Box2, Cov5, check_covariance, is_deterministic};
 use crate::{GeometryError, Result};
@@ -48,11 +48,70 @@ pub fn probabilistic_jaccard(p1: &[f64], p2: &[f64]) -> Result<f64> {
         }
     }
     let mut buf = Vec::new();
-    Ok(jaccard_unchecked(p1, p2, &mut buf))
+    Ok(jaccard_unchecked(p1, p2, &mut buf, &mut Vec::new()))
 }
 
-/// [`probabilistic_jaccard`] without validation; `buf` is scratch space.
-fn jaccard_unchecked(p1: &[f64], p2: &[f64], buf: &mut Vec<(f64, f64, f64)>) -> f64 {
+/// Sort keys of [`jaccard_unchecked`]: with at most `2^PACKED_INDEX_BITS` sample points the cell index is packed
+/// into the low bits of the ratio's bit pattern (see there); above it, `(ratio, p₁, p₂)` tuples
+/// are sorted.
+const PACKED_INDEX_BITS: u32 = 24;
+
+/// [`probabilistic_jaccard`] without validation; `buf` and `keys` are scratch space.
+///
+/// The intersection cells are sorted by `t = p₁/p₂`. With `N ≤ 2²⁴` points each key is the
+/// ratio's bit pattern (positive finite values sort like their bits) with its low `k = ⌈log₂ N⌉`
+/// bits replaced by the cell index: an 8-byte integer sort instead of 24-byte tuples. Two
+/// ratios within a relative `2^(k−52)` of each other may then come out in either order; a
+/// swapped pair replaces `max(p₁ⱼ/p₁ᵢ, p₂ⱼ/p₂ᵢ)` by the other ratio, which differs from it by that
+/// same relative amount, so `J` moves by at most `2^(k−52)` relative (2.3·10⁻¹³ on 900 cells).
+pub(super) fn jaccard_unchecked(
+    p1: &[f64],
+    p2: &[f64],
+    buf: &mut Vec<(f64, f64, f64)>,
+    keys: &mut Vec<u64>,
+) -> f64 {
+    let bits = usize::BITS - p1.len().saturating_sub(1).leading_zeros();
+    if bits > PACKED_INDEX_BITS {
+        return jaccard_tuples(p1, p2, buf);
+    }
+    let mask = (1u64 << bits) - 1;
+    // Points only in R₂ (t = 0) come first, only in R₁ (t = ∞) last: only the intersection is
+    // sorted.
+    let (mut only2, mut only1, mut total1) = (0.0, 0.0, 0.0);
+    keys.clear();
+    for (i, (&a, &b)) in p1.iter().zip(p2).enumerate() {
+        match (a > 0.0, b > 0.0) {
+            (true, true) => {
+                keys.push(((a / b).to_bits() & !mask) | i as u64);
+                total1 += a;
+            }
+            (false, true) => only2 += b,
+            (true, false) => only1 += a,
+            (false, false) => {}
+        }
+    }
+    if keys.is_empty() {
+        return 0.0;
+    }
+    keys.sort_unstable();
+    // suffix sum of p₁ over positions ≥ k (plus the t = ∞ part), prefix of p₂ over < k (plus t = 0).
+    let total1 = total1 + only1;
+    let mut prefix2 = only2;
+    let mut consumed1 = 0.0;
+    let mut j = 0.0;
+    for &key in keys.iter() {
+        let i = (key & mask) as usize;
+        let (a, b) = (p1[i], p2[i]);
+        let suffix1 = total1 - consumed1;
+        j += 1.0 / (suffix1 / a + prefix2 / b);
+        consumed1 += a;
+        prefix2 += b;
+    }
+    j
+}
+
+/// [`jaccard_unchecked`] sorting `(ratio, p₁, p₂)` tuples (any number of points).
+pub(super) fn jaccard_tuples(p1: &[f64], p2: &[f64], buf: &mut Vec<(f64, f64, f64)>) -> f64 {
     // Points only in R₂ (t = 0) come first, only in R₁ (t = ∞) last: only the intersection is
     // sorted.
     let (mut only2, mut only1) = (0.0, 0.0);
@@ -136,9 +195,12 @@ struct Evaluator {
 struct PairScratch {
     sa: Vec<Box2>,
     sb: Vec<Box2>,
+    ta: Vec<(f64, f64)>,
+    tb: Vec<(f64, f64)>,
     ra: RasterScratch,
     rb: RasterScratch,
     buf: Vec<(f64, f64, f64)>,
+    keys: Vec<u64>,
 }
 
 impl Evaluator {
@@ -148,11 +210,14 @@ impl Evaluator {
         }
         sample_boxes_into(&a.mean, &a.cov, &self.table, &mut s.sa)?;
         sample_boxes_into(&b.mean, &b.cov, &self.table, &mut s.sb)?;
-        let grid = Grid2::covering(s.sa.iter().chain(s.sb.iter()), self.opts.grid)?;
+        trig_into(&s.sa, &mut s.ta);
+        trig_into(&s.sb, &mut s.tb);
+        let both = s.sa.iter().zip(&s.ta).chain(s.sb.iter().zip(&s.tb));
+        let grid = Grid2::covering_trig(both, self.opts.grid)?;
         let wa = std::iter::repeat(1.0 / s.sa.len().max(1) as f64);
         let wb = std::iter::repeat(1.0 / s.sb.len().max(1) as f64);
-        rasterize_into(&s.sa, wa, &grid, self.opts.weighting, &mut s.ra);
-        rasterize_into(&s.sb, wb, &grid, self.opts.weighting, &mut s.rb);
+        rasterize_into(&s.sa, &s.ta, wa, &grid, self.opts.weighting, &mut s.ra);
+        rasterize_into(&s.sb, &s.tb, wb, &grid, self.opts.weighting, &mut s.rb);
         let (pa, pb) = (&s.ra.out, &s.rb.out);
         if !pa.iter().any(|v| *v > 0.0) || !pb.iter().any(|v| *v > 0.0) {
             return Err(GeometryError::InvalidParameter {
@@ -161,7 +226,7 @@ impl Evaluator {
                 reason: "a box covers no cell centre: use a finer grid",
             });
         }
-        Ok(jaccard_unchecked(pa, pb, &mut s.buf))
+        Ok(jaccard_unchecked(pa, pb, &mut s.buf, &mut s.keys))
     }
 }
 

@@ -73,9 +73,22 @@ impl Grid2 {
 
     /// The `n×n` grid spanning the bounding rectangle of the corners of `boxes`.
     pub fn covering<'a>(boxes: impl IntoIterator<Item = &'a Box2>, n: usize) -> Result<Self> {
+        Self::covering_corners(boxes.into_iter().map(|b| b.corners()), n)
+    }
+
+    /// [`Grid2::covering`] with each box's `(sin r, cos r)` given (one `sin_cos` per box
+    /// instead of one per corner; the same corners bit for bit).
+    pub(crate) fn covering_trig<'a>(
+        boxes: impl Iterator<Item = (&'a Box2, &'a (f64, f64))>,
+        n: usize,
+    ) -> Result<Self> {
+        Self::covering_corners(boxes.map(|(b, &sc)| corners_trig(b, sc)), n)
+    }
+
+    fn covering_corners(corners: impl Iterator<Item = [[f64; 2]; 4]>, n: usize) -> Result<Self> {
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for b in boxes {
-            for c in b.corners() {
+        for cs in corners {
+            for c in cs {
                 for k in 0..2 {
                     lo[k] = lo[k].min(c[k]);
                     hi[k] = hi[k].max(c[k]);
@@ -136,6 +149,20 @@ fn floor_i(v: f64) -> i64 {
     if (t as f64) > v { t - 1 } else { t }
 }
 
+/// The corners of `b` as [`Box2::corners`] computes them, given `(sin r, cos r)`.
+fn corners_trig(b: &Box2, (s, c): (f64, f64)) -> [[f64; 2]; 4] {
+    [[0.5, 0.5], [-0.5, 0.5], [-0.5, -0.5], [0.5, -0.5]].map(|v0: [f64; 2]| {
+        let (a, w) = (b.l * v0[0], b.w * v0[1]);
+        [b.cx + c * a - s * w, b.cy + s * a + c * w]
+    })
+}
+
+/// `(sin r, cos r)` of each box into `out` (cleared first).
+pub(crate) fn trig_into(boxes: &[Box2], out: &mut Vec<(f64, f64)>) {
+    out.clear();
+    out.extend(boxes.iter().map(|b| b.r.sin_cos()));
+}
+
 /// For each grid row the inclusive range of cells whose centres lie inside `b`, appended to
 /// `spans` as `(row, first, last)` (`last < first` for an empty row); returns the number of cells.
 ///
@@ -144,8 +171,7 @@ fn floor_i(v: f64) -> i64 {
 /// `c_x − (y − c_y)·e_y/e_x ± h/|e_x|`; the row's span is the intersection of the two (a slab
 /// with `e_x = 0` only bounds y, which the row range already does). Two multiply-adds per row,
 /// no division and no branch on the edges.
-fn box_spans(b: &Box2, g: &Grid2, spans: &mut Vec<(u32, i32, i32)>) -> usize {
-    let (s, c) = b.r.sin_cos();
+fn box_spans(b: &Box2, (s, c): (f64, f64), g: &Grid2, spans: &mut Vec<(u32, i32, i32)>) -> usize {
     // (e_y / e_x, h / |e_x|) of the two slabs; an unbounded slab contributes (0, ∞).
     let slab = |ex: f64, ey: f64, h: f64| {
         if ex.abs() > 1e-12 {
@@ -235,8 +261,11 @@ pub fn rasterize(
         });
     }
     let mut scratch = RasterScratch::default();
+    let mut trig = Vec::new();
+    trig_into(boxes, &mut trig);
     let skipped = rasterize_into(
         boxes,
+        &trig,
         weights.iter().copied(),
         grid,
         weighting,
@@ -254,9 +283,11 @@ pub(crate) struct RasterScratch {
     pub(crate) out: Vec<f64>,
 }
 
-/// [`rasterize`] without validation into `scratch.out`; returns the number of skipped boxes.
+/// [`rasterize`] without validation into `scratch.out`, given each box's `(sin r, cos r)`
+/// ([`trig_into`]); returns the number of skipped boxes.
 pub(crate) fn rasterize_into(
     boxes: &[Box2],
+    trig: &[(f64, f64)],
     weights: impl Iterator<Item = f64>,
     grid: &Grid2,
     weighting: Weighting,
@@ -269,9 +300,9 @@ pub(crate) fn rasterize_into(
     diff.resize(ny * (nx + 1), 0.0);
     let spans = &mut scratch.spans;
     let mut skipped = 0;
-    for (b, w) in boxes.iter().zip(weights) {
+    for ((b, &sc), w) in boxes.iter().zip(trig).zip(weights) {
         spans.clear();
-        let n = box_spans(b, grid, spans);
+        let n = box_spans(b, sc, grid, spans);
         if n == 0 {
             skipped += 1;
             continue;
