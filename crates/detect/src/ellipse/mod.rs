@@ -165,7 +165,7 @@ impl Prepared {
             let (j, k) = (MONO[r].0 + MONO[c].0, MONO[r].1 + MONO[c].1);
             mom[(j + k) * (j + k + 1) / 2 + k]
         };
-        let s1 = Matrix3::from_fn(|r, c| entry(r, c));
+        let s1 = Matrix3::from_fn(entry);
         let s2 = Matrix3::from_fn(|r, c| entry(r, c + 3));
         let s3 = Matrix3::from_fn(|r, c| entry(r + 3, c + 3));
         // Collinearity: the 2×2 second-moment matrix of the centred points is singular.
