@@ -76,3 +76,21 @@ def test_bad_input() -> None:
         detect.linear_sum_assignment([["a", "b"]])
     r, k = detect.linear_sum_assignment(np.zeros((0, 0)))
     assert r.size == 0 and k.size == 0
+
+
+def test_in_place_read_matches_the_copied_layouts_and_leaves_the_input_alone() -> None:
+    """A C-order float64 matrix is read in place (no copy); other layouts are copied first."""
+    c = costs("integer", 300, 300, seed=36)
+    c.setflags(write=False)
+    before = c.copy()
+    r, k = detect.linear_sum_assignment(c)
+    rf, kf = detect.linear_sum_assignment(np.asfortranarray(c))
+    rs, ks = scipy_lsa(c)
+    best = c[rs, ks].sum()
+    assert c[r, k].sum() == pytest.approx(best, rel=1e-12)
+    assert c[rf, kf].sum() == pytest.approx(best, rel=1e-12)
+    np.testing.assert_array_equal(c, before)
+    bad = c.copy()
+    bad[123, 45] = np.nan
+    with pytest.raises(InvalidInputError, match="123"):
+        detect.linear_sum_assignment(bad)

@@ -130,14 +130,14 @@ fn column_reduction(
     v: &mut [f64],
 ) -> Vec<usize> {
     // v[j] = min_i c[i][j] and its first minimising row, in one row-major pass.
+    // Branch-free selects, so that the pass vectorises.
     let mut imin = vec![0usize; n];
     for i in 1..n {
         let row = &c[i * n..(i + 1) * n];
         for ((vj, im), &cij) in v.iter_mut().zip(imin.iter_mut()).zip(row) {
-            if cij < *vj {
-                *vj = cij;
-                *im = i;
-            }
+            let lower = cij < *vj;
+            *vj = if lower { cij } else { *vj };
+            *im = if lower { i } else { *im };
         }
     }
     // Columns in reverse order, each to its minimising row if that row is still unassigned.
@@ -253,6 +253,14 @@ fn augment(
     let mut d = vec![0.0f64; n];
     let mut pred = vec![0usize; n];
     let mut collist: Vec<usize> = (0..n).collect();
+    // Every array of length exactly `n`: one bounds check per column index covers them all.
+    let (v, y, d, pred, collist) = (
+        &mut v[..n],
+        &mut y[..n],
+        &mut d[..n],
+        &mut pred[..n],
+        &mut collist[..n],
+    );
     for &free_row in free {
         let row = &c[free_row * n..(free_row + 1) * n];
         for j in 0..n {

@@ -168,6 +168,23 @@ fn linear_sum_assignment<'py>(
     cost: &Bound<'py, PyAny>,
     maximize: bool,
 ) -> PyResult<Indices<'py>> {
+    if !maximize {
+        // A C-contiguous float64 matrix is solved in place: no copy (72 MB at n = 3 000, a
+        // sixth of the solve with its page faults) — the solver reads it row by row and
+        // checks every entry itself. The array must not be written by another thread during
+        // the call (as for NumPy's own routines that release the GIL).
+        let arr = Array::new(cost, "cost")?;
+        let shape = arr.shape().to_vec();
+        if shape.len() == 2 {
+            let view = arr.view();
+            if let Some(data) = view.to_slice() {
+                let a = convert::run_batched(py, data.len(), || {
+                    solve_assignment_row_major(shape[0], shape[1], data).map_err(errors::detect)
+                })?;
+                return Ok(pairs(py, &a));
+            }
+        }
+    }
     let (rows, cols, mut m) = matrix_rows_arg(cost, "cost")?;
     if maximize {
         if let Some(v) = m.iter().find(|v| v.is_nan() || **v == f64::INFINITY) {

@@ -157,19 +157,17 @@ impl Prepared {
                 ),
             });
         }
-        // Scatter of [x², xy, y²] (s1), cross terms (s2) and [x, y, 1] (s3).
-        let mut s1 = Matrix3::zeros();
-        let mut s2 = Matrix3::zeros();
-        let mut s3 = Matrix3::zeros();
-        let inv = 1.0 / scale;
-        for p in &centred {
-            let (x, y) = (p.x * inv, p.y * inv);
-            let d1 = nalgebra::Vector3::new(x * x, x * y, y * y);
-            let d2 = nalgebra::Vector3::new(x, y, 1.0);
-            s1 += d1 * d1.transpose();
-            s2 += d1 * d2.transpose();
-            s3 += d2 * d2.transpose();
-        }
+        // Scatter of [x², xy, y²] (s1), cross terms (s2) and [x, y, 1] (s3): every entry is
+        // one of the 15 moments Σ xʲyᵏ (j + k ≤ 4) of the normalised points.
+        let mom = residual::scatter_moments(points, centroid, 1.0 / scale);
+        const MONO: [(usize, usize); 6] = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)];
+        let entry = |r: usize, c: usize| {
+            let (j, k) = (MONO[r].0 + MONO[c].0, MONO[r].1 + MONO[c].1);
+            mom[(j + k) * (j + k + 1) / 2 + k]
+        };
+        let s1 = Matrix3::from_fn(entry);
+        let s2 = Matrix3::from_fn(|r, c| entry(r, c + 3));
+        let s3 = Matrix3::from_fn(|r, c| entry(r + 3, c + 3));
         // Collinearity: the 2×2 second-moment matrix of the centred points is singular.
         let (sxx, sxy, syy) = (s3[(0, 0)], s3[(0, 1)], s3[(1, 1)]);
         let half_tr = 0.5 * (sxx + syy);

@@ -41,16 +41,13 @@ thread_local! {
     /// Per-thread scratch vectors of the per-point passes (structure-of-arrays buffers and
     /// Jacobian columns), so that a fitting iteration does not allocate and free them.
     static SCRATCH: std::cell::RefCell<Vec<Vec<f64>>> = const { std::cell::RefCell::new(Vec::new()) };
-    /// As [`SCRATCH`], for the four-lane buffers of [`conic_normal_equations`].
-    static SCRATCH_LANES: std::cell::RefCell<Vec<Vec<[f64; 4]>>> =
-        const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// Scratch vectors kept per thread between calls (taken with [`Scratch::take`], returned on
 /// drop): the buffers' contents never carry over (every taken vector is empty), only their
 /// capacity. Nested takes simply get fresh vectors when the pool is empty.
 mod scratch {
-    use super::{SCRATCH, SCRATCH_KEPT, SCRATCH_LANES};
+    use super::{SCRATCH, SCRATCH_KEPT};
     use std::cell::RefCell;
     use std::thread::LocalKey;
 
@@ -62,11 +59,6 @@ mod scratch {
     impl Pooled for f64 {
         fn pool() -> &'static LocalKey<RefCell<Vec<Vec<Self>>>> {
             &SCRATCH
-        }
-    }
-    impl Pooled for [f64; 4] {
-        fn pool() -> &'static LocalKey<RefCell<Vec<Vec<Self>>>> {
-            &SCRATCH_LANES
         }
     }
 
@@ -177,7 +169,64 @@ pub(crate) fn certified_foot_angles(
 ) {
     // Compiled for the best instruction set the CPU has (AVX2 + FMA where available), chosen
     // at run time: the passes below are independent per point and vectorise.
-    pulp::Arch::new().dispatch(|| foot_angles_impl(e, points, start, angles, ok))
+    pulp::Arch::new().dispatch(FootAnglesOp {
+        e,
+        points,
+        start,
+        angles,
+        ok,
+    })
+}
+
+/// The kernels run under [`pulp::Arch::dispatch`], one struct each: pulp's own `WithSimd` for
+/// closures calls the closure through `FnOnce::call_once`, which LLVM leaves out of line and
+/// compiles for the baseline target (two SSE2 lanes, no AVX), whereas these `#[inline(always)]`
+/// `with_simd` bodies put the (`#[inline(always)]`) kernel inside pulp's `#[target_feature]`
+/// function.
+struct FootAnglesOp<'a> {
+    e: &'a Ellipse,
+    points: &'a [Vector2<f64>],
+    start: &'a [(f64, f64)],
+    angles: &'a mut Vec<(f64, f64)>,
+    ok: &'a mut Vec<bool>,
+}
+
+impl pulp::WithSimd for FootAnglesOp<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        foot_angles_impl(self.e, self.points, self.start, self.angles, self.ok)
+    }
+}
+
+/// [`conic_normal_equations`] under [`pulp::Arch::dispatch`] (see [`FootAnglesOp`]).
+struct ConicNormalOp<'a> {
+    e: &'a Ellipse,
+    q: &'a [f64; 6],
+    points: &'a [Vector2<f64>],
+    angles: &'a [(f64, f64)],
+}
+
+impl pulp::WithSimd for ConicNormalOp<'_> {
+    type Output = ConicNormal;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> ConicNormal {
+        conic_normal_equations(self.e, self.q, self.points, self.angles)
+    }
+}
+
+/// [`NormalAcc::finish_impl`] under [`pulp::Arch::dispatch`] (see [`FootAnglesOp`]).
+struct FinishOp<'a, const K: usize>(&'a NormalAcc<K>);
+
+impl<const K: usize> pulp::WithSimd for FinishOp<'_, K> {
+    type Output = (nalgebra::SMatrix<f64, K, K>, nalgebra::SVector<f64, K>, f64);
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
+        self.0.finish_impl()
+    }
 }
 
 /// Completes [`certified_foot_angles`]: the points not marked in `ok` get their angle from the
@@ -210,23 +259,46 @@ fn foot_angles_impl(
     let (a, b) = (e.a, e.b);
     let k = (a - b) * (a + b);
     let reach = a.min(b).powi(2) / a.max(b);
-    // Structure of arrays, so that the passes below compile to vector code.
+    // Structure of arrays, so that the passes below compile to vector code (no pushes or
+    // branches in the loops).
     let n = points.len();
-    let mut us: Vec<f64> = scratch::take(n);
-    let mut vs: Vec<f64> = scratch::take(n);
-    for p in points {
+    let filled = |n: usize| {
+        let mut v: Vec<f64> = scratch::take(n);
+        v.resize(n, 0.0);
+        v
+    };
+    let (mut us, mut vs, mut ss, mut cs) = (filled(n), filled(n), filled(n), filled(n));
+    for ((u, v), p) in us.iter_mut().zip(vs.iter_mut()).zip(points) {
         let (dx, dy) = (p.x - e.cx, p.y - e.cy);
-        us.push(cth * dx + sth * dy);
-        vs.push(-sth * dx + cth * dy);
+        *u = cth * dx + sth * dy;
+        *v = -sth * dx + cth * dy;
     }
-    let mut ss: Vec<f64> = scratch::take(n);
-    let mut cs: Vec<f64> = scratch::take(n);
-    for (i, (&u, &v)) in us.iter().zip(&vs).enumerate() {
-        let (s, c) = start.get(i).copied().unwrap_or((v / b, u / a));
-        // A zero vector gives NaN here, which the certificate below sends to the general solver.
-        let inv = 1.0 / (c * c + s * s).sqrt();
-        ss.push(s * inv);
-        cs.push(c * inv);
+    // A zero vector below gives NaN, which the certificate sends to the general solver.
+    if start.len() == n {
+        for ((s, c), &(s0, c0)) in ss.iter_mut().zip(cs.iter_mut()).zip(start) {
+            let inv = 1.0 / (c0 * c0 + s0 * s0).sqrt();
+            *s = s0 * inv;
+            *c = c0 * inv;
+        }
+    } else {
+        // Cold start: the angle of the first-order (Sampson) foot point
+        // `x' = x − f∇f/‖∇f‖²` of `f = u²/a² + v²/b² − 1`, `(cos t, sin t) ∝ (u'/a, v'/b)`;
+        // for a point at distance `d` from the curve its angle error is `O(d²)`, where the
+        // radial angle `(cos t, sin t) ∝ (u/a, v/b)` is off by `O(d·(a − b))`. The factors are
+        // kept non-negative: far from the curve the projection may overshoot the axis, and
+        // the radial side is then the better start.
+        let (al, be) = (1.0 / (a * a), 1.0 / (b * b));
+        let (ia, ib) = (1.0 / a, 1.0 / b);
+        for (((s, c), &u), &v) in ss.iter_mut().zip(cs.iter_mut()).zip(&us).zip(&vs) {
+            let (gu, gv) = (al * u, be * v);
+            let f = gu * u + gv * v - 1.0;
+            let k = 0.5 * f / (gu * gu + gv * gv);
+            let c0 = u * ia * (1.0 - k * al).max(0.0);
+            let s0 = v * ib * (1.0 - k * be).max(0.0);
+            let inv = 1.0 / (c0 * c0 + s0 * s0).sqrt();
+            *s = s0 * inv;
+            *c = c0 * inv;
+        }
     }
     // Newton passes over all points until every step is small; the certifying pass below
     // then takes one more, quadratically convergent, step.
@@ -400,7 +472,7 @@ impl<const K: usize> NormalAcc<K> {
 
     /// `(JᵀJ, Jᵀr, Σ r²)`.
     fn finish(&self) -> (nalgebra::SMatrix<f64, K, K>, nalgebra::SVector<f64, K>, f64) {
-        pulp::Arch::new().dispatch(|| self.finish_impl())
+        pulp::Arch::new().dispatch(FinishOp(self))
     }
 
     #[inline(always)]
@@ -478,7 +550,12 @@ pub(crate) fn accumulate_conic(
     angles: &mut Vec<(f64, f64)>,
 ) -> ConicNormal {
     foot_angles(e, points, start, angles);
-    pulp::Arch::new().dispatch(|| conic_normal_equations(e, q, points, angles))
+    pulp::Arch::new().dispatch(ConicNormalOp {
+        e,
+        q,
+        points,
+        angles,
+    })
 }
 
 /// The normal equations of [`accumulate_conic`] at known foot angles, as weighted moments.
@@ -497,16 +574,22 @@ fn conic_normal_equations(
     let (sth, cth) = e.theta.sin_cos();
     let (a, b) = (e.a, e.b);
     let n = points.len().min(angles.len());
-    // Foot points, weights w² and w·r, four lanes wide (zero-padded: a zero weight adds
-    // nothing).
-    let lanes = n.div_ceil(4);
+    // Foot points, weights w² and w·r, in flat buffers padded to a multiple of four (a zero
+    // weight adds nothing), filled by a loop without branches or pushes so that it vectorises.
+    let padded = n.div_ceil(4) * 4;
     let zeros = || {
-        let mut v: Vec<[f64; 4]> = scratch::take(lanes);
-        v.resize(lanes, [0.0; 4]);
+        let mut v: Vec<f64> = scratch::take(padded);
+        v.resize(padded, 0.0);
         v
     };
     let (mut xs, mut ys, mut w2, mut wr, mut rr) = (zeros(), zeros(), zeros(), zeros(), zeros());
-    for (i, (p, &(st, ct))) in points.iter().zip(angles).enumerate() {
+    let outputs = xs
+        .iter_mut()
+        .zip(ys.iter_mut())
+        .zip(w2.iter_mut())
+        .zip(wr.iter_mut())
+        .zip(rr.iter_mut());
+    for (((((xo, yo), w2o), wro), rro), (p, &(st, ct))) in outputs.zip(points.iter().zip(angles)) {
         let (dx, dy) = (p.x - e.cx, p.y - e.cy);
         let u = cth * dx + sth * dy;
         let v = -sth * dx + cth * dy;
@@ -518,16 +601,18 @@ fn conic_normal_equations(
         let gx = 2.0 * q[0] * x + q[1] * y + q[3];
         let gy = q[1] * x + 2.0 * q[2] * y + q[4];
         let g2 = 1.0 / (gx * gx + gy * gy);
-        let (k, l) = (i / 4, i % 4);
-        xs[k][l] = x;
-        ys[k][l] = y;
-        w2[k][l] = g2;
-        wr[k][l] = g2.sqrt() * r;
-        rr[k][l] = r;
+        *xo = x;
+        *yo = y;
+        *w2o = g2;
+        *wro = g2.sqrt() * r;
+        *rro = r;
     }
     // The 15 moments Σ w² xʲ yᵏ, j + k ≤ 4, in the order of `MOMENT`.
     let mut mom = [[0.0f64; 4]; 15];
-    for ((x, y), w) in xs.iter().zip(&ys).zip(&w2) {
+    fn quads(v: &[f64]) -> std::slice::ChunksExact<'_, f64> {
+        v.chunks_exact(4)
+    }
+    for ((x, y), w) in quads(&xs).zip(quads(&ys)).zip(quads(&w2)) {
         for l in 0..4 {
             let (x, y, w) = (x[l], y[l], w[l]);
             let (wx, wy) = (w * x, w * y);
@@ -557,7 +642,7 @@ fn conic_normal_equations(
     }
     // Σ w·r·m, Σ r² and Σ |r|.
     let mut lin = [[0.0f64; 4]; 8];
-    for (((x, y), wr), r) in xs.iter().zip(&ys).zip(&wr).zip(&rr) {
+    for (((x, y), wr), r) in quads(&xs).zip(quads(&ys)).zip(quads(&wr)).zip(quads(&rr)) {
         for l in 0..4 {
             let (x, y, t) = (x[l], y[l], wr[l]);
             let (tx, ty) = (t * x, t * y);
@@ -590,6 +675,94 @@ fn conic_normal_equations(
         jtr,
         ssr: lin[6],
         sum_abs: lin[7],
+    }
+}
+
+/// The 15 moments `Σ xʲyᵏ` (`j + k ≤ 4`; degree `d` at `d(d + 1)/2 + k`) of the points
+/// `(p − c)·inv`: every entry of the conic scatter `Σ z zᵀ`, `z = [x², xy, y², x, y, 1]`
+/// (eq. 3.3 written out), in one vectorised pass.
+pub(crate) fn scatter_moments(points: &[Vector2<f64>], c: Vector2<f64>, inv: f64) -> [f64; 15] {
+    pulp::Arch::new().dispatch(MomentsOp { points, c, inv })
+}
+
+/// [`scatter_moments`] under [`pulp::Arch::dispatch`] (see [`FootAnglesOp`]).
+struct MomentsOp<'a> {
+    points: &'a [Vector2<f64>],
+    c: Vector2<f64>,
+    inv: f64,
+}
+
+impl pulp::WithSimd for MomentsOp<'_> {
+    type Output = [f64; 15];
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> [f64; 15] {
+        let (cx, cy, inv) = (self.c.x, self.c.y, self.inv);
+        let mut mom = [[0.0f64; 4]; 15];
+        let chunks = self.points.chunks_exact(4);
+        let tail = chunks.remainder();
+        let mut add = |x: [f64; 4], y: [f64; 4]| {
+            for l in 0..4 {
+                let (x, y) = (x[l], y[l]);
+                let (xx, xy, yy) = (x * x, x * y, y * y);
+                let (xxx, xxy, xyy, yyy) = (xx * x, xx * y, xy * y, yy * y);
+                let terms = [
+                    1.0,
+                    x,
+                    y,
+                    xx,
+                    xy,
+                    yy,
+                    xxx,
+                    xxy,
+                    xyy,
+                    yyy,
+                    xxx * x,
+                    xxx * y,
+                    xxy * y,
+                    xyy * y,
+                    yyy * y,
+                ];
+                for (m, t) in mom.iter_mut().zip(terms) {
+                    m[l] += t;
+                }
+            }
+        };
+        for p in chunks {
+            add(
+                std::array::from_fn(|l| (p[l].x - cx) * inv),
+                std::array::from_fn(|l| (p[l].y - cy) * inv),
+            );
+        }
+        let mut sum: [f64; 15] = std::array::from_fn(|k| {
+            let m = &mom[k];
+            (m[0] + m[1]) + (m[2] + m[3])
+        });
+        for p in tail {
+            let (x, y) = ((p.x - cx) * inv, (p.y - cy) * inv);
+            let (xx, xy, yy) = (x * x, x * y, y * y);
+            let terms = [
+                1.0,
+                x,
+                y,
+                xx,
+                xy,
+                yy,
+                xx * x,
+                xx * y,
+                xy * y,
+                yy * y,
+                xx * xx,
+                xx * xy,
+                xx * yy,
+                xy * yy,
+                yy * yy,
+            ];
+            for (m, t) in sum.iter_mut().zip(terms) {
+                *m += t;
+            }
+        }
+        sum
     }
 }
 
