@@ -65,6 +65,13 @@ impl Default for OptimizeConfig {
     }
 }
 
+/// Bytes of the trajectory QP per control point, at least: 30 limit rows (3 derivative orders ×
+/// 5 joints × 2 signs), each with two (index, value) entries, its bound and its vector header.
+const QP_BYTES_PER_CONTROL_POINT: usize = 30
+    * (2 * std::mem::size_of::<(usize, f64)>()
+        + std::mem::size_of::<f64>()
+        + std::mem::size_of::<Vec<(usize, f64)>>());
+
 /// The optimised trajectory and its figures.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OptimizeResult {
@@ -324,6 +331,14 @@ pub fn optimize_trajectory(
             reason: format!("{n} (need at least 7)"),
         });
     }
+    // The QP holds, per control point, at least the two-sided linearised limit rows of its
+    // velocity, acceleration and jerk points on every joint (30 rows of ≥ 2 entries): a count
+    // whose QP cannot fit in memory is refused up front, not aborted on deep in the solve.
+    autoteach_geometry::alloc::ensure_within_physical_memory(
+        "the trajectory QP of n_ctrl control points",
+        n,
+        QP_BYTES_PER_CONTROL_POINT,
+    )?;
     // Initial trajectory: the path's control polygon, scaled to the limits; more control points
     // until it keeps the clearance.
     let (mut ctrl, mut spans, mut traj) = loop {
@@ -692,6 +707,33 @@ mod tests {
             Err(e) => assert!(matches!(e, PlanError::Infeasible { .. }), "{e}"),
         }
         assert!(t0.elapsed().as_secs_f64() < 30.0);
+    }
+
+    #[test]
+    fn a_control_point_count_beyond_memory_is_refused_not_aborted() {
+        let (ws, poses) = default_scene().unwrap();
+        let dy = Dynamics::new(
+            &ws.robot.params,
+            &DynamicsParams::default(),
+            ws.wafer.as_ref(),
+        );
+        let mut q1 = poses[0].q;
+        q1[0] += 0.2;
+        for n_ctrl in [1usize << 31, 1 << 62, usize::MAX] {
+            let cfg = OptimizeConfig {
+                n_ctrl,
+                ..OptimizeConfig::default()
+            };
+            let e = optimize_trajectory(&ws, &dy, &[poses[0].q, q1], &Limits::default(), &cfg)
+                .unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    PlanError::Geometry(autoteach_geometry::GeometryError::OutOfMemory { .. })
+                ),
+                "{e}"
+            );
+        }
     }
 
     #[test]

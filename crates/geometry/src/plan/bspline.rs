@@ -327,7 +327,7 @@ pub fn fit_path(
         .map(|w| (w[1] - w[0]).component_mul(weights).norm())
         .collect();
     let total: f64 = seg.iter().sum();
-    let mut pts = Vec::with_capacity(n_ctrl);
+    let mut pts = crate::alloc::try_with_capacity("B-spline control points", n_ctrl)?;
     let first = path[0];
     let last = path[path.len() - 1];
     pts.extend([first, first]);
