@@ -6,8 +6,9 @@ strategies. For the command line it is: ``autoteach.cli.main`` returns 0 or exit
 and one line naming the problem on stderr, never a traceback. The command line runs in-process.
 
 These entry points cost more per call than the functions of part one (a simulation, a
-calibration, a planner), so each gets ``EXAMPLES_HEAVY`` derandomised examples
-(``AUTOTEACH_PROPERTY_EXAMPLES_HEAVY`` overrides it; CI keeps the file under a minute).
+calibration, a planner). Each gets ``EXAMPLES_HEAVY`` derandomised examples, 200 as the issue
+asks (``AUTOTEACH_PROPERTY_EXAMPLES_HEAVY`` overrides it); the file runs in about 100 s on the
+2-core CI machine.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from hypothesis import strategies as st
 from autoteach import calib, plan, polygon
 from test_properties import arrays, finite_floats, holds, ints, scalars
 
-EXAMPLES_HEAVY = int(os.environ.get("AUTOTEACH_PROPERTY_EXAMPLES_HEAVY", "40"))
+EXAMPLES_HEAVY = int(os.environ.get("AUTOTEACH_PROPERTY_EXAMPLES_HEAVY", "200"))
 
 HEAVY = settings(
     max_examples=EXAMPLES_HEAVY,
