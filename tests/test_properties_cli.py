@@ -25,7 +25,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from autoteach import calib, plan, polygon
-from test_properties import arrays, finite_floats, holds, ints, scalars
+from test_properties import (
+    _no_hang,  # noqa: F401  (the autouse hang watchdog of part one)
+    arrays,
+    finite_floats,
+    holds,
+    ints,
+    scalars,
+)
 
 EXAMPLES_HEAVY = int(os.environ.get("AUTOTEACH_PROPERTY_EXAMPLES_HEAVY", "200"))
 
