@@ -411,14 +411,6 @@ def conic_distance(points: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.abs(alg) / np.maximum(grad, 1e-300)
 
 
-def _bbox(p: np.ndarray) -> np.ndarray:
-    return np.array([p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()])
-
-
-def _overlap(a: np.ndarray, b: np.ndarray, margin: float) -> bool:
-    return bool(a[0] - margin <= b[2] and b[0] - margin <= a[2] and a[1] - margin <= b[3] and b[1] - margin <= a[3])
-
-
 def detector_options(
     k: np.ndarray, radius: float, thickness: float, *, edge_profile: str = "optical"
 ) -> dict[str, object]:
