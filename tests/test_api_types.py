@@ -125,10 +125,6 @@ PROPERTY_CLASSES: list[tuple[type, str, str]] = [
 
 # Compiled result classes whose getters carry the Rust field names.
 BINDING_CLASSES: list[tuple[Any, str, str]] = [
-    (_core.CpdRigidResult, "detect/src/cpd/mod.rs", "RigidResult"),
-    (_core.CpdAffineResult, "detect/src/cpd/mod.rs", "AffineResult"),
-    (_core.CpdNonrigidResult, "detect/src/cpd/mod.rs", "NonrigidResult"),
-    (_core.GlobalCpdHypothesis, "detect/src/cpd/global.rs", "GlobalHypothesis"),
     (_core.EllipseFit, "detect/src/ellipse/mod.rs", "EllipseFit"),
 ]
 

@@ -69,79 +69,54 @@ def test_slam_mot_point_sigma_scale_is_validated_and_used():
     from autoteach.pipeline import _pinhole_k, simulated_frontend
 
     obs = simulated_frontend(s, seed=1)
-    args = (
+    inputs = (
         _pinhole_k(s.camera),
         _robot_array(s.config.robot),
         s.config.wafer_radius,
         s.config.wafer_thickness,
         np.ascontiguousarray(s.joints_encoder),
-        obs.frames,
-        obs.wafers,
-        obs.rims,
-        obs.start,
-        np.ascontiguousarray(obs.points),
+        len(s.wafer_slots),
+    )
+    start = (
         np.linalg.inv(np.asarray(s.wafer_poses[0])) @ np.array(s.config.base_pose),
         np.zeros(5),
         np.array([[0, 0, (sl - s.wafer_slots[0]) * s.config.slot_pitch, 0, 0] for sl in s.wafer_slots], float),
     )
+
+    def solve(pixel_sigma: float, scale: np.ndarray | None, **options: object) -> dict:
+        flat = (obs.frames, obs.wafers, obs.rims, obs.start, np.ascontiguousarray(obs.points), scale)
+        return _core.HandeyeSlamMot(*inputs, pixel_sigma=pixel_sigma, **options).solve(flat, start)
+
     n = len(obs.points)
     for bad in (np.ones(n + 1), np.zeros(n), np.full(n, np.nan)):
         with pytest.raises(InvalidInputError, match="point_sigma_scale"):
-            _core.handeye_slam_mot(*args, pixel_sigma=0.3, point_sigma_scale=bad)
+            solve(0.3, bad)
     # A uniform factor 2 is the same problem as a pixel σ twice as large: same estimate, same
     # covariance; any other factor changes the covariance.
-    a = _core.handeye_slam_mot(*args, pixel_sigma=0.3, point_sigma_scale=np.full(n, 2.0), huber=None)
-    b = _core.handeye_slam_mot(*args, pixel_sigma=0.6, huber=None)
+    a = solve(0.3, np.full(n, 2.0), huber=None)
+    b = solve(0.6, None, huber=None)
     np.testing.assert_allclose(a["base_pose"], b["base_pose"], atol=1e-9)
     np.testing.assert_allclose(a["covariance"], b["covariance"], rtol=1e-6, atol=1e-18)
-    c = _core.handeye_slam_mot(*args, pixel_sigma=0.6, point_sigma_scale=np.full(n, 1.5), huber=None)
+    c = solve(0.6, np.full(n, 1.5), huber=None)
     assert c["covariance"][3, 3] > 2.0 * b["covariance"][3, 3]
 
 
 def test_slam_mot_rejects_inconsistent_observations():
     p = _robot_array(RobotParams())
     enc = np.zeros((3, 5))
-    with pytest.raises(InvalidInputError, match="obs_start"):
-        _core.handeye_slam_mot(
-            K, p, 0.15, 0.001, enc, [0], [0], [0], [0], np.zeros((4, 2)), np.eye(4), np.zeros(5), np.zeros((1, 5))
-        )
+    slam = _core.HandeyeSlamMot(K, p, 0.15, 0.001, enc, 1)
+    start = (np.eye(4), np.zeros(5), np.zeros((1, 5)))
+    one = ([0], [0], [0], [0, 4], np.ones((4, 2)), None)
+    with pytest.raises(InvalidInputError, match="start"):
+        slam.solve(([0], [0], [0], [0], np.zeros((4, 2)), None), start)
     with pytest.raises(InvalidInputError, match="no wafer edge"):
-        _core.handeye_slam_mot(
-            K, p, 0.15, 0.001, enc, [], [], [], [0], np.zeros((0, 2)), np.eye(4), np.zeros(5), np.zeros((1, 5))
-        )
+        slam.solve(([], [], [], [0], np.zeros((0, 2)), None), start)
     with pytest.raises(InvalidInputError, match="factor"):
-        _core.handeye_slam_mot(
-            K,
-            p,
-            0.15,
-            0.001,
-            enc,
-            [0],
-            [0],
-            [0],
-            [0, 4],
-            np.ones((4, 2)),
-            np.eye(4),
-            np.zeros(5),
-            np.zeros((1, 5)),
-            factor="x",
-        )
+        slam.solve(one, start, factor="x")
     with pytest.raises(InvalidInputError, match="encoders"):
-        _core.handeye_slam_mot(
-            K,
-            p,
-            0.15,
-            0.001,
-            np.zeros((3, 4)),
-            [0],
-            [0],
-            [0],
-            [0, 4],
-            np.ones((4, 2)),
-            np.eye(4),
-            np.zeros(5),
-            np.zeros((1, 5)),
-        )
+        _core.HandeyeSlamMot(K, p, 0.15, 0.001, np.zeros((3, 4)), 1)
+    with pytest.raises(InvalidInputError, match="gates_px"):
+        slam.gate_and_resolve(one, start, (np.ones((4, 2)), [0, 4], [0]), gates_px=[], first_heights=(0, 0.1, 0.01))
 
 
 def test_ukf_rejects_bad_lengths():

@@ -617,65 +617,9 @@ def wafer_detect_defaults() -> dict[str, float | int | bool | str | tuple[float,
 # --- end wafers ---
 
 # --- registration (cpd, global voting) ---
-class CpdRigidResult:
-    @property
-    def rotation(self) -> NDArray[np.float64]: ...
-    @property
-    def translation(self) -> NDArray[np.float64]: ...
-    @property
-    def scale(self) -> float: ...
-    @property
-    def transformed(self) -> NDArray[np.float64]: ...
-    @property
-    def sigma2(self) -> float: ...
-    @property
-    def iterations(self) -> int: ...
-    @property
-    def converged(self) -> bool: ...
-    @property
-    def p(self) -> NDArray[np.float64] | None: ...
-
-class CpdAffineResult:
-    @property
-    def matrix(self) -> NDArray[np.float64]: ...
-    @property
-    def translation(self) -> NDArray[np.float64]: ...
-    @property
-    def transformed(self) -> NDArray[np.float64]: ...
-    @property
-    def sigma2(self) -> float: ...
-    @property
-    def iterations(self) -> int: ...
-    @property
-    def converged(self) -> bool: ...
-    @property
-    def p(self) -> NDArray[np.float64] | None: ...
-
-class CpdNonrigidResult:
-    @property
-    def w(self) -> NDArray[np.float64]: ...
-    @property
-    def transformed(self) -> NDArray[np.float64]: ...
-    @property
-    def energy(self) -> float: ...
-    @property
-    def sigma2(self) -> float: ...
-    @property
-    def iterations(self) -> int: ...
-    @property
-    def converged(self) -> bool: ...
-    @property
-    def rank(self) -> int | None: ...
-    @property
-    def p(self) -> NDArray[np.float64] | None: ...
-
-class GlobalCpdHypothesis:
-    @property
-    def initial(self) -> tuple[NDArray[np.float64], NDArray[np.float64], int, int]:
-        """``(rotation, translation, votes, pair_votes)`` of the voting hypothesis."""
-    @property
-    def cpd(self) -> CpdNonrigidResult: ...
-
+# The results are dicts keyed by the Rust field names (``detect::cpd::RigidResult``,
+# ``AffineResult``, ``NonrigidResult``, ``GlobalHypothesis``); ``autoteach.registration`` builds
+# its result classes from them.
 def cpd_rigid(
     x: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -686,7 +630,7 @@ def cpd_rigid(
     sigma2: float | None = None,
     e_step: str = "auto",
     return_p: bool = False,
-) -> CpdRigidResult: ...
+) -> dict[str, _Any]: ...
 def cpd_affine(
     x: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -696,7 +640,7 @@ def cpd_affine(
     sigma2: float | None = None,
     e_step: str = "auto",
     return_p: bool = False,
-) -> CpdAffineResult: ...
+) -> dict[str, _Any]: ...
 def cpd_nonrigid(
     x: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -710,7 +654,7 @@ def cpd_nonrigid(
     sigma2: float | None = None,
     e_step: str = "auto",
     return_p: bool = False,
-) -> CpdNonrigidResult: ...
+) -> dict[str, _Any]: ...
 def global_cpd(
     x: NDArray[np.float64],
     y: NDArray[np.float64],
@@ -728,7 +672,7 @@ def global_cpd(
     count: str = "y",
     min_votes: int = 3,
     max_points: int = 1000,
-) -> list[GlobalCpdHypothesis]: ...
+) -> list[dict[str, _Any]]: ...
 
 # --- end registration ---
 
@@ -1026,49 +970,84 @@ def calib_synthesize_view(
 # --- end calib ---
 
 # --- handeye ---
-def handeye_slam_mot(
-    k: NDArray[np.float64],
-    robot_params: NDArray[np.float64],
-    wafer_radius: float,
-    wafer_thickness: float,
-    encoders: NDArray[np.float64],
-    obs_frames: list[int],
-    obs_wafers: list[int],
-    obs_rims: list[int],
-    obs_start: list[int],
-    points: NDArray[np.float64],
-    initial_base: NDArray[np.float64],
-    initial_offsets: NDArray[np.float64],
-    initial_wafers: NDArray[np.float64],
-    *,
-    pixel_sigma: float = 0.5,
-    estimate_offsets: list[int] = [1, 3],
-    reference_wafer: int = 0,
-    huber: float | None = 3.0,
-    factor: str = "conic",
-    n_model: int = 360,
-    rounds: int = 3,
-    max_iterations: int = 50,
-    window: int = 0,
-    init_heights: tuple[float, float, float] | None = None,
-    prior_sigmas: tuple[float, float, float] = (0.035, 0.02, 0.035),
-    encoder_sigma: tuple[float, float, float, float] | None = None,
-    estimate_mount: bool = False,
-    estimate_links: list[int] = [],
-    free_camera: tuple[list[float], NDArray[np.float64] | None, list[float]] | None = None,
-    point_sigma_scale: NDArray[np.float64] | None = None,
-    basin_search: bool = False,
-) -> dict[str, object]:
-    """SLAM-MOT calibration (000_3b1454b2b2194811.txt §5.3): batch (and sliding-window) solve with covariances.
+#: Observations in the solver's flat layout: ``(frames, wafers, rims, start, points (N, 2),
+#: sigma_scale (N,) or None)``; the points of observation ``i`` are ``points[start[i]:start[i+1]]``.
+_SlamObservations = tuple[list[int], list[int], list[int], list[int], NDArray[np.float64], NDArray[np.float64] | None]
+#: A start ``(base_pose (4, 4), joint_offsets (5,), wafers (W, 5))``.
+_SlamStart = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+
+class HandeyeSlamMot:
+    """A SLAM-MOT problem of one session (000_3b1454b2b2194811.txt §5.3), built once.
 
     ``free_camera = (motion_sigma (6), odometry (F-1, 4, 4) or None, odometry_sigma (6))`` switches to
-    per-frame camera poses tied by the robot motion factor of eqs. (5.10)–(5.12).
-    ``point_sigma_scale`` (one factor per point, > 0): point ``i`` has the standard deviation
-    ``pixel_sigma · point_sigma_scale[i]`` (eq. (5.5) per point). ``basin_search``: after the
-    batch solve, every wafer whose edge residuals stand out is re-fitted alone (camera poses fixed)
-    from a grid of tilts and heights, and the batch solve is repeated from a better basin when one
-    is found; the wafers moved are ``basins_moved``.
+    per-frame camera poses tied by the robot motion factor of eqs. (5.10)–(5.12), with a calibration
+    prior of ``prior_sigmas`` centred on each solve's start. ``prior_sigmas`` are also the priors
+    carried between sliding windows.
     """
+
+    def __init__(
+        self,
+        k: NDArray[np.float64],
+        robot_params: NDArray[np.float64],
+        wafer_radius: float,
+        wafer_thickness: float,
+        encoders: NDArray[np.float64],
+        n_wafers: int,
+        *,
+        pixel_sigma: float = 0.5,
+        estimate_offsets: list[int] = [1, 3],
+        reference_wafer: int = 0,
+        huber: float | None = 3.0,
+        max_iterations: int = 50,
+        prior_sigmas: tuple[float, float, float] = (0.035, 0.02, 0.035),
+        encoder_sigma: tuple[float, float, float, float] | None = None,
+        estimate_mount: bool = False,
+        estimate_links: list[int] = [],
+        free_camera: tuple[list[float], NDArray[np.float64] | None, list[float]] | None = None,
+    ) -> None: ...
+    def solve(
+        self,
+        observations: _SlamObservations,
+        start: _SlamStart,
+        *,
+        factor: str = "conic",
+        n_model: int = 360,
+        rounds: int = 3,
+        window: int = 0,
+        init_heights: tuple[float, float, float] | None = None,
+        basin_search: bool = False,
+    ) -> dict[str, object]:
+        """Height search (``init_heights``), sliding window (``window > 0``), batch solve (``handeye::run::solve``).
+
+        ``sigma_scale`` (one factor per point, > 0): point ``i`` has the standard deviation
+        ``pixel_sigma · sigma_scale[i]`` (eq. (5.5) per point). ``basin_search``: after the batch
+        solve, every wafer whose edge residuals stand out is re-fitted alone (camera poses fixed)
+        from a grid of tilts and heights, and the batch solve is repeated from a better basin when
+        one is found; the wafers moved are ``basins_moved``.
+        """
+    def gate_and_resolve(
+        self,
+        observations: _SlamObservations,
+        start: _SlamStart,
+        detections: tuple[NDArray[np.float64], list[int], list[int]],
+        *,
+        gates_px: list[float],
+        first_heights: tuple[float, float, float],
+        reset_tilts: bool = True,
+        min_wafer_frames: int = 8,
+        points_per_rim: int = 24,
+        min_inlier_fraction: float = 0.6,
+        min_points: int = 12,
+        min_band_px: float = 0.0,
+        band_weights: bool = False,
+        basin_search: bool = False,
+    ) -> dict[str, _Any]:
+        """The detect front end's chain of gates (``handeye::run::gate_and_resolve``).
+
+        ``detections = (points (N, 2), start (E + 1), frames (E))``. Returns ``observations``,
+        ``start`` (``base_pose``, ``joint_offsets``, ``wafers``), ``stats``, ``last_gate_px`` and
+        ``too_few_views``.
+        """
 
 def handeye_ukf(
     robot_params: NDArray[np.float64],
@@ -1115,8 +1094,8 @@ def handeye_gate(
 ) -> dict[str, _Any]:
     """Gate detected edges against the projected wafer rims (``handeye::gating::gate_edges``).
 
-    Returns ``frames``, ``wafers``, ``rims``, ``start``, ``points (N, 2)``, ``sigma_scale`` (or
-    ``None``) and ``stats``.
+    Returns ``observations`` in the solver's flat layout (``sigma_scale`` only with
+    ``band_weights``) and ``stats``.
     """
 
 def handeye_band_width(

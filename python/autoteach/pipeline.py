@@ -294,6 +294,18 @@ class Observations:
     def __len__(self) -> int:
         return len(self.frames)
 
+    def flat(self) -> tuple[Any, ...]:
+        """The compiled solver's layout ``(frames, wafers, rims, start, points, sigma_scale)``."""
+        return (self.frames, self.wafers, self.rims, self.start, np.ascontiguousarray(self.points), self.sigma_scale)
+
+    @classmethod
+    def from_flat(cls, flat: tuple[Any, ...], n_wafers: int, slots: np.ndarray) -> Observations:
+        """Observations from the compiled solver's layout (see :meth:`flat`)."""
+        frames, wafers, rims, start, points, sigma_scale = flat
+        return cls(
+            frames, wafers, rims, start, points, n_wafers, np.asarray(slots, dtype=np.int64), sigma_scale=sigma_scale
+        )
+
 
 def _subsample(points: np.ndarray, n: int) -> np.ndarray:
     if len(points) <= n:
@@ -594,39 +606,6 @@ def detect_frontend(
     return obs
 
 
-def _drop_sparse_wafers(obs: Observations, min_frames: int) -> Observations:
-    """Remove the observations of wafers seen in fewer than ``min_frames`` frames (stats say which)."""
-    frames_of: dict[int, set[int]] = {}
-    for f, w in zip(obs.frames, obs.wafers, strict=True):
-        frames_of.setdefault(w, set()).add(f)
-    sparse = sorted(w for w, fs in frames_of.items() if len(fs) < min_frames)
-    stats = dict(obs.stats)
-    stats["wafers_too_few_views"] = [int(obs.slots[w]) for w in sparse]
-    if not sparse:
-        obs.stats = stats
-        return obs
-    keep = [i for i, w in enumerate(obs.wafers) if w not in sparse]
-    pts = [obs.points[obs.start[i] : obs.start[i + 1]] for i in keep]
-    start = np.concatenate([[0], np.cumsum([len(p) for p in pts])]).astype(int).tolist()
-    stats["rims_used"] = len(keep)
-    stats["frames_used"] = len({obs.frames[i] for i in keep})
-    scale = None
-    if obs.sigma_scale is not None:
-        parts = [obs.sigma_scale[obs.start[i] : obs.start[i + 1]] for i in keep]
-        scale = np.concatenate(parts) if parts else np.zeros(0)
-    return Observations(
-        [obs.frames[i] for i in keep],
-        [obs.wafers[i] for i in keep],
-        [obs.rims[i] for i in keep],
-        start,
-        np.concatenate(pts) if pts else np.zeros((0, 2)),
-        obs.n_wafers,
-        obs.slots,
-        stats,
-        scale,
-    )
-
-
 #: The detector's edge-point noise against the predicted side-band width, measured on simulated
 #: sessions (``python benchmarks/autoteach_sessions.py --noise-model``): the widths (pixels), and
 #: the relative noise of the upper and of the lower rim there. Defined once, in
@@ -708,22 +687,13 @@ def gate_detections(
 
     Computed by ``autoteach_estimate::handeye::gating::gate_edges``.
     """
-    edge_pts: list[np.ndarray] = []
-    edge_frames: list[int] = []
-    for f, edges in enumerate(detections):
-        for e in edges:
-            edge_pts.append(np.asarray(e.points, dtype=np.float64).reshape(-1, 2))
-            edge_frames.append(f)
-    edge_start = np.concatenate([[0], np.cumsum([len(p) for p in edge_pts], dtype=np.int64)]).tolist()
     g = _core.handeye_gate(
         np.asarray(imaging.k, dtype=np.float64),
         np.asarray(camera_poses, dtype=np.float64).reshape(-1, 4, 4),
         np.asarray(wafers, dtype=np.float64).reshape(-1, 5),
         imaging.radius,
         imaging.thickness,
-        np.concatenate(edge_pts) if edge_pts else np.zeros((0, 2)),
-        edge_start,
-        edge_frames,
+        *_flat_detections(detections),
         gate_px=gate_px,
         min_inlier_fraction=min_inlier_fraction,
         points_per_rim=points_per_rim,
@@ -731,16 +701,7 @@ def gate_detections(
         min_band_px=min_band_px,
         band_weights=band_weights,
     )
-    obs = Observations(
-        g["frames"],
-        g["wafers"],
-        g["rims"],
-        g["start"],
-        g["points"],
-        len(wafers),
-        np.asarray(slots, dtype=np.int64),
-        sigma_scale=g["sigma_scale"] if g["frames"] else None,
-    )
+    obs = Observations.from_flat(g["observations"], len(wafers), slots)
     obs.stats = {
         **g["stats"],
         "gate_px": gate_px,
@@ -748,6 +709,18 @@ def gate_detections(
         "stage": "gated",
     }
     return obs
+
+
+def _flat_detections(detections: list[list[Any]]) -> tuple[np.ndarray, list[int], list[int]]:
+    """Every frame's detected edges as ``(points (N, 2), start (E + 1), frames (E))``."""
+    edge_pts: list[np.ndarray] = []
+    edge_frames: list[int] = []
+    for f, edges in enumerate(detections):
+        for e in edges:
+            edge_pts.append(np.asarray(e.points, dtype=np.float64).reshape(-1, 2))
+            edge_frames.append(f)
+    edge_start = np.concatenate([[0], np.cumsum([len(p) for p in edge_pts], dtype=np.int64)]).tolist()
+    return (np.concatenate(edge_pts) if edge_pts else np.zeros((0, 2)), edge_start, edge_frames)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1079,29 +1052,54 @@ def run_ukf(
 
 @dataclass
 class SlamMotProblem:
-    """The SLAM-MOT inputs (§5.3) that every solve of one session shares.
+    """The SLAM-MOT problem of one session (§5.3).
+
+    What every solve shares, and the current observations and start.
 
     Attributes:
-        args: the positional arguments of ``_core.handeye_slam_mot`` (intrinsics, robot, wafer
-            size, encoders, observations, base, offsets, wafers).
-        options: its keyword options.
+        solver_args: the positional arguments of ``_core.HandeyeSlamMot`` (intrinsics, robot,
+            wafer size, encoders, number of wafers).
+        solver_options: its keyword options (noise model, estimated quantities, free camera).
+        observations: the observations the next solve uses.
+        start: its start ``(base_pose (4, 4), joint_offsets (5,), wafers (W, 5))``.
+        basin_search: follow each batch solve by the per-wafer basin search.
         est_idx: indices of the joints whose offsets are estimated.
         ref: the reference wafer.
-        z_top: height (m) above the highest wafer's start, the top of the basin search.
+        z_top: height (m) above the highest wafer's start, the top of the height search.
         stats: what the stages did (front-end counts, odometry factors, gating).
     """
 
-    args: tuple[Any, ...]
-    options: dict[str, Any]
+    solver_args: tuple[Any, ...]
+    solver_options: dict[str, Any]
+    observations: Observations
+    start: tuple[np.ndarray, np.ndarray, np.ndarray]
+    basin_search: bool
     est_idx: list[int]
     ref: int
     z_top: float
     stats: dict[str, Any] = field(default_factory=dict)
 
-    def with_observations(self, obs: Observations, start: tuple[Any, ...] | None = None) -> tuple[Any, ...]:
-        """The positional arguments with ``obs`` in place of the observations (and a new start)."""
-        tail = self.args[10:] if start is None else start
-        return (*self.args[:5], obs.frames, obs.wafers, obs.rims, obs.start, np.ascontiguousarray(obs.points), *tail)
+    @property
+    def heights(self) -> tuple[float, float, float]:
+        """The height search ``(low, high, step)`` (m) of a first solve."""
+        return (-0.02, max(self.z_top, 0.05), 0.001)
+
+    def solver(self, *, free_camera: bool = True) -> Any:
+        """The compiled problem (``_core.HandeyeSlamMot``); ``free_camera=False`` drops that mode."""
+        options = self.solver_options
+        if not free_camera:
+            options = {k: v for k, v in options.items() if k != "free_camera"}
+        return _core.HandeyeSlamMot(*self.solver_args, **options)
+
+    def solve(self, **plan: Any) -> dict[str, Any]:
+        """One ``run::solve`` of the current observations from the current start.
+
+        ``plan``: ``factor``, ``window``, ``init_heights``, ``basin_search`` (default this
+        problem's), and the solver keywords of :meth:`solver` (``free_camera``).
+        """
+        free_camera = plan.pop("free_camera", True)
+        plan.setdefault("basin_search", self.basin_search)
+        return self.solver(free_camera=free_camera).solve(self.observations.flat(), self.start, **plan)
 
 
 def slam_mot_problem(
@@ -1129,6 +1127,7 @@ def slam_mot_problem(
         encoder_sigma = tuple(max(float(noise5[j]), 1e-9) for j in (0, 1, 3, 4))
     options: dict[str, Any] = {}
     stats: dict[str, Any] = {"initial": dict(obs.stats)} if obs.stats else {}
+    n_wafers = len(init_wafers)
     if config.camera_mode == "free":
         options["free_camera"], stats["odometry_factors"] = _free_camera_factors(setup, config, odometry)
         encoder_sigma = ()
@@ -1143,12 +1142,18 @@ def slam_mot_problem(
         reference_wafer=int(ref),
         huber=config.huber,
         max_iterations=int(config.max_iterations),
-        basin_search=bool(config.basin_search),
     )
-    args = (setup.k, setup.robot, setup.radius, setup.thickness, setup.encoders)
-    problem = SlamMotProblem(args, options, est_idx, ref, float(init_wafers[:, 2].max()) + 0.05, stats)
-    problem.args = problem.with_observations(obs, (nominal_base, offsets0, init_wafers))
-    return problem
+    return SlamMotProblem(
+        (setup.k, setup.robot, setup.radius, setup.thickness, setup.encoders, n_wafers),
+        options,
+        obs,
+        (nominal_base, offsets0, init_wafers),
+        bool(config.basin_search),
+        est_idx,
+        ref,
+        float(init_wafers[:, 2].max()) + 0.05,
+        stats,
+    )
 
 
 def _free_camera_factors(
@@ -1190,81 +1195,41 @@ def gate_and_resolve(
     is associated with the projected prior with shrinking gates, solving again after each. The
     tracks may mix wafers, so the first estimate can sit in a mirrored-tilt basin: the chain of
     gates runs from its tilts and from level wafers (the nominal carrier), and the chain whose
-    estimate explains more detected edges within the last gate wins. Updates ``problem`` to the
-    winner's observations and start; returns the kept observations.
+    estimate explains more detected edges within the last gate wins. Wafers gated into fewer
+    than ``min_wafer_frames`` frames are reported as not estimated and do not enter the solve.
+    Updates ``problem`` to the winner's observations and start; returns the kept observations.
+
+    Computed by ``autoteach_estimate::handeye::run::gate_and_resolve``.
 
     Raises:
         InvalidInputError: no chain associates any edge.
     """
-    heights = (-0.02, max(problem.z_top, 0.05), 0.001)
-    tracked = _core.handeye_slam_mot(*problem.args, factor="conic", window=0, init_heights=heights, **problem.options)
-    best: tuple[int, Observations, tuple[Any, ...]] | None = None
-    for reset in (False, True) if config.reset_tilts else (False,):
-        chain = _gating_chain(setup, config, problem, obs, detections, tracked, reset)
-        if chain is not None and (best is None or chain[0] > best[0]):
-            best = chain
-    if best is None:
-        raise InvalidInputError(
-            f"no detected edge lies within {config.gate_px} px of the projected wafer estimates, or every "
-            "gating chain's estimate put a rim behind a camera: the first estimate from the tracked "
-            "rims is inconsistent with the detections"
-        )
-    _, kept, args = best
-    kept = _drop_sparse_wafers(kept, config.min_wafer_frames)
-    # The solve gets exactly the kept observations (a wafer with too few views is reported as not
-    # estimated and does not enter the solve).
-    problem.args = problem.with_observations(kept, args[10:])
+    out = problem.solver().gate_and_resolve(
+        obs.flat(),
+        problem.start,
+        _flat_detections(detections),
+        gates_px=[float(g) for g in config.gate_px],
+        first_heights=problem.heights,
+        reset_tilts=bool(config.reset_tilts),
+        min_wafer_frames=int(config.min_wafer_frames),
+        points_per_rim=int(config.points_per_rim),
+        min_band_px=float(config.min_band_px),
+        band_weights=bool(config.band_weights),
+        basin_search=problem.basin_search,
+    )
+    kept = Observations.from_flat(out["observations"], obs.n_wafers, obs.slots)
+    kept.stats = {
+        **out["stats"],
+        "gate_px": out["last_gate_px"],
+        "min_band_px": config.min_band_px,
+        "stage": "gated",
+        "wafers_too_few_views": [int(obs.slots[w]) for w in out["too_few_views"]],
+    }
+    start = out["start"]
+    problem.observations = kept
+    problem.start = (start["base_pose"], start["joint_offsets"], start["wafers"])
     problem.stats["gated"] = dict(kept.stats)
     return kept
-
-
-def _gating_chain(
-    setup: Setup,
-    config: AutoteachConfig,
-    problem: SlamMotProblem,
-    obs: Observations,
-    detections: list[list[Any]],
-    tracked: dict[str, Any],
-    reset: bool,
-) -> tuple[int, Observations, tuple[Any, ...]] | None:
-    """One chain of gates from the tracked estimate (``reset``: from level wafers).
-
-    Returns the edges it explains, its observations and its solve's arguments, or ``None`` when
-    an estimate put a rim behind a camera (its gated edges mixed wafers) or nothing was gated.
-    """
-    gates = config.gate_px
-    first, cand_obs, cand_args = tracked, obs, problem.args
-    for gi, gate in enumerate(gates):
-        if gi > 0:
-            try:
-                first = _core.handeye_slam_mot(*cand_args, factor="conic", window=0, **problem.options)
-            except InvalidInputError:
-                return None
-        wafers_first = np.asarray(first["wafers"], dtype=np.float64).copy()
-        if gi == 0 and reset:
-            wafers_first[:, 3:] = 0.0
-        last = gi == len(gates) - 1
-        cand_obs = gate_detections(
-            detections,
-            np.asarray(first["camera_poses"]),
-            np.asarray(first["wafers"], dtype=np.float64),
-            obs.slots,
-            setup.imaging,
-            gate_px=gate,
-            points_per_rim=config.points_per_rim,
-            min_band_px=config.min_band_px if last else 0.0,
-            band_weights=config.band_weights and last,
-        )
-        if len(cand_obs) == 0:
-            return None
-        start = (
-            np.asarray(first["base_pose"], dtype=np.float64),
-            np.asarray(first["joint_offsets"], dtype=np.float64),
-            wafers_first,
-        )
-        cand_args = problem.with_observations(cand_obs, start)
-    # Edges explained (before the band filter, which only thins their points).
-    return int(cand_obs.stats.get("rims_associated", len(cand_obs))), cand_obs, cand_args
 
 
 def assemble_result(
@@ -1375,15 +1340,7 @@ def run_baseline(
 ) -> dict[str, Any]:
     """The seed's baseline as it is: point reprojection, nearest-point association, no basin search."""
     t0 = time.perf_counter()
-    chain_only = {k: v for k, v in problem.options.items() if k not in ("free_camera", "basin_search")}
-    sol = _core.handeye_slam_mot(
-        *problem.args,
-        factor="point",
-        window=0,
-        init_heights=(-0.02, max(problem.z_top, 0.05), 0.001),
-        point_sigma_scale=obs.sigma_scale,
-        **chain_only,
-    )
+    sol = problem.solve(factor="point", init_heights=problem.heights, basin_search=False, free_camera=False)
     b: dict[str, Any] = {
         "base_pose": np.asarray(sol["base_pose"]),
         "wafers": np.asarray(sol["wafers"]),
@@ -1454,18 +1411,11 @@ def autoteach(
 
     t0 = time.perf_counter()
     problem = slam_mot_problem(setup, config, obs, ref, nominal_base, init_wafers, ukf_out, odometry)
-    heights: tuple[float, float, float] | None = (-0.02, max(problem.z_top, 0.05), 0.001)
+    heights: tuple[float, float, float] | None = problem.heights
     if detections is not None:
         obs = gate_and_resolve(setup, config, problem, obs, detections)
         heights = None
-    sol = _core.handeye_slam_mot(
-        *problem.args,
-        factor="conic",
-        window=int(config.window),
-        init_heights=heights,
-        point_sigma_scale=obs.sigma_scale,
-        **problem.options,
-    )
+    sol = problem.solve(window=int(config.window), init_heights=heights)
     timings["slam_mot_s"] = time.perf_counter() - t0
     problem.stats["basins_moved"] = [int(obs.slots[w]) for w in sol["basins_moved"]]
     stages.update()

@@ -145,10 +145,6 @@ class NonrigidCpdResult:
     rank: int | None
     p: NDArray[np.float64] | None
 
-    @classmethod
-    def _from_core(cls, r: _core.CpdNonrigidResult) -> NonrigidCpdResult:
-        return cls(r.w, r.transformed, r.energy, r.sigma2, r.iterations, r.converged, r.rank, r.p)
-
 
 def _common(
     w: float, max_iterations: int, tolerance: float, sigma2: float | None, e_step: str
@@ -206,7 +202,7 @@ def cpd_rigid(
     r = _core.cpd_rigid(
         as_f64(X, "X"), as_f64(Y, "Y"), w, bool(scale), max_iterations, tolerance, sigma2, e_step, bool(return_P)
     )
-    return RigidCpdResult(r.rotation, r.translation, r.scale, r.transformed, r.sigma2, r.iterations, r.converged, r.p)
+    return RigidCpdResult(**r)
 
 
 def cpd_affine(
@@ -241,7 +237,7 @@ def cpd_affine(
     """
     w, max_iterations, tolerance, sigma2, e_step = _common(w, max_iterations, tolerance, sigma2, e_step)
     r = _core.cpd_affine(as_f64(X, "X"), as_f64(Y, "Y"), w, max_iterations, tolerance, sigma2, e_step, bool(return_P))
-    return AffineCpdResult(r.matrix, r.translation, r.transformed, r.sigma2, r.iterations, r.converged, r.p)
+    return AffineCpdResult(**r)
 
 
 def cpd_nonrigid(
@@ -305,7 +301,7 @@ def cpd_nonrigid(
         e_step,
         bool(return_P),
     )
-    return NonrigidCpdResult._from_core(r)
+    return NonrigidCpdResult(**r)
 
 
 @dataclass(frozen=True, slots=True)
@@ -417,7 +413,7 @@ def global_cpd(
     )
     out = []
     for h in hyps:
-        rotation, translation, votes, pair_votes = h.initial
+        rotation, translation, votes, pair_votes = h["initial"]
         initial = RigidHypothesis(rotation, translation, int(votes), int(pair_votes))
-        out.append(GlobalCpdHypothesis(initial, NonrigidCpdResult._from_core(h.cpd)))
+        out.append(GlobalCpdHypothesis(initial, NonrigidCpdResult(**h["cpd"])))
     return out

@@ -36,10 +36,10 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 fn err(e: EstimateError) -> PyErr {
     match e {
         EstimateError::SingularInformation { .. } => {
-            errors::new_err("DegenerateGeometryError", e.to_string())
+            errors::new_err(errors::Class::DegenerateGeometry, e.to_string())
         }
         EstimateError::NoFeasiblePose { .. } => {
-            errors::new_err("UnreachablePoseError", e.to_string())
+            errors::new_err(errors::Class::UnreachablePose, e.to_string())
         }
         EstimateError::InvalidProblem(_) => errors::invalid_input(e.to_string()),
         other => errors::estimate(other),

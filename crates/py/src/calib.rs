@@ -26,7 +26,7 @@ use crate::errors;
 fn calib_err(err: EstimateError) -> PyErr {
     match err {
         EstimateError::DegenerateCalibration(_) | EstimateError::RankDeficient { .. } => {
-            errors::new_err("DegenerateGeometryError", err.to_string())
+            errors::new_err(errors::Class::DegenerateGeometry, err.to_string())
         }
         EstimateError::TooFewPoints { .. } => errors::invalid_input(err.to_string()),
         other => errors::estimate(other),

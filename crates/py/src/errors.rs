@@ -10,8 +10,10 @@
 //! ├── AllocationError(AutoteachError, MemoryError)        an input asks for more memory than exists
 //! └── InternalError(AutoteachError, RuntimeError)         a bug: a Rust panic caught at the boundary
 //! ```
-//! The classes are built at module initialisation (so they can derive from both
-//! `AutoteachError` and the matching built-in) and live in `autoteach._core`.
+//! The classes are built at module initialisation with `type(...)`, so that each derives from
+//! both `AutoteachError` and the matching built-in (pyo3's `create_exception!` takes one base),
+//! live in `autoteach._core`, and are kept in a table indexed by [`Class`]: the mapping names a
+//! class by that enum, never by a string.
 //!
 //! Every core error enum (`GeometryError`, `EstimateError`, `DetectError`, `PlanError`) is
 //! mapped here by an exhaustive `match` with no catch-all arm. Adding a variant to one of them
@@ -21,41 +23,76 @@
 
 use autoteach_geometry::GeometryError;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyTuple};
+use pyo3::sync::PyOnceLock;
+use pyo3::types::{PyDict, PyTuple, PyType};
 
-/// The exception classes, by name, in creation order: (name, built-in second base, doc).
-const CLASSES: &[(&str, Option<&str>, &str)] = &[
-    (
-        "InvalidInputError",
-        Some("ValueError"),
-        "An input has the wrong shape, dtype, a NaN/inf, or an invalid value.",
-    ),
-    (
-        "DegenerateGeometryError",
-        Some("ValueError"),
-        "The data are geometrically degenerate (collinear points, a degenerate conic, ...).",
-    ),
-    (
-        "UnreachablePoseError",
-        Some("ValueError"),
-        "A requested robot pose cannot be reached.",
-    ),
-    (
-        "ConvergenceError",
-        Some("RuntimeError"),
-        "An iterative computation did not converge.",
-    ),
-    (
-        "AllocationError",
-        Some("MemoryError"),
-        "An input asks for a buffer larger than memory (a huge sample count or dimension).",
-    ),
-    (
-        "InternalError",
-        Some("RuntimeError"),
-        "A bug inside autoteach (a Rust panic caught at the Python boundary).",
-    ),
-];
+/// The exception classes below `AutoteachError`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Class {
+    /// `InvalidInputError(AutoteachError, ValueError)`.
+    InvalidInput,
+    /// `DegenerateGeometryError(AutoteachError, ValueError)`.
+    DegenerateGeometry,
+    /// `UnreachablePoseError(AutoteachError, ValueError)`.
+    UnreachablePose,
+    /// `ConvergenceError(AutoteachError, RuntimeError)`.
+    Convergence,
+    /// `AllocationError(AutoteachError, MemoryError)`.
+    Allocation,
+    /// `InternalError(AutoteachError, RuntimeError)`.
+    Internal,
+}
+
+impl Class {
+    /// Every class, in creation order.
+    const ALL: [Class; 6] = [
+        Class::InvalidInput,
+        Class::DegenerateGeometry,
+        Class::UnreachablePose,
+        Class::Convergence,
+        Class::Allocation,
+        Class::Internal,
+    ];
+
+    /// (Python name, built-in second base, doc).
+    fn spec(self) -> (&'static str, &'static str, &'static str) {
+        match self {
+            Class::InvalidInput => (
+                "InvalidInputError",
+                "ValueError",
+                "An input has the wrong shape, dtype, a NaN/inf, or an invalid value.",
+            ),
+            Class::DegenerateGeometry => (
+                "DegenerateGeometryError",
+                "ValueError",
+                "The data are geometrically degenerate (collinear points, a degenerate conic, ...).",
+            ),
+            Class::UnreachablePose => (
+                "UnreachablePoseError",
+                "ValueError",
+                "A requested robot pose cannot be reached.",
+            ),
+            Class::Convergence => (
+                "ConvergenceError",
+                "RuntimeError",
+                "An iterative computation did not converge.",
+            ),
+            Class::Allocation => (
+                "AllocationError",
+                "MemoryError",
+                "An input asks for a buffer larger than memory (a huge sample count or dimension).",
+            ),
+            Class::Internal => (
+                "InternalError",
+                "RuntimeError",
+                "A bug inside autoteach (a Rust panic caught at the Python boundary).",
+            ),
+        }
+    }
+}
+
+/// The classes created by [`register`], in [`Class::ALL`] order.
+static CLASSES: PyOnceLock<Vec<Py<PyType>>> = PyOnceLock::new();
 
 /// Creates `AutoteachError` and its subclasses and adds them to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -68,43 +105,42 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     ns.set_item("__module__", "autoteach")?;
     let base = type_.call1(("AutoteachError", PyTuple::new(py, [exception])?, ns))?;
     m.add("AutoteachError", &base)?;
-    for (name, builtin, doc) in CLASSES {
-        let mut bases = vec![base.clone()];
-        if let Some(b) = builtin {
-            bases.push(builtins.getattr(*b)?);
-        }
+    let mut created = Vec::with_capacity(Class::ALL.len());
+    for class in Class::ALL {
+        let (name, builtin, doc) = class.spec();
+        let bases = [base.clone(), builtins.getattr(builtin)?];
         let ns = PyDict::new(py);
-        ns.set_item("__doc__", *doc)?;
+        ns.set_item("__doc__", doc)?;
         ns.set_item("__module__", "autoteach")?;
-        let cls = type_.call1((*name, PyTuple::new(py, bases)?, ns))?;
-        m.add(*name, cls)?;
+        let cls = type_
+            .call1((name, PyTuple::new(py, bases)?, ns))?
+            .cast_into::<PyType>()?;
+        m.add(name, &cls)?;
+        created.push(cls.unbind());
     }
+    // A second initialisation of the module (a sub-interpreter) keeps the first classes.
+    let _ = CLASSES.set(py, created);
     Ok(())
 }
 
 /// Builds an instance of the autoteach exception `class` with `message`.
-pub fn new_err(class: &str, message: impl Into<String>) -> PyErr {
+pub fn new_err(class: Class, message: impl Into<String>) -> PyErr {
     let message = message.into();
-    Python::attach(|py| {
-        let cls = py
-            .import("autoteach._core")
-            .and_then(|m| m.getattr(class))
-            .and_then(|c| c.cast_into::<pyo3::types::PyType>().map_err(PyErr::from));
-        match cls {
-            Ok(cls) => PyErr::from_type(cls, message),
-            Err(e) => e,
-        }
+    Python::attach(|py| match CLASSES.get(py) {
+        Some(classes) => PyErr::from_type(classes[class as usize].bind(py).clone(), message),
+        // Only before the module is initialised, which no caller can reach.
+        None => pyo3::exceptions::PyRuntimeError::new_err(message),
     })
 }
 
 /// `InvalidInputError(message)`.
 pub fn invalid_input(message: impl Into<String>) -> PyErr {
-    new_err("InvalidInputError", message)
+    new_err(Class::InvalidInput, message)
 }
 
 /// `InternalError(message)`.
 pub fn internal(message: impl Into<String>) -> PyErr {
-    new_err("InternalError", message)
+    new_err(Class::Internal, message)
 }
 
 /// Maps a geometry error to its Python exception.
@@ -112,9 +148,9 @@ pub fn geometry(err: GeometryError) -> PyErr {
     new_err(geometry_class(&err), err.to_string())
 }
 
-/// The name of the exception class a geometry error maps to (a batch error takes the class of
+/// The exception class a geometry error maps to (a batch error takes the class of
 /// the failing element's error).
-fn geometry_class(err: &GeometryError) -> &'static str {
+fn geometry_class(err: &GeometryError) -> Class {
     match err {
         GeometryError::NonFinite { .. }
         | GeometryError::WrongLength { .. }
@@ -122,11 +158,11 @@ fn geometry_class(err: &GeometryError) -> &'static str {
         | GeometryError::NotProjectable { .. }
         | GeometryError::NotUnprojectable { .. }
         | GeometryError::UnknownModel { .. }
-        | GeometryError::DegenerateQuaternion { .. } => "InvalidInputError",
-        GeometryError::Unreachable { .. } => "UnreachablePoseError",
-        GeometryError::DegenerateConic { .. } => "DegenerateGeometryError",
-        GeometryError::NoConvergence { .. } => "ConvergenceError",
-        GeometryError::OutOfMemory { .. } => "AllocationError",
+        | GeometryError::DegenerateQuaternion { .. } => Class::InvalidInput,
+        GeometryError::Unreachable { .. } => Class::UnreachablePose,
+        GeometryError::DegenerateConic { .. } => Class::DegenerateGeometry,
+        GeometryError::NoConvergence { .. } => Class::Convergence,
+        GeometryError::OutOfMemory { .. } => Class::Allocation,
         GeometryError::AtIndex { source, .. } => geometry_class(source),
     }
 }
@@ -150,15 +186,15 @@ pub fn estimate(err: autoteach_estimate::EstimateError) -> PyErr {
         // An unconstrained direction (gauge freedom), a singular information matrix, a
         // calibration that the views cannot determine, no pose meeting the constraints.
         E::RankDeficient { .. } | E::SingularInformation { .. } | E::DegenerateCalibration(_) => {
-            new_err("DegenerateGeometryError", err.to_string())
+            new_err(Class::DegenerateGeometry, err.to_string())
         }
-        E::NoFeasiblePose { .. } => new_err("UnreachablePoseError", err.to_string()),
+        E::NoFeasiblePose { .. } => new_err(Class::UnreachablePose, err.to_string()),
         E::NotPositiveDefinite { .. }
         | E::NotSymmetric { .. }
         | E::NonFinite { .. }
         | E::NonFiniteResidual { .. }
         | E::LinearSolver(_)
-        | E::NoConvergence { .. } => new_err("ConvergenceError", err.to_string()),
+        | E::NoConvergence { .. } => new_err(Class::Convergence, err.to_string()),
         // Radio models (issue 33): a kernel that is not positive definite on the data, a
         // link with coincident ends or outside the map, an empty training set.
         E::KernelNotPositiveDefinite { .. }
@@ -183,7 +219,7 @@ pub fn detect(err: autoteach_detect::DetectError) -> PyErr {
         | E::WrongLength { .. }
         | E::Infeasible { .. } => invalid_input(err.to_string()),
         E::Degenerate { .. } | E::RankDeficient { .. } => {
-            new_err("DegenerateGeometryError", err.to_string())
+            new_err(Class::DegenerateGeometry, err.to_string())
         }
     }
 }
@@ -197,6 +233,6 @@ pub fn plan(err: autoteach_geometry::plan::PlanError) -> PyErr {
         E::InvalidInput { .. } | E::InCollision { .. } | E::Infeasible { .. } => {
             invalid_input(err.to_string())
         }
-        E::NoPath { .. } => new_err("ConvergenceError", err.to_string()),
+        E::NoPath { .. } => new_err(Class::Convergence, err.to_string()),
     }
 }

@@ -6,12 +6,13 @@ use autoteach_estimate::handeye::gating::{
     band_sigma_scale, band_width, gate_edges,
 };
 use autoteach_estimate::handeye::{Rim, WaferGeometry};
-use nalgebra::{Vector2, Vector5};
+use nalgebra::Vector5;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::convert::{self, matrix3, to_numpy};
 use crate::errors;
+use crate::handeye_slam::{observations_tuple, points2, stats_dict};
 
 /// Adds the gating function to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -31,8 +32,9 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 
 /// Gates detected edges (`edge_points (N, 2)`, `edge_start (E + 1)`, `edge_frames (E)`) against
 /// the rims of `wafers (W, 5)` (a row with a non-finite value has no estimate) projected by `k`
-/// from `camera_poses (F, 4, 4)` (`T_wc`). Returns the observations in the solver's flat layout,
-/// the per-point σ factors (or `None`) and the counts.
+/// from `camera_poses (F, 4, 4)` (`T_wc`). Returns
+/// `observations` in the solver's flat layout (`handeye_slam`'s module doc; the per-point σ
+/// factors only with `band_weights`) and the `stats`.
 #[pyfunction]
 #[pyo3(signature = (k, camera_poses, wafers, wafer_radius, wafer_thickness, edge_points, edge_start, edge_frames, *,
     gate_px=2.0, min_inlier_fraction=0.6, points_per_rim=24, min_points=12, min_band_px=0.0, band_weights=false))]
@@ -89,47 +91,13 @@ fn handeye_gate<'py>(
         };
         gate_edges(&k, &cams, &wafers, geometry, &edges, &config).map_err(errors::estimate)
     })?;
-    let obs = &gated.observations;
-    let mut start = vec![0usize];
-    let mut flat = Vec::new();
-    let mut scale = Vec::new();
-    for o in obs {
-        for q in &o.points {
-            flat.extend_from_slice(&[q.x, q.y]);
-        }
-        scale.extend_from_slice(&o.sigma_scale);
-        start.push(flat.len() / 2);
-    }
-    let n = flat.len() / 2;
     let d = PyDict::new(py);
-    d.set_item("frames", obs.iter().map(|o| o.frame).collect::<Vec<_>>())?;
-    d.set_item("wafers", obs.iter().map(|o| o.wafer).collect::<Vec<_>>())?;
     d.set_item(
-        "rims",
-        obs.iter().map(|o| o.rim as usize).collect::<Vec<_>>(),
+        "observations",
+        observations_tuple(py, &gated.observations, band_weights)?,
     )?;
-    d.set_item("start", start)?;
-    d.set_item("points", to_numpy(py, flat, &[n, 2])?)?;
-    if band_weights {
-        d.set_item("sigma_scale", to_numpy(py, scale, &[n])?)?;
-    } else {
-        d.set_item("sigma_scale", py.None())?;
-    }
-    let s = &gated.stats;
-    let stats = PyDict::new(py);
-    stats.set_item("edges", s.edges)?;
-    stats.set_item("edges_rejected", s.edges_rejected)?;
-    stats.set_item("rims_used", s.rims_used)?;
-    stats.set_item("frames_used", s.frames_used)?;
-    stats.set_item("points_narrow_band", s.points_narrow_band)?;
-    stats.set_item("rims_associated", s.rims_associated)?;
-    d.set_item("stats", stats)?;
+    d.set_item("stats", stats_dict(py, &gated.stats)?)?;
     Ok(d)
-}
-
-fn points2(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<Vector2<f64>>> {
-    let (p, _) = convert::finite_array(obj, name)?.rows(2, "(N, 2)")?;
-    Ok(p.iter().map(|r| Vector2::new(r[0], r[1])).collect())
 }
 
 /// Predicted image width (pixels) of a wafer's side face at `points (N, 2)` of one rim

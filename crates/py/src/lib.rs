@@ -18,6 +18,7 @@ mod geometry;
 mod gray;
 mod handeye;
 mod handeye_gate;
+mod handeye_slam;
 mod lsq;
 mod mapping;
 mod plan;
@@ -53,6 +54,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     calib::register(m)?;
     handeye::register(m)?;
     handeye_gate::register(m)?;
+    handeye_slam::register(m)?;
     active::register(m)?;
     radio::register(m)?;
     ellipse_detection::register(m)?;

@@ -2,17 +2,18 @@
 //! wrappers live in `python/autoteach/registration.py`.
 //!
 //! Each function converts its NumPy inputs, calls one core function (without the GIL) and
-//! returns a lean frozen result class whose getters build NumPy arrays.
+//! returns the result's fields as a dict keyed by the Rust field names; the result classes are
+//! defined once, in Python, and a test pins their fields to the Rust structs.
 
 use autoteach_detect::cpd::{
-    AffineOptions, AffineResult, CpdOptions, EStep, GlobalCpdOptions, GlobalHypothesis,
-    NonrigidOptions, NonrigidResult, RigidOptions, RigidResult, affine, global_cpd as core_global,
-    nonrigid, rigid,
+    AffineOptions, AffineResult, CpdOptions, EStep, GlobalCpdOptions, NonrigidOptions,
+    NonrigidResult, RigidOptions, RigidResult, affine, global_cpd as core_global, nonrigid, rigid,
 };
 use autoteach_detect::voting::{VoteCount, VotingOptions};
 use nalgebra::{DMatrix, DVector};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use crate::convert::{self, Array};
 use crate::errors;
@@ -81,149 +82,54 @@ fn cpd_options(
     })
 }
 
-/// Result of `cpd_rigid` (`x ≈ s R y + t`); see `autoteach.registration.RigidCpdResult`.
-#[pyclass(name = "CpdRigidResult", module = "autoteach._core", frozen)]
-pub struct PyCpdRigid {
-    inner: RigidResult,
+/// A CPD result's fields as a dict keyed by the Rust field names (the Python result classes of
+/// `autoteach.registration` are built from it, and a test pins their fields to the Rust struct).
+fn rigid_dict<'py>(py: Python<'py>, r: &RigidResult) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("rotation", matrix_out(py, &r.rotation)?)?;
+    d.set_item("translation", vector_out(py, &r.translation)?)?;
+    d.set_item("scale", r.scale)?;
+    d.set_item("transformed", matrix_out(py, &r.transformed)?)?;
+    d.set_item("sigma2", r.sigma2)?;
+    d.set_item("iterations", r.iterations)?;
+    d.set_item("converged", r.converged)?;
+    d.set_item("p", posterior(py, &r.p)?)?;
+    Ok(d)
 }
 
-#[pymethods]
-impl PyCpdRigid {
-    /// Rotation `R` (D × D).
-    #[getter]
-    fn rotation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        matrix_out(py, &self.inner.rotation)
-    }
-    /// Translation `t` (D,).
-    #[getter]
-    fn translation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        vector_out(py, &self.inner.translation)
-    }
-    /// Scale `s`.
-    #[getter]
-    fn scale(&self) -> f64 {
-        self.inner.scale
-    }
-    /// The moved Y (M × D).
-    #[getter]
-    fn transformed<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        matrix_out(py, &self.inner.transformed)
-    }
-    /// Final σ².
-    #[getter]
-    fn sigma2(&self) -> f64 {
-        self.inner.sigma2
-    }
-    /// EM iterations run.
-    #[getter]
-    fn iterations(&self) -> usize {
-        self.inner.iterations
-    }
-    /// Whether the tolerance was met.
-    #[getter]
-    fn converged(&self) -> bool {
-        self.inner.converged
-    }
-    /// Posterior matrix `P` (M × N) of the last E-step, or `None`.
-    #[getter]
-    fn p<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArrayDyn<f64>>>> {
-        self.inner.p.as_ref().map(|p| matrix_out(py, p)).transpose()
-    }
+/// See [`rigid_dict`].
+fn affine_dict<'py>(py: Python<'py>, r: &AffineResult) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("matrix", matrix_out(py, &r.matrix)?)?;
+    d.set_item("translation", vector_out(py, &r.translation)?)?;
+    d.set_item("transformed", matrix_out(py, &r.transformed)?)?;
+    d.set_item("sigma2", r.sigma2)?;
+    d.set_item("iterations", r.iterations)?;
+    d.set_item("converged", r.converged)?;
+    d.set_item("p", posterior(py, &r.p)?)?;
+    Ok(d)
 }
 
-/// Result of `cpd_affine` (`x ≈ B y + t`).
-#[pyclass(name = "CpdAffineResult", module = "autoteach._core", frozen)]
-pub struct PyCpdAffine {
-    inner: AffineResult,
+/// See [`rigid_dict`].
+fn nonrigid_dict<'py>(py: Python<'py>, r: &NonrigidResult) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("w", matrix_out(py, &r.w)?)?;
+    d.set_item("transformed", matrix_out(py, &r.transformed)?)?;
+    d.set_item("energy", r.energy)?;
+    d.set_item("sigma2", r.sigma2)?;
+    d.set_item("iterations", r.iterations)?;
+    d.set_item("converged", r.converged)?;
+    d.set_item("rank", r.rank)?;
+    d.set_item("p", posterior(py, &r.p)?)?;
+    Ok(d)
 }
 
-#[pymethods]
-impl PyCpdAffine {
-    /// Linear part `B` (D × D).
-    #[getter]
-    fn matrix<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        matrix_out(py, &self.inner.matrix)
-    }
-    /// Translation `t` (D,).
-    #[getter]
-    fn translation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        vector_out(py, &self.inner.translation)
-    }
-    /// The moved Y (M × D).
-    #[getter]
-    fn transformed<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        matrix_out(py, &self.inner.transformed)
-    }
-    /// Final σ².
-    #[getter]
-    fn sigma2(&self) -> f64 {
-        self.inner.sigma2
-    }
-    /// EM iterations run.
-    #[getter]
-    fn iterations(&self) -> usize {
-        self.inner.iterations
-    }
-    /// Whether the tolerance was met.
-    #[getter]
-    fn converged(&self) -> bool {
-        self.inner.converged
-    }
-    /// Posterior matrix `P` (M × N) of the last E-step, or `None`.
-    #[getter]
-    fn p<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArrayDyn<f64>>>> {
-        self.inner.p.as_ref().map(|p| matrix_out(py, p)).transpose()
-    }
-}
-
-/// Result of `cpd_nonrigid` (`T(Y) = Y + G W`).
-#[pyclass(name = "CpdNonrigidResult", module = "autoteach._core", frozen)]
-pub struct PyCpdNonrigid {
-    inner: NonrigidResult,
-}
-
-#[pymethods]
-impl PyCpdNonrigid {
-    /// Kernel weights `W` (M × D).
-    #[getter]
-    fn w<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        matrix_out(py, &self.inner.w)
-    }
-    /// The moved Y (M × D).
-    #[getter]
-    fn transformed<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        matrix_out(py, &self.inner.transformed)
-    }
-    /// Deformation energy `tr(Wᵀ G W)`.
-    #[getter]
-    fn energy(&self) -> f64 {
-        self.inner.energy
-    }
-    /// Final σ².
-    #[getter]
-    fn sigma2(&self) -> f64 {
-        self.inner.sigma2
-    }
-    /// EM iterations run.
-    #[getter]
-    fn iterations(&self) -> usize {
-        self.inner.iterations
-    }
-    /// Whether the tolerance was met.
-    #[getter]
-    fn converged(&self) -> bool {
-        self.inner.converged
-    }
-    /// Eigenpairs used for `G`, or `None` for full rank.
-    #[getter]
-    fn rank(&self) -> Option<usize> {
-        self.inner.rank
-    }
-    /// Posterior matrix `P` (M × N) of the last E-step, or `None`.
-    #[getter]
-    fn p<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArrayDyn<f64>>>> {
-        self.inner.p.as_ref().map(|p| matrix_out(py, p)).transpose()
-    }
+/// The posterior matrix `P` (M × N) of the last E-step, or `None`.
+fn posterior<'py>(
+    py: Python<'py>,
+    p: &Option<DMatrix<f64>>,
+) -> PyResult<Option<Bound<'py, PyArrayDyn<f64>>>> {
+    p.as_ref().map(|p| matrix_out(py, p)).transpose()
 }
 
 /// Rigid CPD of `y` (M, D) onto `x` (N, D).
@@ -231,10 +137,10 @@ impl PyCpdNonrigid {
 #[pyo3(signature = (x, y, w = 0.0, scale = true, max_iterations = 100, tolerance = 1e-3,
     sigma2 = None, e_step = "auto", return_p = false))]
 #[allow(clippy::too_many_arguments)]
-fn cpd_rigid(
-    py: Python<'_>,
-    x: &Bound<'_, PyAny>,
-    y: &Bound<'_, PyAny>,
+fn cpd_rigid<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
     w: f64,
     scale: bool,
     max_iterations: usize,
@@ -242,14 +148,14 @@ fn cpd_rigid(
     sigma2: Option<f64>,
     e_step: &str,
     return_p: bool,
-) -> PyResult<PyCpdRigid> {
+) -> PyResult<Bound<'py, PyDict>> {
     let (xm, ym) = (points_arg(x, "X")?, points_arg(y, "Y")?);
     let options = RigidOptions {
         cpd: cpd_options(w, max_iterations, tolerance, sigma2, e_step, return_p)?,
         scale,
     };
-    let inner = convert::detached(py, || rigid(&xm, &ym, &options).map_err(errors::detect))?;
-    Ok(PyCpdRigid { inner })
+    let out = convert::detached(py, || rigid(&xm, &ym, &options).map_err(errors::detect))?;
+    rigid_dict(py, &out)
 }
 
 /// Affine CPD of `y` (M, D) onto `x` (N, D).
@@ -257,23 +163,23 @@ fn cpd_rigid(
 #[pyo3(signature = (x, y, w = 0.0, max_iterations = 100, tolerance = 1e-3, sigma2 = None,
     e_step = "auto", return_p = false))]
 #[allow(clippy::too_many_arguments)]
-fn cpd_affine(
-    py: Python<'_>,
-    x: &Bound<'_, PyAny>,
-    y: &Bound<'_, PyAny>,
+fn cpd_affine<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
     w: f64,
     max_iterations: usize,
     tolerance: f64,
     sigma2: Option<f64>,
     e_step: &str,
     return_p: bool,
-) -> PyResult<PyCpdAffine> {
+) -> PyResult<Bound<'py, PyDict>> {
     let (xm, ym) = (points_arg(x, "X")?, points_arg(y, "Y")?);
     let options = AffineOptions {
         cpd: cpd_options(w, max_iterations, tolerance, sigma2, e_step, return_p)?,
     };
-    let inner = convert::detached(py, || affine(&xm, &ym, &options).map_err(errors::detect))?;
-    Ok(PyCpdAffine { inner })
+    let out = convert::detached(py, || affine(&xm, &ym, &options).map_err(errors::detect))?;
+    affine_dict(py, &out)
 }
 
 /// Non-rigid CPD of `y` (M, D) onto `x` (N, D).
@@ -282,10 +188,10 @@ fn cpd_affine(
     w = 0.0, max_iterations = 100, tolerance = 1e-3, sigma2 = None, e_step = "auto",
     return_p = false))]
 #[allow(clippy::too_many_arguments)]
-fn cpd_nonrigid(
-    py: Python<'_>,
-    x: &Bound<'_, PyAny>,
-    y: &Bound<'_, PyAny>,
+fn cpd_nonrigid<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
     beta: f64,
     lam: f64,
     low_rank: Option<usize>,
@@ -296,7 +202,7 @@ fn cpd_nonrigid(
     sigma2: Option<f64>,
     e_step: &str,
     return_p: bool,
-) -> PyResult<PyCpdNonrigid> {
+) -> PyResult<Bound<'py, PyDict>> {
     let (xm, ym) = (points_arg(x, "X")?, points_arg(y, "Y")?);
     let options = NonrigidOptions {
         cpd: cpd_options(w, max_iterations, tolerance, sigma2, e_step, return_p)?,
@@ -305,60 +211,23 @@ fn cpd_nonrigid(
         low_rank,
         power_iterations,
     };
-    let inner = convert::detached(py, || nonrigid(&xm, &ym, &options).map_err(errors::detect))?;
-    Ok(PyCpdNonrigid { inner })
+    let out = convert::detached(py, || nonrigid(&xm, &ym, &options).map_err(errors::detect))?;
+    nonrigid_dict(py, &out)
 }
-
-/// One hypothesis of `global_cpd`: the rigid initial transform from global voting and the
-/// non-rigid CPD run from it.
-#[pyclass(name = "GlobalCpdHypothesis", module = "autoteach._core", frozen)]
-pub struct PyGlobalHypothesis {
-    inner: GlobalHypothesis,
-}
-
-#[pymethods]
-impl PyGlobalHypothesis {
-    /// The rigid initial transform from global voting, as the arrays and counts of
-    /// `autoteach_detect::voting::RigidHypothesis`: `(rotation (D, D), translation (D,), votes,
-    /// pair_votes)`.
-    #[getter]
-    fn initial<'py>(&self, py: Python<'py>) -> PyResult<GlobalInitial<'py>> {
-        let h = &self.inner.initial;
-        Ok((
-            matrix_out(py, &h.rotation)?,
-            vector_out(py, &h.translation)?,
-            h.votes,
-            h.pair_votes,
-        ))
-    }
-    /// The non-rigid CPD run from the initial transform (its `energy` ranks the hypotheses).
-    #[getter]
-    fn cpd(&self) -> PyCpdNonrigid {
-        PyCpdNonrigid {
-            inner: self.inner.cpd.clone(),
-        }
-    }
-}
-
-/// `(rotation, translation, votes, pair_votes)` of a global-CPD hypothesis's initial transform.
-type GlobalInitial<'py> = (
-    Bound<'py, PyArrayDyn<f64>>,
-    Bound<'py, PyArrayDyn<f64>>,
-    usize,
-    usize,
-);
 
 /// Global-CPD of `y` (M, D) onto `x` (N, D): top-`k` voting hypotheses refined by non-rigid
-/// CPD, ranked by deformation energy.
+/// CPD, ranked by deformation energy. Each hypothesis is a dict: `initial`, the rigid transform
+/// from global voting as `(rotation (D, D), translation (D,), votes, pair_votes)`
+/// (`autoteach_detect::voting::RigidHypothesis`), and `cpd`, the non-rigid run from it.
 #[pyfunction]
 #[pyo3(signature = (x, y, k = 3, beta = 2.0, lam = 2.0, w = 0.5, low_rank = None,
     max_iterations = 100, tolerance = 1e-3, sigma2 = None, neighbours = 10, angle_bin = 0.2,
     translation_bin = None, count = "y", min_votes = 3, max_points = 1000))]
 #[allow(clippy::too_many_arguments)]
-fn global_cpd(
-    py: Python<'_>,
-    x: &Bound<'_, PyAny>,
-    y: &Bound<'_, PyAny>,
+fn global_cpd<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    y: &Bound<'py, PyAny>,
     k: usize,
     beta: f64,
     lam: f64,
@@ -373,7 +242,7 @@ fn global_cpd(
     count: &str,
     min_votes: usize,
     max_points: usize,
-) -> PyResult<Vec<PyGlobalHypothesis>> {
+) -> PyResult<Vec<Bound<'py, PyDict>>> {
     let (xm, ym) = (points_arg(x, "X")?, points_arg(y, "Y")?);
     let options = GlobalCpdOptions {
         voting: voting_options(
@@ -396,10 +265,21 @@ fn global_cpd(
     let hyps = convert::detached(py, || {
         core_global(&xm, &ym, &options).map_err(errors::detect)
     })?;
-    Ok(hyps
-        .into_iter()
-        .map(|inner| PyGlobalHypothesis { inner })
-        .collect())
+    hyps.iter()
+        .map(|h| {
+            let d = PyDict::new(py);
+            let i = &h.initial;
+            let initial = (
+                matrix_out(py, &i.rotation)?,
+                vector_out(py, &i.translation)?,
+                i.votes,
+                i.pair_votes,
+            );
+            d.set_item("initial", initial)?;
+            d.set_item("cpd", nonrigid_dict(py, &h.cpd)?)?;
+            Ok(d)
+        })
+        .collect()
 }
 
 /// The voting options of the global registrations (`count` is `"y"` or `"pairs"`).
@@ -434,15 +314,11 @@ pub(crate) fn voting_options(
     })
 }
 
-/// Adds the registration functions and classes to the module.
+/// Adds the registration functions to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<PyCpdRigid>()?;
-    m.add_class::<PyCpdAffine>()?;
-    m.add_class::<PyCpdNonrigid>()?;
     m.add_function(wrap_pyfunction!(cpd_rigid, m)?)?;
     m.add_function(wrap_pyfunction!(cpd_affine, m)?)?;
     m.add_function(wrap_pyfunction!(cpd_nonrigid, m)?)?;
-    m.add_class::<PyGlobalHypothesis>()?;
     m.add_function(wrap_pyfunction!(global_cpd, m)?)?;
     Ok(())
 }

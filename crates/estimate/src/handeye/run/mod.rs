@@ -5,10 +5,54 @@
 //! The auto-teaching pipeline as a whole spans the detector (`autoteach-detect`) and the
 //! estimators of this crate, which does not depend on the detector; its stage order is the
 //! Python driver's (`autoteach.pipeline.autoteach`), each stage one compiled call. Within
-//! SLAM-MOT, the order is this module's.
+//! SLAM-MOT, the order is this module's: [`solve`] for one set of observations, and
+//! [`gate_and_resolve`] for the detect front end's chain of gates that produces them.
 
-use super::slam::{BasinSearch, PriorSigmas, SlamMot, SlamMotSolution, SlamMotState, WindowRecord};
+mod resolve;
+
+pub use resolve::{GatedStart, GatingPlan, gate_and_resolve};
+
+use autoteach_geometry::robot::Joints;
+
+use super::slam::{
+    BasinSearch, EdgeObservation, PriorSigmas, SlamMot, SlamMotConfig, SlamMotSolution,
+    SlamMotState, WindowRecord,
+};
 use crate::Result;
+
+/// What every SLAM-MOT solve of one session shares: the configuration, the encoder readings
+/// and the number of wafers. The observations and the start change from solve to solve.
+#[derive(Debug, Clone)]
+pub struct SlamMotInputs {
+    /// The estimator's configuration.
+    pub config: SlamMotConfig,
+    /// Encoder readings, one per frame.
+    pub encoders: Vec<Joints>,
+    /// Number of wafers (estimated or not).
+    pub n_wafers: usize,
+}
+
+impl SlamMotInputs {
+    /// The estimator over `observations`. In the free-camera mode the calibration prior
+    /// ([`super::slam::FreeCamera::calibration_prior`]) is centred on `start`'s base and offsets:
+    /// each solve is tied to the calibration it starts from.
+    pub fn problem(
+        &self,
+        observations: Vec<EdgeObservation>,
+        start: &SlamMotState,
+    ) -> Result<SlamMot> {
+        let mut config = self.config.clone();
+        if let Some(prior) = config
+            .free_camera
+            .as_mut()
+            .and_then(|f| f.calibration_prior.as_mut())
+        {
+            prior.0 = start.base;
+            prior.1 = start.offsets;
+        }
+        SlamMot::new(config, self.encoders.clone(), observations, self.n_wafers)
+    }
+}
 
 /// Which solves to run, in order.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,6 +66,24 @@ pub struct SolvePlan {
     pub window_prior: PriorSigmas,
     /// Re-fit wafers whose residuals stand out from a grid of basins after the batch solve.
     pub basin_search: bool,
+}
+
+impl SolvePlan {
+    /// The batch solve alone (with the basin search when asked): no height search, no window
+    /// (`window_prior` is then unused).
+    pub fn batch(basin_search: bool) -> Self {
+        let unused = PriorSigmas {
+            base_rotation: 0.0,
+            base_translation: 0.0,
+            offset: 0.0,
+        };
+        Self {
+            init_heights: None,
+            window: 0,
+            window_prior: unused,
+            basin_search,
+        }
+    }
 }
 
 /// What the solves produced.
