@@ -522,3 +522,26 @@ pub fn pg_moments_at(
         })
         .collect())
 }
+
+#[cfg(test)]
+mod rounding_tests {
+    use super::{ceil_small, floor_small};
+
+    /// The rounding-constant floor and ceil equal libm's on integers, half-integers, their
+    /// neighbouring floats and a dense sweep of the span domain [−1, n].
+    #[test]
+    fn floor_and_ceil_match_libm() {
+        let mut values = vec![-1.0, -0.5, -0.0, 0.0, 0.5, 29.5, 30.0, 1e9, -1e9];
+        for k in -2..=40 {
+            let v = f64::from(k);
+            for x in [v, v + 0.5, v - 0.5] {
+                values.extend([x, x.next_up(), x.next_down()]);
+            }
+        }
+        values.extend((0..100_000).map(|i| -1.0 + 41.0 * f64::from(i) / 100_000.0));
+        for v in values {
+            assert_eq!(floor_small(v), v.floor() as i32, "floor {v:e}");
+            assert_eq!(ceil_small(v), v.ceil() as i32, "ceil {v:e}");
+        }
+    }
+}
