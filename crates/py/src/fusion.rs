@@ -143,13 +143,22 @@ impl PySparsePooling {
         ) -> PyResult<Bound<'py, PyAny>> {
             let s = contiguous(a, name)?;
             let out = detached(py, || {
-                let mut out = vec![T::ZERO; nout * ch];
-                let r = if backward {
-                    op.backward(dir, s, ch, &mut out)
+                let n = nout.checked_mul(ch).ok_or_else(|| {
+                    errors::invalid_input(format!("{nout} cells × {ch} channels overflow"))
+                })?;
+                // A new buffer is written once by the product, without a zeroing pass first.
+                let mut out: Vec<T> = Vec::with_capacity(n);
+                let slots = &mut out.spare_capacity_mut()[..n];
+                if backward {
+                    op.backward_uninit(dir, s, ch, slots)
                 } else {
-                    op.forward(dir, s, ch, &mut out)
-                };
-                r.map(|_| out).map_err(errors::detect)
+                    op.forward_uninit(dir, s, ch, slots)
+                }
+                .map_err(errors::detect)?;
+                // SAFETY: `out` has capacity `n`, and on `Ok` `forward_uninit`/`backward_uninit`
+                // have written every one of its first `n` elements.
+                unsafe { out.set_len(n) };
+                Ok(out)
             })?;
             let arr = out.into_pyarray(py);
             Ok(arr.reshape([nout, ch])?.into_any())

@@ -23,6 +23,8 @@
 //! `N·k²` non-zeros, whatever the feature-map sizes. Points behind the camera (`w ≤ 0`) or
 //! outside either grid are dropped and counted, never written out of bounds.
 
+use std::mem::MaybeUninit;
+
 use autoteach_geometry::counting_sort::bucket_offsets;
 use rayon::prelude::*;
 
@@ -183,58 +185,224 @@ fn empty_buckets(ptr: &[u32]) -> Vec<u32> {
         .collect()
 }
 
-/// Bytes of one channel block of [`Csr::apply`].
-const BLOCK_BYTES: usize = 4096;
 /// Output rows per parallel task of [`Csr::apply`].
 const ROWS_PER_TASK: usize = 256;
+/// Channels of one output row that [`gather_row`] sums in registers at a time.
+const LANES: usize = 16;
 
-/// `out = Σ_k w_k · input[cols_k, c0..c0 + out.len()]`, summed left to right in the order of
-/// the entries (the first product is stored, not added to a zero).
-///
-/// Four entries are taken per pass over `out`: `((o + w₁s₁) + w₂s₂) + …` per channel is the
-/// same rounding as four passes, but four source rows stream at once (the gather is bound by
-/// memory latency, not arithmetic) and `out` is read and written a quarter as often.
+/// An output element [`Csr::apply`] stores to: an initialised `T`, or a `MaybeUninit<T>` of a
+/// freshly allocated buffer (so the output is not zeroed before the product overwrites it).
+trait Slot<T>: Send {
+    fn put(&mut self, v: T);
+}
+
+impl<T: Feature> Slot<T> for T {
+    #[inline(always)]
+    fn put(&mut self, v: T) {
+        *self = v;
+    }
+}
+
+impl<T: Feature> Slot<T> for MaybeUninit<T> {
+    #[inline(always)]
+    fn put(&mut self, v: T) {
+        self.write(v);
+    }
+}
+
+/// `input[start..start + LANES]` as an array.
 #[inline(always)]
-fn gather_row<T: Feature>(
-    out: &mut [T],
+fn lanes<T>(input: &[T], start: usize) -> &[T; LANES] {
+    &input[start..start + LANES].as_chunks::<LANES>().0[0]
+}
+
+/// `out[c] = Σ_k w_k · input[cols_k, c]` for every channel `c`, summed left to right in the order
+/// of the entries (the first product is stored, not added to a zero); returns whether every
+/// output value is finite. An empty row is zero.
+///
+/// `LANES` channels at a time are summed over all entries in registers and stored once: the
+/// output row is written once and never read back, and each gathered row is read in
+/// consecutive `LANES`-channel pieces, one stream per entry.
+#[inline(always)]
+fn gather_row<T: Feature, O: Slot<T>>(
+    out: &mut [O],
     w: &[T],
     cols: &[u32],
     input: &[T],
     channels: usize,
-    c0: usize,
-) {
-    let n = out.len();
-    let src = |c: u32| {
-        let s = c as usize * channels + c0;
-        &input[s..s + n]
+) -> bool {
+    let (Some((&w0, w_rest)), Some((&c0, c_rest))) = (w.split_first(), cols.split_first()) else {
+        out.iter_mut().for_each(|o| o.put(T::ZERO));
+        return true;
     };
-    match (w.first(), cols.first()) {
-        (Some(&w0), Some(&col0)) => {
-            for (o, s) in out.iter_mut().zip(src(col0)) {
-                *o = w0 * *s;
+    let start = |c: u32| c as usize * channels;
+    let mut finite = true;
+    let blocks = channels / LANES;
+    for (j, out_block) in out[..blocks * LANES].chunks_exact_mut(LANES).enumerate() {
+        let at = j * LANES;
+        let first = lanes(input, start(c0) + at);
+        let mut acc = [T::ZERO; LANES];
+        for i in 0..LANES {
+            acc[i] = w0 * first[i];
+        }
+        for (&wk, &ck) in w_rest.iter().zip(c_rest) {
+            let s = lanes(input, start(ck) + at);
+            for i in 0..LANES {
+                acc[i] = acc[i] + wk * s[i];
             }
         }
-        _ => {
-            out.fill(T::ZERO);
-            return;
+        finite &= acc.iter().fold(true, |ok, v| ok & v.to_f64().is_finite());
+        for (o, a) in out_block.iter_mut().zip(acc) {
+            o.put(a);
         }
     }
-    let (mut w, mut cols) = (&w[1..], &cols[1..]);
-    while let (Some(w4), Some(c4)) = (w.first_chunk::<4>(), cols.first_chunk::<4>()) {
-        let (s0, s1, s2, s3) = (src(c4[0]), src(c4[1]), src(c4[2]), src(c4[3]));
-        for i in 0..n {
-            out[i] = out[i] + w4[0] * s0[i] + w4[1] * s1[i] + w4[2] * s2[i] + w4[3] * s3[i];
+    for (c, o) in out.iter_mut().enumerate().skip(blocks * LANES) {
+        let mut acc = w0 * input[start(c0) + c];
+        for (&wk, &ck) in w_rest.iter().zip(c_rest) {
+            acc = acc + wk * input[start(ck) + c];
         }
-        (w, cols) = (&w[4..], &cols[4..]);
+        finite &= acc.to_f64().is_finite();
+        o.put(acc);
     }
-    for (&wk, &ck) in w.iter().zip(cols) {
-        for (o, s) in out.iter_mut().zip(src(ck)) {
-            *o = *o + wk * *s;
+    finite
+}
+
+/// The four kernels `[image → BEV, BEV → image, (image → BEV)ᵀ, (BEV → image)ᵀ]` of the
+/// one-cell variant (eq. 7.8) from the `(image cell, BEV cell)` of each point.
+///
+/// Both directions share two sparsity patterns: `F` (rows: BEV cells) and its transpose `T`
+/// (rows: image cells), each entry counting the `n_bm` points seen by BEV cell `b` and image
+/// cell `m`. With `N_b`, `N_m` the points per cell, `K_ib[b, m] = n_bm/N_b` and `K_bi[m, b] =
+/// n_bm/N_m`, so `K_ib = F/N_b`, `K_biᵀ = F/N_m`, `K_ibᵀ = T/N_b`, `K_bi = T/N_m`. Three
+/// counting passes: bucket the points by `m`, then (reading the `m` buckets in order) by `b`,
+/// which leaves each `F` row in ascending `m` with equal pairs adjacent; `T` is `F` bucketed by
+/// column.
+fn cell_kernels(n_img: usize, n_bev: usize, hits: &[(u32, u32)]) -> [Csr; 4] {
+    let img_ptr = bucket_offsets_u32(n_img, hits.iter().map(|h| h.0));
+    let bev_ptr = bucket_offsets_u32(n_bev, hits.iter().map(|h| h.1));
+    let mut fill = img_ptr.clone();
+    let mut by_img = vec![0u32; hits.len()];
+    for &(m, b) in hits {
+        by_img[fill[m as usize] as usize] = b;
+        fill[m as usize] += 1;
+    }
+    let mut fill = bev_ptr.clone();
+    let mut by_bev = vec![0u32; hits.len()];
+    for m in 0..n_img {
+        for &b in &by_img[img_ptr[m] as usize..img_ptr[m + 1] as usize] {
+            by_bev[fill[b as usize] as usize] = m as u32;
+            fill[b as usize] += 1;
         }
     }
+    // F: runs of equal m in each row become one entry with its count.
+    let mut f_ptr = Vec::with_capacity(n_bev + 1);
+    f_ptr.push(0u32);
+    let (mut f_col, mut f_cnt) = (
+        Vec::with_capacity(hits.len()),
+        Vec::with_capacity(hits.len()),
+    );
+    for b in 0..n_bev {
+        let row = &by_bev[bev_ptr[b] as usize..bev_ptr[b + 1] as usize];
+        for (k, &m) in row.iter().enumerate() {
+            if k > 0 && row[k - 1] == m {
+                if let Some(c) = f_cnt.last_mut() {
+                    *c += 1;
+                }
+            } else {
+                f_col.push(m);
+                f_cnt.push(1u32);
+            }
+        }
+        f_ptr.push(f_col.len() as u32);
+    }
+    // T = Fᵀ, rows filled in ascending b.
+    let t_ptr = bucket_offsets_u32(n_img, f_col.iter().copied());
+    let mut fill = t_ptr.clone();
+    let (mut t_col, mut t_cnt) = (vec![0u32; f_col.len()], vec![0u32; f_col.len()]);
+    for b in 0..n_bev {
+        for k in f_ptr[b] as usize..f_ptr[b + 1] as usize {
+            let slot = &mut fill[f_col[k] as usize];
+            t_col[*slot as usize] = b as u32;
+            t_cnt[*slot as usize] = f_cnt[k];
+            *slot += 1;
+        }
+    }
+    // `1/N` per cell (0 points: no entry reads it).
+    let inverse = |ptr: &[u32]| -> Vec<f64> {
+        ptr.windows(2)
+            .map(|p| 1.0 / f64::from((p[1] - p[0]).max(1)))
+            .collect()
+    };
+    let (inv_img, inv_bev) = (inverse(&img_ptr), inverse(&bev_ptr));
+    // Weights `n_bm · (1/N)` of a pattern, the cell counted being its row or its column: exactly
+    // `1/N` for an entry seen by one point (most), within an ulp of `n_bm/N` otherwise.
+    let weights = |ptr: &[u32], col: &[u32], cnt: &[u32], inv: &[f64], by_row: bool| {
+        let mut w = vec![0.0; col.len()];
+        for (r, p) in ptr.windows(2).enumerate() {
+            let span = p[0] as usize..p[1] as usize;
+            let (w, col, cnt) = (&mut w[span.clone()], &col[span.clone()], &cnt[span]);
+            if by_row {
+                for (w, &n) in w.iter_mut().zip(cnt) {
+                    *w = f64::from(n) * inv[r];
+                }
+            } else {
+                for ((w, &n), &c) in w.iter_mut().zip(cnt).zip(col) {
+                    *w = f64::from(n) * inv[c as usize];
+                }
+            }
+        }
+        w
+    };
+    let unread_img = empty_buckets(&img_ptr);
+    let unread_bev = empty_buckets(&bev_ptr);
+    let f_ib = weights(&f_ptr, &f_col, &f_cnt, &inv_bev, true);
+    let f_bi = weights(&f_ptr, &f_col, &f_cnt, &inv_img, false);
+    let t_ib = weights(&t_ptr, &t_col, &t_cnt, &inv_bev, false);
+    let t_bi = weights(&t_ptr, &t_col, &t_cnt, &inv_img, true);
+    [
+        Csr::new(
+            n_bev,
+            n_img,
+            f_ptr.clone(),
+            f_col.clone(),
+            f_ib,
+            unread_img.clone(),
+        ),
+        Csr::new(
+            n_img,
+            n_bev,
+            t_ptr.clone(),
+            t_col.clone(),
+            t_bi,
+            unread_bev.clone(),
+        ),
+        Csr::new(n_img, n_bev, t_ptr, t_col, t_ib, unread_bev),
+        Csr::new(n_bev, n_img, f_ptr, f_col, f_bi, unread_img),
+    ]
 }
 
 impl Csr {
+    /// From its parts (the `f32` weights are derived).
+    fn new(
+        rows: usize,
+        cols: usize,
+        indptr: Vec<u32>,
+        indices: Vec<u32>,
+        data: Vec<f64>,
+        unread_cols: Vec<u32>,
+    ) -> Self {
+        let data32 = data.iter().map(|v| *v as f32).collect();
+        Self {
+            rows,
+            cols,
+            indptr,
+            indices,
+            data,
+            data32,
+            unread_cols,
+        }
+    }
+
     /// From `(row, col, weight)` triplets; duplicates are summed.
     ///
     /// Two counting passes and no comparison sort: the triplets are bucketed by column (a CSC
@@ -346,12 +514,12 @@ impl Csr {
     }
 
     /// `out = self · input` for channels-last `input` (`cols × channels`) into `out`
-    /// (`rows × channels`), rows in parallel.
-    fn apply<T: Feature>(
+    /// (`rows × channels`, every element written), rows in parallel.
+    fn apply<T: Feature, O: Slot<T>>(
         &self,
         input: &[T],
         channels: usize,
-        out: &mut [T],
+        out: &mut [O],
         weights: &[T],
     ) -> Result<()> {
         if channels == 0 {
@@ -376,39 +544,26 @@ impl Csr {
             });
         }
         // Rows are independent and each is summed in a fixed order: thread-count invariant.
-        // Tasks own runs of whole output rows; inside a task the channels are walked in blocks
-        // of `BLOCK_BYTES` (whole rows up to 4 KiB: a contiguous gathered row is what the
-        // hardware prefetcher follows; 256-byte blocks measured 1.4× slower).
-        let block = (BLOCK_BYTES / std::mem::size_of::<T>()).clamp(1, channels);
         let rows_per_task = ROWS_PER_TASK.min(self.rows.max(1));
-        out.par_chunks_mut(rows_per_task * channels)
+        let finite_out = out
+            .par_chunks_mut(rows_per_task * channels)
             .enumerate()
-            .for_each(|(t, rows_out)| {
+            .map(|(t, rows_out)| {
                 let r0 = t * rows_per_task;
-                let mut c0 = 0;
-                while c0 < channels {
-                    let c1 = (c0 + block).min(channels);
-                    for (i, row) in rows_out.chunks_exact_mut(channels).enumerate() {
+                rows_out
+                    .chunks_exact_mut(channels)
+                    .enumerate()
+                    .fold(true, |ok, (i, row)| {
                         let r = r0 + i;
                         let (a, b) = (self.indptr[r] as usize, self.indptr[r + 1] as usize);
-                        gather_row(
-                            &mut row[c0..c1],
-                            &weights[a..b],
-                            &self.indices[a..b],
-                            input,
-                            channels,
-                            c0,
-                        );
-                    }
-                    c0 = c1;
-                }
-            });
+                        let cols = &self.indices[a..b];
+                        ok & gather_row(row, &weights[a..b], cols, input, channels)
+                    })
+            })
+            .reduce(|| true, |x, y| x & y);
         // Non-finite inputs: a gathered NaN/∞ shows in the output (weights are positive and
         // finite); cells no row gathers are checked apart. The index is searched only then.
-        let finite_out = out
-            .par_chunks(1 << 14)
-            .all(|c| c.iter().fold(true, |ok, v| ok & v.to_f64().is_finite()));
-        let finite_unread = self.unread_cols.iter().all(|&c| {
+        let finite_unread = self.unread_cols.par_iter().all(|&c| {
             let c = c as usize;
             input[c * channels..(c + 1) * channels]
                 .iter()
@@ -497,8 +652,10 @@ impl SparsePooling {
             });
         }
         let mut dropped = Dropped::default();
-        // (image cell (row, col), bev cell (ix, iy)) of each kept point.
-        let mut hits: Vec<(u32, u32, u32, u32)> = Vec::with_capacity(points.len());
+        let img_idx = |r: usize, c: usize| (r * image.cols + c) as u32;
+        let bev_idx = |ix: usize, iy: usize| (ix * bev.ny + iy) as u32;
+        // (image cell, BEV cell) of each kept point.
+        let mut hits: Vec<(u32, u32)> = Vec::with_capacity(points.len());
         for (index, x) in points.iter().enumerate() {
             if let Some(&value) = x.iter().find(|v| !v.is_finite()) {
                 return Err(DetectError::NonFinite {
@@ -525,42 +682,47 @@ impl SparsePooling {
                 dropped.outside_bev += 1;
                 continue;
             }
-            hits.push((r as u32, c as u32, ix as u32, iy as u32));
+            hits.push((
+                img_idx(r as usize, c as usize),
+                bev_idx(ix as usize, iy as usize),
+            ));
         }
-        let n_img = image.len();
-        let n_bev = bev.len();
-        let img_idx = |r: usize, c: usize| (r * image.cols + c) as u32;
-        let bev_idx = |ix: usize, iy: usize| (ix * bev.ny + iy) as u32;
-        let mut per_bev = vec![0u32; n_bev];
-        let mut per_img = vec![0u32; n_img];
-        for h in &hits {
-            per_bev[bev_idx(h.2 as usize, h.3 as usize) as usize] += 1;
-            per_img[img_idx(h.0 as usize, h.1 as usize) as usize] += 1;
-        }
-        let k2 = neighbourhood * neighbourhood;
-        let mut ib = Vec::with_capacity(hits.len() * k2);
-        let mut bi = Vec::with_capacity(hits.len() * k2);
-        let mut win = Vec::with_capacity(k2);
-        for h in &hits {
-            let (r, c, ix, iy) = (h.0 as usize, h.1 as usize, h.2 as usize, h.3 as usize);
-            let (b, m) = (bev_idx(ix, iy), img_idx(r, c));
-            // image → BEV: row b gathers the image window around m.
-            window(r, c, image.rows, image.cols, neighbourhood, &mut win);
-            let w = 1.0 / (per_bev[b as usize] as f64 * win.len() as f64);
-            for &(i, j) in &win {
-                ib.push((b, img_idx(i, j), w));
+        let (n_img, n_bev) = (image.len(), bev.len());
+        let [image_to_bev, bev_to_image, image_to_bev_t, bev_to_image_t] = if neighbourhood == 1 {
+            cell_kernels(n_img, n_bev, &hits)
+        } else {
+            let mut per_bev = vec![0u32; n_bev];
+            let mut per_img = vec![0u32; n_img];
+            for &(m, b) in &hits {
+                per_bev[b as usize] += 1;
+                per_img[m as usize] += 1;
             }
-            // BEV → image: row m gathers the BEV window around b.
-            window(ix, iy, bev.nx, bev.ny, neighbourhood, &mut win);
-            let w = 1.0 / (per_img[m as usize] as f64 * win.len() as f64);
-            for &(i, j) in &win {
-                bi.push((m, bev_idx(i, j), w));
+            let k2 = neighbourhood * neighbourhood;
+            let mut ib = Vec::with_capacity(hits.len() * k2);
+            let mut bi = Vec::with_capacity(hits.len() * k2);
+            let mut win = Vec::with_capacity(k2);
+            for &(m, b) in &hits {
+                let (r, c) = (m as usize / image.cols, m as usize % image.cols);
+                let (ix, iy) = (b as usize / bev.ny, b as usize % bev.ny);
+                // image → BEV: row b gathers the image window around m.
+                window(r, c, image.rows, image.cols, neighbourhood, &mut win);
+                let w = 1.0 / (per_bev[b as usize] as f64 * win.len() as f64);
+                for &(i, j) in &win {
+                    ib.push((b, img_idx(i, j), w));
+                }
+                // BEV → image: row m gathers the BEV window around b.
+                window(ix, iy, bev.nx, bev.ny, neighbourhood, &mut win);
+                let w = 1.0 / (per_img[m as usize] as f64 * win.len() as f64);
+                for &(i, j) in &win {
+                    bi.push((m, bev_idx(i, j), w));
+                }
             }
-        }
-        let image_to_bev = Csr::from_triplets(n_bev, n_img, &ib);
-        let bev_to_image = Csr::from_triplets(n_img, n_bev, &bi);
-        let image_to_bev_t = image_to_bev.transpose();
-        let bev_to_image_t = bev_to_image.transpose();
+            let image_to_bev = Csr::from_triplets(n_bev, n_img, &ib);
+            let bev_to_image = Csr::from_triplets(n_img, n_bev, &bi);
+            let image_to_bev_t = image_to_bev.transpose();
+            let bev_to_image_t = bev_to_image.transpose();
+            [image_to_bev, bev_to_image, image_to_bev_t, bev_to_image_t]
+        };
         Ok(Self {
             image_to_bev,
             bev_to_image,
@@ -587,6 +749,14 @@ impl SparsePooling {
         (k.cols, k.rows)
     }
 
+    /// The kernel of the backward pass of a direction (the transpose of [`Self::kernel`]).
+    fn kernel_t(&self, dir: Direction) -> &Csr {
+        match dir {
+            Direction::ImageToBev => &self.image_to_bev_t,
+            Direction::BevToImage => &self.bev_to_image_t,
+        }
+    }
+
     /// Forward pooling `out = K·input` (channels-last `input`: input cells × `channels`).
     pub fn forward<T: Feature>(
         &self,
@@ -594,6 +764,19 @@ impl SparsePooling {
         input: &[T],
         channels: usize,
         out: &mut [T],
+    ) -> Result<()> {
+        let k = self.kernel(dir);
+        k.apply(input, channels, out, k.weights::<T>())
+    }
+
+    /// [`Self::forward`] into uninitialised memory (a new output buffer needs no zeroing pass):
+    /// on `Ok` every element of `out` has been written.
+    pub fn forward_uninit<T: Feature>(
+        &self,
+        dir: Direction,
+        input: &[T],
+        channels: usize,
+        out: &mut [MaybeUninit<T>],
     ) -> Result<()> {
         let k = self.kernel(dir);
         k.apply(input, channels, out, k.weights::<T>())
@@ -608,10 +791,20 @@ impl SparsePooling {
         channels: usize,
         grad_in: &mut [T],
     ) -> Result<()> {
-        let k = match dir {
-            Direction::ImageToBev => &self.image_to_bev_t,
-            Direction::BevToImage => &self.bev_to_image_t,
-        };
+        let k = self.kernel_t(dir);
+        k.apply(grad_out, channels, grad_in, k.weights::<T>())
+    }
+
+    /// [`Self::backward`] into uninitialised memory: on `Ok` every element of `grad_in` has been
+    /// written.
+    pub fn backward_uninit<T: Feature>(
+        &self,
+        dir: Direction,
+        grad_out: &[T],
+        channels: usize,
+        grad_in: &mut [MaybeUninit<T>],
+    ) -> Result<()> {
+        let k = self.kernel_t(dir);
         k.apply(grad_out, channels, grad_in, k.weights::<T>())
     }
 }

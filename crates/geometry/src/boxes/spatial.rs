@@ -137,16 +137,23 @@ impl Grid2 {
     }
 }
 
-/// `⌈v⌉` as an integer without a libm call (`v` finite and well inside the `i64` range).
-fn ceil_i(v: f64) -> i64 {
-    let t = v as i64;
-    if (t as f64) < v { t + 1 } else { t }
+/// `1.5·2⁵²`: for `|v| < 2⁵¹`, `v + ROUND_MAGIC` rounds `v` to the nearest integer (the sum's
+/// unit in the last place is 1) and holds it in the low bits of its pattern, two's complement.
+const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0;
+
+/// `⌊v⌋` for `|v| < 2³¹`: the nearest integer, less one where it lies above `v`. Exact, with no
+/// libm call and no conversion instruction, so the row loop of [`box_spans`] vectorises.
+#[inline(always)]
+fn floor_small(v: f64) -> i32 {
+    let t = v + ROUND_MAGIC;
+    t.to_bits() as i32 - i32::from(t - ROUND_MAGIC > v)
 }
 
-/// `⌊v⌋` as an integer without a libm call (`v` finite and well inside the `i64` range).
-fn floor_i(v: f64) -> i64 {
-    let t = v as i64;
-    if (t as f64) > v { t - 1 } else { t }
+/// `⌈v⌉` for `|v| < 2³¹` (see [`floor_small`]).
+#[inline(always)]
+fn ceil_small(v: f64) -> i32 {
+    let t = v + ROUND_MAGIC;
+    t.to_bits() as i32 + i32::from(t - ROUND_MAGIC < v)
 }
 
 /// The corners of `b` as [`Box2::corners`] computes them, given `(sin r, cos r)`.
@@ -163,15 +170,24 @@ pub(crate) fn trig_into(boxes: &[Box2], out: &mut Vec<(f64, f64)>) {
     out.extend(boxes.iter().map(|b| b.r.sin_cos()));
 }
 
-/// For each grid row the inclusive range of cells whose centres lie inside `b`, appended to
-/// `spans` as `(row, first, last)` (`last < first` for an empty row); returns the number of cells.
+/// For the grid rows from the returned `r0` on, the inclusive range of cells whose centres lie
+/// inside `b`, into `first` and `last` (`last < first` for an empty row); returns `(r0, number
+/// of cells)`.
 ///
 /// The box is `{p : |(p − c)·e₁| ≤ l/2, |(p − c)·e₂| ≤ w/2}` with `e₁ = (cos r, sin r)`,
 /// `e₂ = (−sin r, cos r)`. At a row's height `y` each slab with `e_x ≠ 0` is the x-interval
 /// `c_x − (y − c_y)·e_y/e_x ± h/|e_x|`; the row's span is the intersection of the two (a slab
 /// with `e_x = 0` only bounds y, which the row range already does). Two multiply-adds per row,
-/// no division and no branch on the edges.
-fn box_spans(b: &Box2, (s, c): (f64, f64), g: &Grid2, spans: &mut Vec<(u32, i32, i32)>) -> usize {
+/// no division and no branch.
+fn box_spans(
+    b: &Box2,
+    (s, c): (f64, f64),
+    g: &Grid2,
+    first: &mut Vec<i32>,
+    last: &mut Vec<i32>,
+) -> (usize, usize) {
+    first.clear();
+    last.clear();
     // (e_y / e_x, h / |e_x|) of the two slabs; an unbounded slab contributes (0, ∞).
     let slab = |ex: f64, ey: f64, h: f64| {
         if ex.abs() > 1e-12 {
@@ -184,12 +200,21 @@ fn box_spans(b: &Box2, (s, c): (f64, f64), g: &Grid2, spans: &mut Vec<(u32, i32,
     let (k2, h2) = slab(-s, c, 0.5 * b.w);
     let half_y = 0.5 * (b.l * s.abs() + b.w * c.abs());
     let (ymin, ymax) = (b.cy - half_y, b.cy + half_y);
-    // Rows whose centre y lies in [ymin, ymax].
-    let r0 = ((ymin - g.y0) / g.dy - 0.5).ceil().max(0.0);
-    let r1 = ((ymax - g.y0) / g.dy - 0.5).floor().min(g.ny as f64 - 1.0);
-    if r1 < r0 {
-        return 0;
+    // Rows whose centre y lies in [ymin, ymax] (clamped to [−1, ny] first, which leaves the
+    // clipped range unchanged and keeps the rounding helpers in their domain).
+    let ny = g.ny as f64;
+    let (lo, hi) = ((ymin - g.y0) / g.dy - 0.5, (ymax - g.y0) / g.dy - 0.5);
+    if lo.is_nan() || hi.is_nan() {
+        return (0, 0);
     }
+    let r0 = ceil_small(lo.clamp(-1.0, ny)).max(0);
+    let r1 = floor_small(hi.clamp(-1.0, ny)).min(g.ny as i32 - 1);
+    if r1 < r0 {
+        return (0, 0);
+    }
+    let (r0, rows) = (r0 as usize, (r1 - r0 + 1) as usize);
+    first.resize(rows, 0);
+    last.resize(rows, 0);
     // Everything per row in grid units (`(x − x₀)/dx − ½`, so a cell index is an integer):
     // one multiply-add per slab and row, and no division in the loop.
     let inv_dx = 1.0 / g.dx;
@@ -197,24 +222,20 @@ fn box_spans(b: &Box2, (s, c): (f64, f64), g: &Grid2, spans: &mut Vec<(u32, i32,
     let (q1, q2) = (k1 * inv_dx, k2 * inv_dx);
     let (hh1, hh2) = (h1 * inv_dx, h2 * inv_dx);
     let nx = g.nx as f64;
-    let last = g.nx as i64 - 1;
-    let rows = r0 as usize..=r1 as usize;
-    spans.reserve(rows.clone().count());
-    let mut count = 0;
-    // Branch-free per row: empty rows are kept with `last < first` (the consumer skips them).
-    for row in rows {
-        let t = g.y0 + (row as f64 + 0.5) * g.dy - b.cy;
+    let end = g.nx as i32 - 1;
+    let mut count = 0i64;
+    for (i, (f, l)) in first.iter_mut().zip(last.iter_mut()).enumerate() {
+        let t = g.y0 + ((r0 + i) as f64 + 0.5) * g.dy - b.cy;
         let (u1, u2) = (base - t * q1, base - t * q2);
-        // Clamp before the integer conversion (the span may reach far outside the grid); an
-        // empty span (`xr < xl`) gives `c1 < c0`.
+        // Clamped to [−1, nx] (the span may reach far outside the grid); an empty span
+        // (`xr < xl`) gives `last < first`.
         let s0 = fmin(fmax(fmax(u1 - hh1, u2 - hh2), -1.0), nx);
         let s1 = fmin(fmax(fmin(u1 + hh1, u2 + hh2), -1.0), nx);
-        let c0 = ceil_i(s0).max(0);
-        let c1 = floor_i(s1).min(last);
-        count += (c1 - c0 + 1).max(0);
-        spans.push((row as u32, c0 as i32, c1 as i32));
+        let (c0, c1) = (ceil_small(s0).max(0), floor_small(s1).min(end));
+        count += i64::from((c1 - c0 + 1).max(0));
+        (*f, *l) = (c0, c1);
     }
-    count as usize
+    (r0, count as usize)
 }
 
 /// `max(a, b)` for non-NaN values (a single `maxsd`, without `f64::max`'s NaN handling).
@@ -278,7 +299,8 @@ pub fn rasterize(
 #[derive(Debug, Default)]
 pub(crate) struct RasterScratch {
     diff: Vec<f64>,
-    spans: Vec<(u32, i32, i32)>,
+    first: Vec<i32>,
+    last: Vec<i32>,
     /// The rasterised distribution, row-major.
     pub(crate) out: Vec<f64>,
 }
@@ -298,11 +320,9 @@ pub(crate) fn rasterize_into(
     let diff = &mut scratch.diff;
     diff.clear();
     diff.resize(ny * (nx + 1), 0.0);
-    let spans = &mut scratch.spans;
     let mut skipped = 0;
     for ((b, &sc), w) in boxes.iter().zip(trig).zip(weights) {
-        spans.clear();
-        let n = box_spans(b, sc, grid, spans);
+        let (r0, n) = box_spans(b, sc, grid, &mut scratch.first, &mut scratch.last);
         if n == 0 {
             skipped += 1;
             continue;
@@ -311,25 +331,27 @@ pub(crate) fn rasterize_into(
             Weighting::Density => w / n as f64,
             Weighting::Indicator => w,
         };
-        for &(row, a, z) in spans.iter().filter(|sp| sp.2 >= sp.1) {
-            let base = row as usize * (nx + 1);
-            diff[base + a as usize] += v;
-            diff[base + z as usize + 1] -= v;
+        let rows = diff[r0 * (nx + 1)..].chunks_exact_mut(nx + 1);
+        for (drow, (&a, &z)) in rows.zip(scratch.first.iter().zip(&scratch.last)) {
+            if z >= a {
+                drow[a as usize] += v;
+                drow[z as usize + 1] -= v;
+            }
         }
     }
     let out = &mut scratch.out;
     out.clear();
-    out.reserve(nx * ny);
-    for row in 0..ny {
+    out.resize(nx * ny, 0.0);
+    for (orow, drow) in out.chunks_exact_mut(nx).zip(diff.chunks_exact(nx + 1)) {
         let mut acc = 0.0;
-        for &d in &diff[row * (nx + 1)..row * (nx + 1) + nx] {
+        for (o, &d) in orow.iter_mut().zip(drow) {
             acc += d;
             // Cancellation can leave −1e−17 where the density is zero.
-            out.push(if acc.abs() < 1e-14 * (1.0 + acc.abs()) {
+            *o = if acc.abs() < 1e-14 * (1.0 + acc.abs()) {
                 0.0
             } else {
                 acc.max(0.0)
-            });
+            };
         }
     }
     skipped
@@ -499,4 +521,27 @@ pub fn pg_moments_at(
                 * weight
         })
         .collect())
+}
+
+#[cfg(test)]
+mod rounding_tests {
+    use super::{ceil_small, floor_small};
+
+    /// The rounding-constant floor and ceil equal libm's on integers, half-integers, their
+    /// neighbouring floats and a dense sweep of the span domain [−1, n].
+    #[test]
+    fn floor_and_ceil_match_libm() {
+        let mut values = vec![-1.0, -0.5, -0.0, 0.0, 0.5, 29.5, 30.0, 1e9, -1e9];
+        for k in -2..=40 {
+            let v = f64::from(k);
+            for x in [v, v + 0.5, v - 0.5] {
+                values.extend([x, x.next_up(), x.next_down()]);
+            }
+        }
+        values.extend((0..100_000).map(|i| -1.0 + 41.0 * f64::from(i) / 100_000.0));
+        for v in values {
+            assert_eq!(floor_small(v), v.floor() as i32, "floor {v:e}");
+            assert_eq!(ceil_small(v), v.ceil() as i32, "ceil {v:e}");
+        }
+    }
 }
