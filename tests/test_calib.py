@@ -161,7 +161,7 @@ def test_bad_input_is_rejected_with_clear_errors():
         calibrate(obj, img[:2], "brown_conrady", SIZE)
     bad = [i.copy() for i in img]
     bad[0][2, 0] = np.inf
-    with pytest.raises(InvalidInputError, match="non-finite"):
+    with pytest.raises(InvalidInputError, match="must be finite|non-finite"):
         calibrate(obj, bad, "brown_conrady", SIZE)
     with pytest.raises(InvalidInputError, match="unknown model"):
         calibrate(obj, img, "polynomial", SIZE)

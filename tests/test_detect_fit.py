@@ -223,7 +223,7 @@ def test_bad_inputs_raise_clear_errors(method: str) -> None:
         detect.fit_ellipse(five[:4], method=method)
     nan = five.copy()
     nan[3, 0] = np.nan
-    with pytest.raises(InvalidInputError, match="non-finite value NaN in points at index 3"):
+    with pytest.raises(InvalidInputError, match="points must be finite, got NaN at index 3"):
         detect.fit_ellipse(nan, method=method)
     with pytest.raises(InvalidInputError, match=r"shape \(N, 2\)"):
         detect.fit_ellipse(np.zeros((10, 3)), method=method)

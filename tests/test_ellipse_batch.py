@@ -68,7 +68,7 @@ def test_bad_arcs_are_reported_not_raised() -> None:
     fits = fit_ellipses(np.concatenate(all_arcs), _offsets(all_arcs))
     assert fits.ok.tolist() == [True, False, False, False, True]
     assert "too few points" in fits.errors[1]
-    assert "non-finite" in fits.errors[2] and "index 4" in fits.errors[2]
+    assert "must be finite" in fits.errors[2] and "index 4" in fits.errors[2]
     assert "collinear" in fits.errors[3]
     assert np.isnan(fits.params[1:4]).all() and not fits.converged[1:4].any()
     e = fit_ellipse(arcs[1]).ellipse

@@ -133,7 +133,7 @@ class TestMessages:
     def test_full_rank_limit_names_the_python_option(self):
         rng = np.random.default_rng(0)
         y = rng.normal(size=(12_001, 2))
-        with pytest.raises(InvalidInputError, match="12000 source points; set low_rank") as err:
+        with pytest.raises(InvalidInputError, match="12000 source points; set low_rank=") as err:
             registration.cpd_nonrigid(y, y)
         assert "Some(" not in str(err.value)
 

@@ -200,7 +200,7 @@ def test_bad_input_is_rejected_clearly(hallway):
     pts, cols = points[keep], colors[keep]
     bad = pts.copy()
     bad[5, 1] = np.nan
-    with pytest.raises(InvalidInputError, match="non-finite value NaN in points at index 5"):
+    with pytest.raises(InvalidInputError, match="points must be finite, got NaN at index 5"):
         segment.segment_colored_cloud(bad, cols, graph="knn")
     with pytest.raises(InvalidInputError, match="too few points"):
         segment.segment_colored_cloud(np.zeros((0, 3)), np.zeros((0, 3), np.uint8), graph="knn")
@@ -218,7 +218,7 @@ def test_bad_input_is_rejected_clearly(hallway):
         segment.segment_colored_cloud(points, colors, edge_cut=0.0)
     inf = points.copy()
     inf[0, 0, 0] = np.inf
-    with pytest.raises(InvalidInputError, match="non-finite"):
+    with pytest.raises(InvalidInputError, match="must be finite|non-finite"):
         segment.segment_colored_cloud(inf, colors)
     # Floats in [0, 1] are scaled, not rejected: the same labels as the uint8 colours.
     np.testing.assert_array_equal(

@@ -25,15 +25,27 @@ def _real_array(value: Any, name: str, what: str, reject: tuple[type, ...], dtyp
     Otherwise raises :class:`InvalidInputError` saying that ``name`` must be ``what``; the dtype
     message reads ``got {dtype_owner}dtype ...``.
     """
+    if value is None:
+        raise InvalidInputError(f"{name} must be {what}, got None")
     if isinstance(value, reject):
-        raise InvalidInputError(f"{name} must be {what}, got {type(value).__name__} {value!r}")
+        raise InvalidInputError(f"{name} must be {what}, got {type(value).__name__} {_short(value)}")
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError) as err:
         raise InvalidInputError(f"{name} must be {what}: {err}") from None
     if arr.dtype.kind not in "iuf":
-        raise InvalidInputError(f"{name} must be {what}, got {dtype_owner}dtype {arr.dtype}")
+        raise InvalidInputError(f"{name} must be {what}, got {dtype_owner}dtype {arr.dtype}{_first_non_real(arr)}")
     return arr
+
+
+def _first_non_real(arr: np.ndarray) -> str:
+    """For an object array, ``" (None at index (0,))"``: its first element that is not a real number."""
+    if arr.dtype != object:
+        return ""
+    for idx, v in np.ndenumerate(arr):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+            return f" ({type(v).__name__} {_short(v)} at index {idx})"
+    return ""
 
 
 def as_f64(value: ArrayLike, name: str) -> F64Array:

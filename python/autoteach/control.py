@@ -34,9 +34,11 @@ class TransferFunction:
 
     def __init__(self, num: ArrayLike, den: ArrayLike) -> None:
         """Build from numerator and denominator coefficients (descending powers of ``s``)."""
-        n, d = _core.control_tf_normalize(
-            np.atleast_1d(as_f64(num, "num")).ravel(), np.atleast_1d(as_f64(den, "den")).ravel()
-        )
+        coefficients = {"num": as_f64(num, "num"), "den": as_f64(den, "den")}
+        for name, c in coefficients.items():
+            if c.size == 0:
+                raise InvalidInputError(f"{name} must hold at least one coefficient, got shape {c.shape}")
+        n, d = _core.control_tf_normalize(*(np.atleast_1d(c).ravel() for c in coefficients.values()))
         self.num: F64Array = n
         self.den: F64Array = d
 

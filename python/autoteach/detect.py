@@ -247,11 +247,13 @@ def detect_wafers(image: ArrayLike, options: WaferDetectOptions | None = None, *
         InvalidInputError: Not 2-D, empty, unsupported dtype, NaN/inf pixels, bad parameters.
 
     """
+    if image is None:
+        raise InvalidInputError("image must be a 2-D (height, width) grayscale array, got None")
     arr = np.asarray(image)
     if arr.ndim != 2:
         raise InvalidInputError(f"image must be 2-D (height, width) grayscale, got shape {arr.shape}")
     if arr.size == 0:
-        raise InvalidInputError(f"image is empty, shape {arr.shape}")
+        raise InvalidInputError(f"image must not be empty, got shape {arr.shape}")
     if arr.dtype not in (np.uint8, np.float32, np.float64):
         raise InvalidInputError(f"image must have dtype uint8, float32 or float64, got {arr.dtype}")
     opts = options or WaferDetectOptions()

@@ -96,11 +96,13 @@ class EllipseDetection:
 
 
 def _image(image: ArrayLike) -> np.ndarray:
+    if image is None:
+        raise InvalidInputError("image must be a 2-D (height, width) grayscale array, got None")
     arr = np.asarray(image)
     if arr.ndim != 2:
         raise InvalidInputError(f"image must be 2-D (height, width) grayscale, got shape {arr.shape}")
     if arr.size == 0:
-        raise InvalidInputError(f"image is empty, shape {arr.shape}")
+        raise InvalidInputError(f"image must not be empty, got shape {arr.shape}")
     if arr.dtype not in _DTYPES:
         raise InvalidInputError(f"image must have dtype uint8, uint16, float32 or float64, got {arr.dtype}")
     return np.ascontiguousarray(arr)

@@ -1237,7 +1237,7 @@ def bundle_adjust(
         bad = np.flatnonzero((idx < 0) | (idx >= n))
         if bad.size:
             k = int(bad[0])
-            raise InvalidInputError(f"{name}[{k}] = {idx[k]} is out of range (there are {n})")
+            raise InvalidInputError(f"{name}[{k}] = {idx[k]} is out of range: it must be in [0, {n})")
     poses_a, points_a, summary = _core.lsq_bundle_adjust(
         _matrix(K, "K"),
         poses_m,
@@ -1304,10 +1304,7 @@ class LeastSquaresProblem:
 
     def add_rotation(self, R: ArrayLike) -> int:  # noqa: N803 - a rotation matrix
         """Add an SO(3) block from a 3×3 rotation matrix; returns its id."""
-        r = _matrix(R, "R")
-        if r.shape != (3, 3):
-            raise InvalidInputError(f"R must have shape (3, 3), got {r.shape}")
-        return int(self._inner.add_block(r.reshape(-1, order="F"), "so3"))
+        return int(self._inner.add_rotation(np.ascontiguousarray(_matrix(R, "R"))))
 
     def set_fixed(self, block: int, fixed: bool = True) -> None:
         """Hold a block constant (or release it)."""

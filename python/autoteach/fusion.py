@@ -62,16 +62,16 @@ class SparsePooling:
     ) -> SparsePooling:
         """Build the sparse kernel of eq. 7.4-7.8 (``neighbourhood``: odd window of source cells)."""
         ig = (
-            as_int(image_grid[0], "image_grid rows"),
-            as_int(image_grid[1], "image_grid cols"),
-            as_float(image_grid[2], "stride"),
+            as_int(image_grid[0], "image_grid[0] (rows)"),
+            as_int(image_grid[1], "image_grid[1] (cols)"),
+            as_float(image_grid[2], "image_grid[2] (stride)"),
         )
         bg = (
-            as_float(bev_grid[0], "x_min"),
-            as_float(bev_grid[1], "y_min"),
-            as_float(bev_grid[2], "cell"),
-            as_int(bev_grid[3], "nx"),
-            as_int(bev_grid[4], "ny"),
+            as_float(bev_grid[0], "bev_grid[0] (x_min)"),
+            as_float(bev_grid[1], "bev_grid[1] (y_min)"),
+            as_float(bev_grid[2], "bev_grid[2] (cell)"),
+            as_int(bev_grid[3], "bev_grid[3] (nx)"),
+            as_int(bev_grid[4], "bev_grid[4] (ny)"),
         )
         inner = _core.FusionSparsePooling.build(
             as_f64(points, "points"), as_f64(P, "P"), ig, bg, as_int(neighbourhood, "neighbourhood")

@@ -292,6 +292,8 @@ def detect_polygon(
     ``support_distance`` (3), ``support_angle`` (0.1 rad), ``oriented`` (True),
     ``irls_iterations`` (30). ``segment_options`` go to :func:`detect_segments`.
     """
+    if image_or_segments is None:
+        raise InvalidInputError("image_or_segments must be an image (H, W) or segments (S, 4), got None")
     arr = np.asarray(image_or_segments)
     t = as_f64(template, "template")
     h = as_f64(homography, "homography")

@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from autoteach import _core
-from autoteach._convert import as_f64, as_float, as_int
+from autoteach._convert import as_finite_f64, as_float, as_int
 from autoteach.errors import InvalidInputError
 
 F64Array = NDArray[np.float64]
@@ -88,11 +88,11 @@ class OccupancyMap:
 
 
 def _links(tx: ArrayLike, rx: ArrayLike) -> tuple[F64Array, F64Array]:
-    return np.ascontiguousarray(as_f64(tx, "tx")), np.ascontiguousarray(as_f64(rx, "rx"))
+    return np.ascontiguousarray(as_finite_f64(tx, "tx")), np.ascontiguousarray(as_finite_f64(rx, "rx"))
 
 
 def _rss(rss: ArrayLike) -> F64Array:
-    return np.ascontiguousarray(as_f64(rss, "rss"))
+    return np.ascontiguousarray(as_finite_f64(rss, "rss"))
 
 
 class LogFit:

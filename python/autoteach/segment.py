@@ -102,7 +102,7 @@ def as_colors(colors: ArrayLike, name: str = "colors") -> NDArray[np.uint8]:
         return np.ascontiguousarray(arr, dtype=np.uint8)
     if kind == "f":
         if arr.size and not np.all(np.isfinite(arr)):
-            raise InvalidInputError(f"{name} contains NaN or inf")
+            raise InvalidInputError(f"{name} must be finite, got NaN or inf")
         if arr.size and (arr.min() < 0.0 or arr.max() > 1.0):
             raise InvalidInputError(
                 f"float {name} must lie in [0, 1] (got min {arr.min():g}, max {arr.max():g}); "

@@ -250,13 +250,16 @@ def unscented_transform(
     000_3b1454b2b2194811.txt §5.2): the default ``UT`` of
     :class:`~autoteach.estimate.UnscentedKalmanFilter`'s ``predict``/``update``/``rts_smoother``.
     """
-    s = np.atleast_2d(as_finite_f64(sigmas, "sigmas"))
-    wm = as_finite_f64(Wm, "Wm").reshape(-1)
-    wc = as_finite_f64(Wc, "Wc").reshape(-1)
-    if s.ndim != 2 or s.shape[0] != wm.size or wm.size != wc.size:
-        raise InvalidInputError(
-            f"sigmas of shape {s.shape} need one mean and one covariance weight per row, got {wm.size} and {wc.size}"
-        )
+    s = as_finite_f64(sigmas, "sigmas")
+    if s.ndim != 2:
+        raise InvalidInputError(f"sigmas must have shape (N, n) (one sigma point per row), got {s.shape}")
+    wm = as_finite_f64(Wm, "Wm")
+    wc = as_finite_f64(Wc, "Wc")
+    for name, w in (("Wm", wm), ("Wc", wc)):
+        if w.shape != (s.shape[0],):
+            raise InvalidInputError(
+                f"{name} must have shape ({s.shape[0]},) (one weight per row of sigmas), got {w.shape}"
+            )
     n = s.shape[1]
     noise = None if noise_cov is None else as_finite_f64(noise_cov, "noise_cov")
     if noise is not None and noise.shape not in ((), (1,), (n, n), (1, 1)):
@@ -271,5 +274,7 @@ def unscented_transform(
         if noise is not None:
             P = P + noise  # noqa: N806
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
-        raise InvalidInputError("the sigma points are too large: their mean or covariance overflows float64")
+        raise InvalidInputError(
+            "sigmas must be small enough for their mean and covariance to fit in float64; they overflow"
+        )
     return x, P

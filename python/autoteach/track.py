@@ -16,6 +16,7 @@ edges with noise, missed detections, false arcs and duplicates.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -150,9 +151,36 @@ def _get(obj: Any, name: str, default: Any = None) -> Any:
     return getattr(obj, name, default)
 
 
+def _checked_options(params: dict[str, Any]) -> dict[str, Any]:
+    """``params`` with unknown names refused and numbers converted by the type of their default.
+
+    The compiled tracker would raise a bare ``TypeError`` for an unknown name or a string, and an
+    ``OverflowError`` for a negative count; these name the option instead.
+    """
+    known = inspect.signature(_core.TrackWaferTracker).parameters
+    unknown = sorted(set(params) - set(known))
+    if unknown:
+        raise InvalidInputError(f"unknown WaferTracker option(s) {unknown}; the options are {sorted(known)}")
+    out = dict(params)
+    for key, value in params.items():
+        default = known[key].default
+        if isinstance(default, bool):
+            if not isinstance(value, (bool, np.bool_)):
+                raise InvalidInputError(f"{key} must be True or False, got {value!r}")
+        elif isinstance(default, int):
+            out[key] = as_int(value, key)
+        elif isinstance(default, float):
+            out[key] = as_float(value, key)
+        elif isinstance(default, str) and not isinstance(value, str):
+            raise InvalidInputError(f"{key} must be a string, got {type(value).__name__} {value!r}")
+    return out
+
+
 def _ellipse_array(e: Any, i: int) -> NDArray[np.float64]:
     if e is None:
-        raise InvalidInputError(f"edge {i} has no ellipse")
+        raise InvalidInputError(
+            f"edges[{i}] must have an ellipse (cx, cy, a, b, theta, as an object or 5 numbers), got None"
+        )
     if hasattr(e, "cx"):
         return np.array([e.cx, e.cy, e.a, e.b, e.theta], dtype=np.float64)
     arr = as_f64(e, f"edge {i}: ellipse").reshape(-1)
@@ -242,6 +270,7 @@ class WaferTracker:
     """
 
     def __init__(self, **params: Any) -> None:
+        params = _checked_options(params)
         for key in ("image_size", "normal_prior"):
             if params.get(key) is not None:
                 params[key] = tuple(float(v) for v in params[key])

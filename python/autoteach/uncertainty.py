@@ -41,9 +41,9 @@ Kind = Literal["pg", "pdq"]
 
 def _boxes(value: ArrayLike, name: str) -> tuple[F64Array, bool]:
     arr = as_f64(value, name)
-    if arr.ndim == 1:
+    if arr.ndim == 1 and arr.shape == (5,):
         return arr.reshape(1, -1), True
-    if arr.ndim != 2:
+    if arr.ndim != 2 or arr.shape[1] != 5:
         raise InvalidInputError(f"{name} must be one box (5,) or boxes (n, 5), got shape {arr.shape}")
     return arr, False
 
@@ -196,7 +196,9 @@ def spatial_distribution(
     c = np.zeros((5, 5)) if cov is None else as_f64(cov, "cov")
     pdq = _kind(kind)
     if (grid is None) == (points is None):
-        raise InvalidInputError("give exactly one of grid and points")
+        raise InvalidInputError(
+            f"exactly one of grid and points must be given, got {'neither' if grid is None else 'both'}"
+        )
     if method not in ("moments", "sampled"):
         raise InvalidInputError(f'method must be "moments" or "sampled", got {method!r}')
     if grid is not None and method == "sampled":

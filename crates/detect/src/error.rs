@@ -1,5 +1,6 @@
 //! The error type of this crate.
 
+use autoteach_geometry::error::Num;
 use thiserror::Error;
 
 /// Everything that can go wrong in this crate. Messages carry the offending values.
@@ -17,7 +18,7 @@ pub enum DetectError {
         needed: usize,
     },
     /// An input coordinate was NaN or infinite.
-    #[error("non-finite value {value} in {what} at index {index}")]
+    #[error("{what} must be finite, got {value} at index {index}")]
     NonFinite {
         /// Which input held the value.
         what: &'static str,
@@ -41,7 +42,7 @@ pub enum DetectError {
         reason: String,
     },
     /// An option or parameter is outside its valid domain.
-    #[error("invalid parameter {what} = {value}: {reason}")]
+    #[error("invalid parameter {what} = {}: {reason}", Num(*.value))]
     InvalidParameter {
         /// Parameter name.
         what: &'static str,

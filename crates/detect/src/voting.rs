@@ -482,7 +482,7 @@ fn prepare(x: &DMatrix<f64>, y: &DMatrix<f64>, o: &VotingOptions) -> Result<Prob
         return Err(DetectError::InvalidParameter {
             what: "translation_bin",
             value: o.translation_bin.unwrap_or(f64::NAN),
-            reason: "out of range for the extent of the data",
+            reason: "must be finite and > 0 (unset, it is angle_bin times the data's RMS extent, which overflows here)",
         });
     }
     Ok(Problem {
@@ -654,7 +654,7 @@ fn binners(p: &Problem, pairs: &Pairs, shift: f64) -> Result<Vec<Binner>> {
                 return Err(DetectError::InvalidParameter {
                     what,
                     value,
-                    reason: "too small for the extent of the data (over 5·10⁷ bins in one dimension)",
+                    reason: "too small for the extent of the data: it must leave at most 5·10⁷ bins in one dimension",
                 });
             }
             b.kmin = lo.min(hi) as i64;

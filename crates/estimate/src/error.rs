@@ -1,5 +1,6 @@
 //! The error type of this crate.
 
+use autoteach_geometry::error::Num;
 use thiserror::Error;
 
 /// Everything that can go wrong in this crate. Messages carry the offending values.
@@ -13,7 +14,11 @@ pub enum EstimateError {
     Geometry(#[from] autoteach_geometry::GeometryError),
 
     /// A vector or matrix has the wrong size for the filter or model it is given to.
-    #[error("{what}: expected shape {expected:?}, got {got:?}")]
+    #[error(
+        "{what}: expected shape {}, got {}",
+        shape_str(expected),
+        shape_str(got)
+    )]
     DimensionMismatch {
         /// What was passed (e.g. `"measurement z"`).
         what: String,
@@ -24,7 +29,7 @@ pub enum EstimateError {
     },
 
     /// A parameter is outside its valid range.
-    #[error("invalid parameter {name} = {value}: {reason}")]
+    #[error("invalid parameter {name} = {}: {reason}", Num(*.value))]
     InvalidParameter {
         /// The parameter's name.
         name: &'static str,
@@ -35,7 +40,7 @@ pub enum EstimateError {
     },
 
     /// An input contains NaN or ±inf.
-    #[error("{what} contains a non-finite value {value} at index {index}")]
+    #[error("{what} must be finite, got {value} at index {index}")]
     NonFiniteInput {
         /// What was passed.
         what: String,
@@ -220,7 +225,7 @@ pub enum EstimateError {
     /// A radio link has coincident (or nearly coincident) transmitter and receiver, where the
     /// path loss `log10 ‖r − t‖` of eq. 3.1 is undefined.
     #[error(
-        "{what}: link {index} has transmitter and receiver {distance:.3e} m apart (minimum {minimum} m)"
+        "{what}: link {index} has transmitter and receiver {distance:.3e} m apart; they must be at least {minimum} m apart"
     )]
     CoincidentLink {
         /// What was passed.
@@ -234,7 +239,10 @@ pub enum EstimateError {
     },
 
     /// A point lies outside the map a model was fitted on.
-    #[error("{what}: point {index} = ({x}, {y}) lies outside the map [{x0}, {x1}] × [{y0}, {y1}]")]
+    #[error(
+        "{what}: point {index} = ({}, {}) lies outside the map [{x0}, {x1}] × [{y0}, {y1}]: it must lie inside",
+        Num(*.x), Num(*.y)
+    )]
     OutsideMap {
         /// What was passed.
         what: String,
@@ -260,7 +268,7 @@ pub enum EstimateError {
     InvalidInput(String),
 
     /// An input that must not be empty is empty (e.g. a training set with no measurement).
-    #[error("{0} is empty")]
+    #[error("{0} must not be empty")]
     EmptyInput(String),
 
     /// Mapping input that the rasterizer cannot use (seed 004_815695db12a6b16c.txt ch. 2): a
@@ -278,4 +286,19 @@ pub enum EstimateError {
         /// Why it is rejected, with the offending values.
         reason: String,
     },
+}
+
+/// A shape as Python prints it: `(3,)`, `(2, 2)`, `()` (messages reach Python users).
+pub fn shape_str(shape: &[usize]) -> String {
+    match shape {
+        [n] => format!("({n},)"),
+        _ => format!(
+            "({})",
+            shape
+                .iter()
+                .map(|n| n.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
 }

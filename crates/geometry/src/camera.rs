@@ -307,12 +307,12 @@ impl Camera {
         let expected = model.num_params();
         if params.len() != expected {
             return Err(GeometryError::WrongLength {
-                what: "camera parameters",
+                what: "params (camera parameters)",
                 got: params.len(),
                 expected,
             });
         }
-        check_finite("camera parameters", params)?;
+        check_finite("params (camera parameters)", params)?;
         for (what, value) in [("fx", params[0]), ("fy", params[1])] {
             if value <= 0.0 {
                 return Err(GeometryError::InvalidParameter {

@@ -662,7 +662,7 @@ impl Ellipse {
         }
         let step = (t1 - t0) / (n - 1) as f64;
         // A fallible reservation: a huge n is an error, not a capacity-overflow panic or an abort.
-        let mut out = crate::alloc::try_with_capacity("ellipse sample points", n)?;
+        let mut out = crate::alloc::try_with_capacity("the n ellipse sample points", n)?;
         out.extend((0..n).map(|i| {
             let t = if i + 1 == n { t1 } else { t0 + step * i as f64 };
             self.point_at(t)
@@ -780,7 +780,7 @@ fn intrinsics_inverse(k: &Matrix3<f64>) -> Result<Matrix3<f64>> {
         return Err(GeometryError::InvalidParameter {
             what: "K last row",
             value: k[(2, 2)],
-            reason: "a pinhole intrinsic matrix has last row (0, 0, k33 > 0)",
+            reason: "a pinhole intrinsic matrix must have last row (0, 0, k33 > 0)",
         });
     }
     let det = k.determinant();

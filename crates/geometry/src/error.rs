@@ -6,7 +6,7 @@ use thiserror::Error;
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum GeometryError {
     /// An input value was NaN or infinite.
-    #[error("non-finite value in {what}: {value}")]
+    #[error("{what} must be finite, got {value}")]
     NonFinite {
         /// Which input held the value.
         what: &'static str,
@@ -24,7 +24,7 @@ pub enum GeometryError {
         expected: usize,
     },
     /// A parameter is outside its valid domain (for example a non-positive focal length).
-    #[error("invalid parameter {what} = {value}: {reason}")]
+    #[error("invalid parameter {what} = {}: {reason}", Num(*.value))]
     InvalidParameter {
         /// Parameter name.
         what: &'static str,
@@ -46,7 +46,10 @@ pub enum GeometryError {
         reason: String,
     },
     /// A point cannot be projected (behind the camera or outside the model's valid domain).
-    #[error("cannot project point ({x}, {y}, {z}): {reason}")]
+    #[error(
+        "cannot project point ({}, {}, {}): {reason} (a point in the model's field of view is expected)",
+        Num(*.x), Num(*.y), Num(*.z)
+    )]
     NotProjectable {
         /// Point x.
         x: f64,
@@ -68,7 +71,10 @@ pub enum GeometryError {
         residual: f64,
     },
     /// A quaternion given as (w, x, y, z) has (near-)zero norm and encodes no rotation.
-    #[error("quaternion (w={w}, x={x}, y={y}, z={z}) has norm {norm:e}, too small to normalise")]
+    #[error(
+        "quaternion q = (w={}, x={}, y={}, z={}) has norm {norm:e}: it must be at least {} to normalise",
+        Num(*.w), Num(*.x), Num(*.y), Num(*.z), crate::lie::MIN_QUATERNION_NORM
+    )]
     DegenerateQuaternion {
         /// Scalar part.
         w: f64,
@@ -91,7 +97,7 @@ pub enum GeometryError {
     },
     /// A pixel has no ray under the camera model (for example it lies outside the image of the
     /// Kannala–Brandt model's monotonic range).
-    #[error("cannot unproject pixel ({u}, {v}): {reason}")]
+    #[error("cannot unproject pixel ({}, {}): {reason}", Num(*.u), Num(*.v))]
     NotUnprojectable {
         /// Pixel column.
         u: f64,
@@ -103,7 +109,7 @@ pub enum GeometryError {
     /// An allocation the input asks for cannot be made (its size overflows, or the allocator
     /// refuses it): reported instead of aborting the process.
     #[error(
-        "cannot allocate {what}: {elements} elements of {bytes_each} bytes do not fit in memory"
+        "{what} must fit in memory: {elements} elements of {bytes_each} bytes cannot be allocated"
     )]
     OutOfMemory {
         /// What was being allocated.
@@ -121,6 +127,22 @@ pub enum GeometryError {
         /// What went wrong with it.
         source: Box<GeometryError>,
     },
+}
+
+/// A number as a message shows it: plain decimals for ordinary magnitudes, scientific notation
+/// beyond them (`{}` alone writes 1e300 as 301 digits and 1e-300 as 300 zeros).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Num(pub f64);
+
+impl std::fmt::Display for Num {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = self.0;
+        if v == 0.0 || !v.is_finite() || (1e-4..1e16).contains(&v.abs()) {
+            write!(f, "{v}")
+        } else {
+            write!(f, "{v:e}")
+        }
+    }
 }
 
 /// Returns `Err(NonFinite)` naming `what` if any value is NaN or infinite.

@@ -451,7 +451,7 @@ fn options(
         "cauchy" => RobustLoss::Cauchy(scale),
         other => {
             return Err(errors::invalid_input(format!(
-                "unknown loss {other:?}: use 'trivial', 'huber' or 'cauchy'"
+                "loss must be one of 'trivial', 'huber' or 'cauchy', got {other:?}"
             )));
         }
     };

@@ -89,7 +89,7 @@ fn slice<'a, T: Element + Feature>(
     }
     if let Some((i, v)) = s.iter().enumerate().find(|(_, v)| !v.to_f64().is_finite()) {
         return Err(errors::invalid_input(format!(
-            "{name} contains a non-finite value {v:?} at flat index {i}"
+            "{name} must be finite, got {v:?} at flat index {i}"
         )));
     }
     Ok(s)
@@ -193,16 +193,17 @@ impl PySparsePooling {
             )));
         }
         let pts: Vec<[f64; 3]> = data.chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
-        let pm = convert::finite_array(projection, "projection")?.exact(&[3, 4])?;
+        let pm = convert::finite_array(projection, "P")?.exact(&[3, 4])?;
         let p = [
             [pm[0], pm[1], pm[2], pm[3]],
             [pm[4], pm[5], pm[6], pm[7]],
             [pm[8], pm[9], pm[10], pm[11]],
         ];
-        let ig =
-            ImageGrid::new(image_grid.0, image_grid.1, image_grid.2).map_err(errors::detect)?;
+        // The grids' own errors name their fields (`cell`, `stride`): prefix the argument.
+        let ig = ImageGrid::new(image_grid.0, image_grid.1, image_grid.2)
+            .map_err(|e| errors::invalid_input(format!("image_grid: {e}")))?;
         let bg = BevGrid::new(bev_grid.0, bev_grid.1, bev_grid.2, bev_grid.3, bev_grid.4)
-            .map_err(errors::detect)?;
+            .map_err(|e| errors::invalid_input(format!("bev_grid: {e}")))?;
         let inner = detached(py, || {
             SparsePooling::build(&pts, &p, ig, bg, neighbourhood).map_err(errors::detect)
         })?;

@@ -233,7 +233,7 @@ impl LsqProblem {
             Ok(BlockId(b))
         } else {
             Err(errors::invalid_input(format!(
-                "unknown block {b} (the problem has {} blocks)",
+                "unknown block {b}: block must be an id in [0, {}) returned by an add_* call",
                 self.inner.num_blocks()
             )))
         }
@@ -270,9 +270,20 @@ impl LsqProblem {
             .map_err(errors::estimate)
     }
 
+    /// Adds an SO(3) block from a 3×3 rotation matrix (refused unless orthonormal with det +1,
+    /// like every rotation argument); returns its id.
+    fn add_rotation(&mut self, r: &Bound<'_, PyAny>) -> PyResult<usize> {
+        let rot = convert::matrix_to_rotation(&convert::matrix3(r, "R")?, "R")?;
+        // nalgebra stores column-major: the So3 block's value layout.
+        self.inner
+            .add_block(rot.matrix().as_slice(), Manifold::So3)
+            .map(|b| b.0)
+            .map_err(errors::estimate)
+    }
+
     /// Adds an SE(3) block from a 4×4 homogeneous transform; returns its id.
     fn add_pose(&mut self, t: &Bound<'_, PyAny>) -> PyResult<usize> {
-        let t = convert::isometry(t, "t")?;
+        let t = convert::isometry(t, "T")?;
         self.inner
             .add_block(&se3_to_params(&t), Manifold::Se3)
             .map(|b| b.0)

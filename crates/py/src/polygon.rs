@@ -36,12 +36,41 @@ fn take<'py, T: FromPyObjectOwned<'py>>(
             }
             v.extract::<T>().map(Some).map_err(|_| {
                 errors::invalid_input(format!(
-                    "option {key} has the wrong type ({})",
-                    v.get_type()
+                    "option {key} must be {}, got {}",
+                    python_kind::<T>(),
+                    short_repr(&v)
                 ))
             })
         }
     }
+}
+
+/// What a Rust option type accepts, in Python's words (a negative count is out of range, not
+/// of the wrong type).
+fn python_kind<T>() -> &'static str {
+    match std::any::type_name::<T>() {
+        "usize" | "u64" | "u32" | "u16" | "u8" => "a non-negative integer",
+        "isize" | "i64" | "i32" => "an integer",
+        "f64" | "f32" => "a real number",
+        "bool" => "True or False",
+        n if n.ends_with("String") => "a string",
+        _ => "of another type",
+    }
+}
+
+/// `repr(value)`, elided in the middle beyond 40 characters (a 300-digit integer).
+fn short_repr(v: &Bound<'_, PyAny>) -> String {
+    let r = v
+        .repr()
+        .map(|r| r.to_string())
+        .unwrap_or_else(|_| "an unprintable value".to_string());
+    let chars: Vec<char> = r.chars().collect();
+    if chars.len() <= 40 {
+        return r;
+    }
+    let head: String = chars[..18].iter().collect();
+    let tail: String = chars[chars.len() - 18..].iter().collect();
+    format!("{head}...{tail} ({} characters)", chars.len())
 }
 
 /// Fails if `opts` still has keys.

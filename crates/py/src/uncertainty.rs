@@ -156,17 +156,17 @@ fn uncertainty_jiou<'py>(
     seed: u64,
     pdq: bool,
 ) -> PyResult<PyArr<'py>> {
-    let am = boxes(a_mean, "a_mean")?;
-    let bm = boxes(b_mean, "b_mean")?;
+    let am = boxes(a_mean, "box_a")?;
+    let bm = boxes(b_mean, "box_b")?;
     if am.len() != bm.len() {
         return Err(errors::invalid_input(format!(
-            "a_mean and b_mean hold {} and {} boxes",
+            "box_a and box_b must hold as many boxes, got {} and {}",
             am.len(),
             bm.len()
         )));
     }
-    let ac = covs(a_cov, "a_cov", am.len())?;
-    let bc = covs(b_cov, "b_cov", bm.len())?;
+    let ac = covs(a_cov, "cov_a", am.len())?;
+    let bc = covs(b_cov, "cov_b", bm.len())?;
     let a: Vec<ProbBox> = am
         .iter()
         .zip(&ac)
@@ -234,7 +234,7 @@ fn uncertainty_spatial_sampled<'py>(
     seed: u64,
     pdq: bool,
 ) -> PyResult<PyArr<'py>> {
-    let m = one_box(mean, "mean")?;
+    let m = one_box(mean, "box")?;
     let c = one_cov(cov, "cov")?;
     let g = grid(grid_)?;
     if samples < 1 {
@@ -257,7 +257,7 @@ fn uncertainty_pg_moments<'py>(
     points: &Bound<'py, PyAny>,
     lattice: usize,
 ) -> PyResult<PyArr<'py>> {
-    let m = one_box(mean, "mean")?;
+    let m = one_box(mean, "box")?;
     let c = one_cov(cov, "cov")?;
     let p = points2(points, "points")?;
     let v = detached(py, || {
@@ -278,7 +278,7 @@ fn uncertainty_pdq_at<'py>(
     samples: usize,
     seed: u64,
 ) -> PyResult<PyArr<'py>> {
-    let m = one_box(mean, "mean")?;
+    let m = one_box(mean, "box")?;
     let c = one_cov(cov, "cov")?;
     let p = points2(points, "points")?;
     if samples < 1 {
@@ -299,7 +299,7 @@ fn uncertainty_point_moments<'py>(
     cov: &Bound<'py, PyAny>,
     v0: &Bound<'py, PyAny>,
 ) -> PyResult<(PyArr<'py>, PyArr<'py>)> {
-    let m = one_box(mean, "mean")?;
+    let m = one_box(mean, "box")?;
     let c = one_cov(cov, "cov")?;
     let p = points2(v0, "v0")?;
     let mom = BoxMoments::new(&m, &c);

@@ -6,6 +6,7 @@
 //! without an interpreter: the bounded fuzz loop at the end of this file drives them with random
 //! shapes, strides (reversed, stepped, transposed views), NaN, infinities and huge values.
 
+use autoteach_geometry::error::Num;
 use numpy::ndarray::{ArrayViewD, Dimension};
 
 /// The multi-index and value of the first non-finite element in row-major (logical) order.
@@ -27,9 +28,7 @@ pub fn first_non_finite(view: &ArrayViewD<'_, f64>) -> Option<(Vec<usize>, f64)>
 pub fn finite(view: &ArrayViewD<'_, f64>, name: &str) -> Result<(), String> {
     match first_non_finite(view) {
         None => Ok(()),
-        Some((idx, v)) => Err(format!(
-            "{name} contains a non-finite value {v} at index {idx:?}"
-        )),
+        Some((idx, v)) => Err(format!("{name} must be finite, got {v} at index {idx:?}")),
     }
 }
 
@@ -52,7 +51,10 @@ pub fn rows(
 ) -> Result<(Vec<Vec<f64>>, Vec<usize>), String> {
     let shape = view.shape();
     if shape.is_empty() || shape[shape.len() - 1] != n {
-        return Err(format!("{name} must have shape {expected}, got {shape:?}"));
+        return Err(format!(
+            "{name} must have shape {expected}, got {}",
+            shape_str(shape)
+        ));
     }
     let lead = shape[..shape.len() - 1].to_vec();
     let data = row_major(view);
@@ -82,8 +84,8 @@ pub fn exact(view: &ArrayViewD<'_, f64>, name: &str, shape: &[usize]) -> Result<
 pub fn vector(view: &ArrayViewD<'_, f64>, name: &str) -> Result<Vec<f64>, String> {
     if view.ndim() != 1 {
         return Err(format!(
-            "{name} must be one-dimensional, got shape {:?}",
-            view.shape()
+            "{name} must be one-dimensional, got shape {}",
+            shape_str(view.shape())
         ));
     }
     Ok(view.iter().copied().collect())
@@ -140,8 +142,9 @@ pub fn rotation(
     let is_rotation = orth <= ROTATION_TOL && r.determinant() > 0.0;
     if !is_rotation {
         return Err(format!(
-            "{name} is not a rotation matrix (|RᵀR − I| = {orth:.3e}, det R = {:.6})",
-            r.determinant()
+            "{name} is not a rotation matrix (|RᵀR − I| = {orth:.3e}, det R = {}, largest |entry| {:.3e})",
+            Num(r.determinant()),
+            r.amax()
         ));
     }
     // Re-orthonormalise so tiny input errors do not leak into the core.
@@ -161,9 +164,13 @@ pub fn isometry(
     let is_rigid = orth <= ROTATION_TOL && r.determinant() > 0.0 && last_ok;
     if !is_rigid {
         return Err(format!(
-            "{name} is not a rigid transform (|RᵀR − I| = {orth:.3e}, det R = {:.6}, last row {:?})",
-            r.determinant(),
-            [m[(3, 0)], m[(3, 1)], m[(3, 2)], m[(3, 3)]]
+            "{name} is not a rigid transform (|RᵀR − I| = {orth:.3e}, det R = {}, largest |Rᵢⱼ| {:.3e}, last row [{}, {}, {}, {}])",
+            Num(r.determinant()),
+            r.amax(),
+            Num(m[(3, 0)]),
+            Num(m[(3, 1)]),
+            Num(m[(3, 2)]),
+            Num(m[(3, 3)])
         ));
     }
     let rot = nalgebra::Rotation3::from_matrix(&r);
@@ -255,7 +262,7 @@ mod tests {
             ) {
                 (Ok(()), None) => {}
                 (Err(msg), Some(_)) => {
-                    assert!(msg.starts_with("arg contains a non-finite value"), "{msg}");
+                    assert!(msg.starts_with("arg must be finite, got"), "{msg}");
                     let (idx, _) = first_non_finite(&view).unwrap();
                     let first = view.indexed_iter().find(|(_, v)| !v.is_finite()).unwrap();
                     assert_eq!(idx, first.0.slice());

@@ -90,7 +90,7 @@ def _plot(rows: list[dict[str, Any]], folder: Path, ws: Any) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     if not args.demo:
-        print("autoteach plan: only --demo is available", file=sys.stderr)
+        print("autoteach plan: error: --demo is expected (the only mode)", file=sys.stderr)
         return 2
     from autoteach.commands.viewer_flag import rerun_target
 

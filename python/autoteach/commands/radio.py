@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -129,8 +130,12 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError(
             f"--environments must name some of {', '.join(ENVIRONMENTS)}, got {args.environments!r}"
         )
-    if args.stride < 1 or args.duration <= 30:
-        raise InvalidInputError("--stride must be >= 1 and --duration > 30 s")
+    if args.stride < 1:
+        raise InvalidInputError(f"--stride must be >= 1, got {args.stride}")
+    if not args.duration > 30:  # written so that NaN fails
+        raise InvalidInputError(f"--duration must be > 30 s, got {args.duration:g}")
+    if not (math.isfinite(args.sigma) and args.sigma >= 0):
+        raise InvalidInputError(f"--sigma must be a finite shadowing deviation >= 0 dB, got {args.sigma:g}")
     if args.tune:
         from autoteach.radio_tuning import compare_tuned
 

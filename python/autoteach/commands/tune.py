@@ -94,7 +94,10 @@ def _jsonable(obj: Any) -> Any:
 
 def _run(args: argparse.Namespace) -> int:
     if not args.demo:
-        print("autoteach tune: only --demo is available (the simulated JT2/JT4 experiment)", file=sys.stderr)
+        print(
+            "autoteach tune: error: --demo is expected (the only mode: the simulated JT2/JT4 experiment)",
+            file=sys.stderr,
+        )
         return 2
     from autoteach.control import demo, plot_sensitivities, table_2_3
 

@@ -99,7 +99,7 @@ def _plots(out: Path) -> list[str]:
 
 def _run(args: argparse.Namespace) -> int:
     if not args.demo:
-        print("autoteach uncertainty: nothing to do: pass --demo", file=sys.stderr)
+        print("autoteach uncertainty: error: nothing to do: --demo is expected (the only mode)", file=sys.stderr)
         return 2
     result = demo()
     if not args.no_plot:

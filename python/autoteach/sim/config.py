@@ -270,7 +270,13 @@ class SimConfig:
         if not isinstance(self.camera_model, str) or not self.camera_model:
             raise InvalidInputError(f"camera_model must be a non-empty string, got {self.camera_model!r}")
         put(self, "camera_params", _floats(self.camera_params, None, "camera_params"))
-        Camera(self.camera_model, np.asarray(self.camera_params), self.width, self.height)  # validates the model
+        try:  # validates the model against its parameters and the image size
+            Camera(self.camera_model, np.asarray(self.camera_params), self.width, self.height)
+        except InvalidInputError as err:
+            raise InvalidInputError(
+                f"camera_model {self.camera_model!r} with camera_params {self.camera_params}, "
+                f"width {self.width}, height {self.height}: {err}"
+            ) from None
         if not isinstance(self.robot, RobotParams):
             raise InvalidInputError(f"robot must be a RobotParams, got {type(self.robot).__name__}")
         base = np.asarray(_floats(self.base_pose, 16, "base_pose")).reshape(4, 4)

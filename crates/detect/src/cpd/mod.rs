@@ -720,7 +720,7 @@ pub fn nonrigid(
     options: &NonrigidOptions,
 ) -> Result<NonrigidResult> {
     let d = check(x, y, &options.cpd)?;
-    for (what, value) in [("beta", options.beta), ("lambda", options.lambda)] {
+    for (what, value) in [("beta", options.beta), ("lam", options.lambda)] {
         if !(value > 0.0 && value.is_finite()) {
             return Err(DetectError::InvalidParameter {
                 what,
@@ -738,12 +738,12 @@ pub fn nonrigid(
             });
         }
         None if y.nrows() > MAX_FULL_RANK_POINTS => {
-            // The message names the limit literally; `full_rank_limit_is_named` keeps the two equal.
+            // The message names the limit literally (tests/test_reliability.py pins the wording).
             return Err(DetectError::InvalidParameter {
-                what: "number of source points M",
+                what: "number of source points M (rows of Y)",
                 value: y.nrows() as f64,
-                reason: "full-rank non-rigid CPD holds the M × M kernel and is limited to \
-                         12000 source points; set low_rank to K eigenpairs (for example 100)",
+                reason: "full-rank non-rigid CPD holds the M × M kernel and must stay within \
+                         12000 source points; set low_rank=K eigenpairs (for example low_rank=100)",
             });
         }
         _ => {}

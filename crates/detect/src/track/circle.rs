@@ -193,7 +193,7 @@ pub(crate) fn check_intrinsics(k: &Matrix3<f64>) -> Result<()> {
         return Err(DetectError::InvalidParameter {
             what: "K[2, 2]",
             value: k[(2, 2)],
-            reason: "a pinhole intrinsic matrix has last row (0, 0, k33 > 0)",
+            reason: "a pinhole intrinsic matrix must have last row (0, 0, k33 > 0)",
         });
     }
     let det = k.determinant();

@@ -81,7 +81,7 @@ fn solve(
         return Err(DetectError::InvalidParameter {
             what: "label box size / sigma",
             value,
-            reason: "the posterior precision overflows f64: the box is too large for sigma",
+            reason: "must be finite: the posterior precision overflows f64 (the box is too large for sigma)",
         });
     }
     let free = if heading { 5 } else { 4 };

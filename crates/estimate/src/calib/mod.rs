@@ -51,7 +51,7 @@ impl View {
     pub fn new(view: usize, object: &[[f64; 3]], image: &[[f64; 2]]) -> Result<View> {
         if object.len() != image.len() {
             return Err(EstimateError::DimensionMismatch {
-                what: format!("view {view}: image points (one per object point)"),
+                what: format!("image_points[{view}] (one row per row of object_points[{view}])"),
                 expected: vec![object.len(), 2],
                 got: vec![image.len(), 2],
             });
@@ -63,11 +63,16 @@ impl View {
         };
         for (i, (o, p)) in object.iter().zip(image).enumerate() {
             let vals = [o[0], o[1], o[2], p[0], p[1]];
-            if let Some(&bad) = vals.iter().find(|v| v.is_infinite()) {
+            if let Some(k) = vals.iter().position(|v| v.is_infinite()) {
+                let (what, column) = if k < 3 {
+                    ("object_points", k)
+                } else {
+                    ("image_points", k - 3)
+                };
                 return Err(EstimateError::NonFiniteInput {
-                    what: format!("view {view} point {i}"),
-                    index: i,
-                    value: bad,
+                    what: format!("{what}[{view}][{i}] (NaN marks a missing point)"),
+                    index: column,
+                    value: vals[k],
                 });
             }
             if vals.iter().any(|v| v.is_nan()) {

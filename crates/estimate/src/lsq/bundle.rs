@@ -60,7 +60,7 @@ pub fn bundle_adjust(
     let check_index = |what: &str, idx: &[usize], n: usize| -> Result<()> {
         match idx.iter().enumerate().find(|(_, i)| **i >= n) {
             Some((k, i)) => Err(EstimateError::InvalidProblem(format!(
-                "{what}[{k}] = {i} is out of range (there are {n})"
+                "{what}[{k}] = {i} is out of range: it must be in [0, {n})"
             ))),
             None => Ok(()),
         }

@@ -112,7 +112,7 @@ impl Problem {
     pub(crate) fn block(&self, b: BlockId) -> Result<&Block> {
         self.blocks.get(b.0).ok_or_else(|| {
             EstimateError::InvalidProblem(format!(
-                "unknown block {} (the problem has {} blocks)",
+                "unknown block {}: block must be an id in [0, {}) returned by an add_* call",
                 b.0,
                 self.blocks.len()
             ))

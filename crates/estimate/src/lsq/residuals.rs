@@ -10,6 +10,7 @@ use nalgebra::{DMatrix, Isometry3, Matrix3, Vector3, Vector6};
 use super::manifold::{Manifold, se3_from_params};
 use super::problem::Residual;
 use crate::{EstimateError, Result};
+use autoteach_geometry::error::Num;
 
 /// Validated pinhole intrinsics `K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -38,7 +39,13 @@ impl Intrinsics {
         }
         if k[(1, 0)] != 0.0 || k[(2, 0)] != 0.0 || k[(2, 1)] != 0.0 || k[(2, 2)] != 1.0 {
             return Err(EstimateError::InvalidProblem(format!(
-                "K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]], got {k}"
+                "K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]], got last rows [{}, {}, {}], [{}, {}, {}]",
+                Num(k[(1, 0)]),
+                Num(k[(1, 1)]),
+                Num(k[(1, 2)]),
+                Num(k[(2, 0)]),
+                Num(k[(2, 1)]),
+                Num(k[(2, 2)])
             )));
         }
         if k[(0, 0)] <= 0.0 || k[(1, 1)] <= 0.0 {
@@ -141,7 +148,7 @@ impl Residual for ReprojectionResidual {
         let pc = r * xw + t.translation.vector;
         if pc.z <= 1e-12 {
             return Err(EstimateError::InvalidProblem(format!(
-                "point at depth {:.3e} is not in front of the camera",
+                "point at depth {:.3e} is not in front of the camera: a depth > 1e-12 is expected",
                 pc.z
             )));
         }

@@ -236,7 +236,7 @@ impl Rasterizer {
     fn validate(&self, graph: &[NodeInput<'_>]) -> Result<Vec<Option<LocalScan>>> {
         if graph.is_empty() {
             return Err(EstimateError::InvalidMapInput(
-                "the graph has no nodes (nothing to rasterize)".into(),
+                "the graph must have at least one node, got none (nothing to rasterize)".into(),
             ));
         }
         let mut seen: HashMap<u64, usize> = HashMap::with_capacity(graph.len());
@@ -308,9 +308,11 @@ impl Rasterizer {
                 let v = n.pose[c];
                 if (v.abs() + reach) / res >= limit {
                     return Err(EstimateError::InvalidMapInput(format!(
-                        "pose of node {} has coordinate {v} m, beyond the map's reach of {:.3e} m \
-                         at resolution {res} m (cell indices are 32-bit)",
+                        "pose of node {} has coordinate {} m, beyond the map's reach of {:.3e} m \
+                         at resolution {res} m: coordinates must stay within it (cell indices are \
+                         32-bit)",
                         n.id,
+                        autoteach_geometry::error::Num(v),
                         limit * res - reach
                     )));
                 }

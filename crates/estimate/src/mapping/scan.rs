@@ -87,8 +87,9 @@ impl LocalScan {
             }
             if r < 0.0 {
                 return Err(EstimateError::InvalidMapInput(format!(
-                    "node {node}: beam {k} has a negative range {r} (use NaN for an invalid \
-                     return, +inf for no return)"
+                    "scans: node {node}, beam {k} has range {}; a range must be >= 0 (NaN for \
+                     an invalid return, +inf for no return)",
+                    autoteach_geometry::error::Num(r)
                 )));
             }
             let hit = r < g.max_range;

@@ -15,7 +15,7 @@ use crate::{EstimateError, Result};
 pub(crate) fn filled_weights(count: Option<usize>, value: f64) -> Result<DVector<f64>> {
     let n = count.unwrap_or(usize::MAX);
     Ok(DVector::from_vec(autoteach_geometry::alloc::try_filled(
-        "sigma-point weights",
+        "the sigma-point weights (2n + 1 for n state dimensions)",
         n,
         value,
     )?))

@@ -733,7 +733,7 @@ fn size_mismatches_and_bad_inputs_are_reported() {
             got: vec![3]
         }
     );
-    assert!(err.to_string().contains("expected shape [2], got [3]"));
+    assert!(err.to_string().contains("expected shape (2,), got (3,)"));
     assert!(matches!(
         ukf.set_q(DMatrix::identity(3, 3)),
         Err(EstimateError::DimensionMismatch { .. })

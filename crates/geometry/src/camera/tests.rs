@@ -94,7 +94,7 @@ fn invalid_parameters_are_rejected() {
             assert_eq!(
                 Camera::new(m, &p, 640, 480),
                 Err(GeometryError::WrongLength {
-                    what: "camera parameters",
+                    what: "params (camera parameters)",
                     got: len,
                     expected: n
                 })
