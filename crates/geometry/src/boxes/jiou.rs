@@ -223,7 +223,7 @@ impl Evaluator {
             return Err(GeometryError::InvalidParameter {
                 what: "grid",
                 value: self.opts.grid as f64,
-                reason: "a box covers no cell centre: use a finer grid",
+                reason: "each box must cover at least one cell centre: use a finer grid",
             });
         }
         Ok(jaccard_unchecked(pa, pb, &mut s.buf, &mut s.keys))
