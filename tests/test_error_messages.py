@@ -48,6 +48,7 @@ from autoteach import (
 )
 from autoteach.errors import AutoteachError, InternalError, InvalidInputError
 from autoteach.sigma_points import MerweScaledSigmaPoints
+from test_properties_cli import calibration_views
 
 #: Phrases that state what was expected. A message saying only what is wrong ("contains a
 #: non-finite value") leaves the reader to guess the fix.
@@ -275,27 +276,9 @@ def _polygon(**kw: Any) -> Callable[[], Any]:
     return call
 
 
-_VIEWS: list[Any] = []
-
-
-def _views() -> tuple[list[np.ndarray], list[np.ndarray], tuple[int, int]]:
-    if not _VIEWS:
-        lens = calib.LENSES["medium"]
-        target = calib.make_target(6, 5, 0.05)
-        poses = calib.random_poses(lens["model"], lens["params"], lens["image_size"], target, 12, seed=1)
-        obj, img = [], []
-        for k, pose in enumerate(poses):
-            v = calib.simulate_view(lens["model"], lens["params"], lens["image_size"], pose, target, sigma=0.1, seed=k)
-            if v is not None and len(v[2]) >= 20:
-                obj.append(v[0])
-                img.append(v[1])
-        _VIEWS.append((obj[:4], img[:4], lens["image_size"]))
-    return _VIEWS[0]
-
-
 def _calibrate(**kw: Any) -> Callable[[], Any]:
     def call() -> Any:
-        obj, img, size = _views()
+        obj, img, size = calibration_views()
         args = {"object_points": obj, "image_points": img, "model": "brown_conrady", "image_size": size}
         calib.calibrate(**{**args, "max_iterations": 5, "bootstrap": False, **kw})
 
@@ -658,7 +641,12 @@ CASES: list[Any] = [
     Case("calibrate", "max_iterations", "-1", _calibrate(max_iterations=-1)),
     Case("calibrate", "image_points", "(22, 2)", _calibrate(object_points=[np.zeros((2, 3))] * 4)),
     # NaN rows are missing points by design; infinity is refused.
-    Case("calibrate", "image_points", "inf", lambda: _calibrate(image_points=[i + np.inf for i in _views()[1]])()),
+    Case(
+        "calibrate",
+        "image_points",
+        "inf",
+        lambda: _calibrate(image_points=[i + np.inf for i in calibration_views()[1]])(),
+    ),
     Case("calibrate", "params", "length 3", _view(params=np.zeros(3))),
     Case("calibrate", "pose", "(3, 4)", _view(pose=np.zeros((3, 4)))),
     Case("calibrate", "sigma", "-1", _view(sigma=-1.0)),

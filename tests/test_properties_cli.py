@@ -14,6 +14,7 @@ asks (``AUTOTEACH_PROPERTY_EXAMPLES_HEAVY`` overrides it); the file runs in abou
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import os
 from pathlib import Path
@@ -159,8 +160,9 @@ def test_the_command_line_fails_with_one_line_and_status_2(command: str, garbage
 # -- calibration -------------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def views() -> tuple[list[np.ndarray], list[np.ndarray], tuple[int, int]]:
+@functools.cache
+def calibration_views() -> tuple[list[np.ndarray], list[np.ndarray], tuple[int, int]]:
+    """Four simulated views of a 6 × 5 target by the medium lens (shared with the message audit)."""
     lens = calib.LENSES["medium"]
     target = calib.make_target(6, 5, 0.05)
     poses = calib.random_poses(lens["model"], lens["params"], lens["image_size"], target, 12, seed=1)
@@ -173,6 +175,11 @@ def views() -> tuple[list[np.ndarray], list[np.ndarray], tuple[int, int]]:
         if len(obj) == 4:
             break
     return obj, img, lens["image_size"]
+
+
+@pytest.fixture(scope="module")
+def views() -> tuple[list[np.ndarray], list[np.ndarray], tuple[int, int]]:
+    return calibration_views()
 
 
 def test_calibrate(views: tuple[list[np.ndarray], list[np.ndarray], tuple[int, int]]) -> None:

@@ -6,6 +6,8 @@
 //! without an interpreter: the bounded fuzz loop at the end of this file drives them with random
 //! shapes, strides (reversed, stepped, transposed views), NaN, infinities and huge values.
 
+/// A shape as Python prints it: `(3,)`, `(2, 2)`, `()` (the core's messages use the same).
+pub use autoteach_estimate::error::shape_str;
 use autoteach_geometry::error::Num;
 use numpy::ndarray::{ArrayViewD, Dimension};
 
@@ -106,21 +108,6 @@ pub fn batch(
         ));
     }
     Ok((row_major(view), shape[..shape.len() - item.len()].to_vec()))
-}
-
-/// A shape as Python prints it: `(3,)`, `(2, 2)`, `()`.
-pub fn shape_str(shape: &[usize]) -> String {
-    match shape {
-        [n] => format!("({n},)"),
-        _ => format!(
-            "({})",
-            shape
-                .iter()
-                .map(|n| n.to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    }
 }
 
 /// Tolerance on `|RᵀR − I|` (Frobenius) for a matrix accepted as a rotation.
