@@ -448,10 +448,7 @@ CASES: list[Any] = [
     Case("cpd_rigid", "w", "2", _cpd(registration.cpd_rigid, w=2.0)),
     Case("cpd_rigid", "max_iterations", "-1", _cpd(registration.cpd_rigid, max_iterations=-1)),
     Case("cpd_rigid", "e_step", "foo", _cpd(registration.cpd_rigid, e_step="foo")),
-    pytest.param(
-        Case("cpd_rigid", "X", "0", _cpd(registration.cpd_rigid, X=np.zeros((0, 2)))),
-        marks=pytest.mark.xfail(reason="DetectError::TooFewPoints carries no argument name (19 call sites)"),
-    ),
+    Case("cpd_rigid", "X", "0", _cpd(registration.cpd_rigid, X=np.zeros((0, 2)))),
     Case("cpd_rigid", "tolerance", "nan", _cpd(registration.cpd_rigid, tolerance=NAN)),
     Case("cpd_affine", "X", "nan", _cpd(registration.cpd_affine, X=_nan(P3), Y=P3[:15])),
     Case("cpd_affine", "sigma2", "-1", _cpd(registration.cpd_affine, sigma2=-1.0)),

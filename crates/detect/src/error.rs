@@ -10,8 +10,10 @@ pub enum DetectError {
     #[error(transparent)]
     Geometry(#[from] autoteach_geometry::GeometryError),
     /// Too few points (or too few distinct points) for the requested fit.
-    #[error("too few points: got {got}, need at least {needed}")]
+    #[error("{what}: too few points: got {got}, need at least {needed}")]
     TooFewPoints {
+        /// The argument (as the caller names it).
+        what: &'static str,
         /// Number of (distinct) points received.
         got: usize,
         /// Minimum number required.

@@ -144,6 +144,7 @@ fn validate_points(what: &'static str, p: &DMatrix<f64>) -> Result<()> {
     }
     if p.nrows() < d + 1 {
         return Err(DetectError::TooFewPoints {
+            what,
             got: p.nrows(),
             needed: d + 1,
         });
@@ -227,8 +228,11 @@ fn neighbourhoods<const D: usize>(p: &DMatrix<f64>, k: usize) -> Result<Vec<Vec<
             reason: format!("k-d tree construction failed: {e:?}"),
         }
     })?;
-    let kk =
-        NonZero::new(k.min(n).max(1)).ok_or(DetectError::TooFewPoints { got: n, needed: 1 })?;
+    let kk = NonZero::new(k.min(n).max(1)).ok_or(DetectError::TooFewPoints {
+        what: "points",
+        got: n,
+        needed: 1,
+    })?;
     Ok(entries
         .iter()
         .map(|q| {

@@ -247,6 +247,7 @@ fn points<const D: usize>(p: &DMatrix<f64>, what: &'static str) -> Result<Vec<[f
     }
     if out.len() < D + 1 {
         return Err(DetectError::TooFewPoints {
+            what,
             got: out.len(),
             needed: D + 1,
         });

@@ -216,7 +216,11 @@ fn bad_input_is_rejected() {
     let two = cloud(2, 2, 11);
     assert!(matches!(
         rigid(&two, &y, &o),
-        Err(DetectError::TooFewPoints { got: 2, needed: 3 })
+        Err(DetectError::TooFewPoints {
+            got: 2,
+            needed: 3,
+            ..
+        })
     ));
     // Identical points.
     let same = DMatrix::from_element(10, 2, 0.5);
@@ -281,7 +285,7 @@ fn bad_input_is_rejected() {
     let e = nonrigid(&big, &big, &NonrigidOptions::default()).unwrap_err();
     assert!(
         e.to_string().contains(&format!(
-            "limited to {MAX_FULL_RANK_POINTS} source points; set low_rank"
+            "must stay within {MAX_FULL_RANK_POINTS} source points; set low_rank="
         )),
         "{e}"
     );

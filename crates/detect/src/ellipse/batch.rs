@@ -140,7 +140,11 @@ mod tests {
         assert!(out[..12].iter().all(|r| r.is_ok()));
         assert_eq!(
             out[12],
-            Err(DetectError::TooFewPoints { got: 3, needed: 5 })
+            Err(DetectError::TooFewPoints {
+                what: "points",
+                got: 3,
+                needed: 5
+            })
         );
         assert!(matches!(
             out[13],

@@ -470,6 +470,7 @@ pub fn fit_ellipse_geometric_masked(
     }
     if points.len() <= k {
         return Err(DetectError::TooFewPoints {
+            what: "points",
             got: points.len(),
             needed: k + 1,
         });

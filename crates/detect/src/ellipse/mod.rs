@@ -143,7 +143,11 @@ impl Prepared {
         }
         let n = points.len();
         if n < 5 {
-            return Err(DetectError::TooFewPoints { got: n, needed: 5 });
+            return Err(DetectError::TooFewPoints {
+                what: "points",
+                got: n,
+                needed: 5,
+            });
         }
         let centroid = points.iter().sum::<Vector2<f64>>() / n as f64;
         let centred: Vec<Vector2<f64>> = points.iter().map(|p| p - centroid).collect();

@@ -336,10 +336,24 @@ fn bad_inputs_are_errors() {
     let five = truth.sample(5, 0.0, 5.0).unwrap();
     // Four points.
     both_fail(&five[..4], |e| {
-        matches!(e, DetectError::TooFewPoints { got: 4, needed: 5 })
+        matches!(
+            e,
+            DetectError::TooFewPoints {
+                got: 4,
+                needed: 5,
+                ..
+            }
+        )
     });
     both_fail(&[], |e| {
-        matches!(e, DetectError::TooFewPoints { got: 0, needed: 5 })
+        matches!(
+            e,
+            DetectError::TooFewPoints {
+                got: 0,
+                needed: 5,
+                ..
+            }
+        )
     });
     // NaN and infinity.
     let mut nan = five.clone();

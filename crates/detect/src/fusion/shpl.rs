@@ -628,7 +628,11 @@ impl SparsePooling {
         neighbourhood: usize,
     ) -> Result<Self> {
         if points.is_empty() {
-            return Err(DetectError::TooFewPoints { got: 0, needed: 1 });
+            return Err(DetectError::TooFewPoints {
+                what: "points",
+                got: 0,
+                needed: 1,
+            });
         }
         if neighbourhood == 0 || neighbourhood.is_multiple_of(2) {
             return Err(DetectError::InvalidParameter {

@@ -203,6 +203,7 @@ fn validate_options(o: &PolygonOptions) -> Result<()> {
 fn normalise_template(t: &[Vector2<f64>]) -> Result<Vec<Vector2<f64>>> {
     if t.len() < 3 {
         return Err(DetectError::TooFewPoints {
+            what: "template",
             got: t.len(),
             needed: 3,
         });
@@ -353,7 +354,11 @@ fn vote(refs: &[Option<Segment>], e: &[Edge], o: &PolygonOptions) -> Result<Houg
         }
     }
     if !lo.x.is_finite() {
-        return Err(DetectError::TooFewPoints { got: 0, needed: 1 });
+        return Err(DetectError::TooFewPoints {
+            what: "segments",
+            got: 0,
+            needed: 1,
+        });
     }
     let origin = lo - Vector2::repeat(radius + 2.0 * o.cell);
     let ext = hi + Vector2::repeat(radius + 2.0 * o.cell) - origin;
@@ -568,7 +573,11 @@ fn irls(
         lines.push((n, -n.dot(&m), e[k].d0, seg.length(), theta_j));
     }
     if lines.is_empty() {
-        return Err(DetectError::TooFewPoints { got: 0, needed: 2 });
+        return Err(DetectError::TooFewPoints {
+            what: "matched segments",
+            got: 0,
+            needed: 2,
+        });
     }
     let mut pose = *start;
     let mut w_dist = vec![1.0; lines.len()];
@@ -711,7 +720,11 @@ pub fn detect_polygon(
         }
     };
     if segs.is_empty() {
-        return Err(DetectError::TooFewPoints { got: 0, needed: 1 });
+        return Err(DetectError::TooFewPoints {
+            what: "segments",
+            got: 0,
+            needed: 1,
+        });
     }
     let refs = to_reference(&segs, &hinv);
     let e = edges(&t);

@@ -181,7 +181,11 @@ pub fn knn_graph(points: &[[f64; 3]], k: usize, edge_cut: f64) -> Result<Graph> 
     // More neighbours than the other n − 1 points is the complete graph: k is capped there, so a
     // huge k neither overflows k + 1 nor sizes an impossible edge buffer.
     let k = k.min(n - 1);
-    let kk = NonZero::new(k + 1).ok_or(DetectError::TooFewPoints { got: n, needed: 1 })?;
+    let kk = NonZero::new(k + 1).ok_or(DetectError::TooFewPoints {
+        what: "points",
+        got: n,
+        needed: 1,
+    })?;
     let mut edges = Vec::with_capacity(n * k);
     for (i, p) in points.iter().enumerate() {
         for nb in tree

@@ -160,7 +160,11 @@ pub fn segment_cloud(
 ) -> Result<CloudSegmentation> {
     let n = points.len();
     if n == 0 {
-        return Err(DetectError::TooFewPoints { got: 0, needed: 1 });
+        return Err(DetectError::TooFewPoints {
+            what: "points",
+            got: 0,
+            needed: 1,
+        });
     }
     if colors.len() != n {
         return Err(DetectError::WrongLength {

@@ -343,6 +343,7 @@ pub fn refine_circle(
     let mut lin = linearise(k, views, &t_wo, radius, &o, true);
     if lin.points < 5 {
         return Err(DetectError::TooFewPoints {
+            what: "edge points",
             needed: 5,
             got: lin.points,
         });

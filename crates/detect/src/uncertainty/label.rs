@@ -37,7 +37,11 @@ impl Default for LabelOptions {
 
 pub(crate) fn check_points(points: &[[f64; 2]]) -> Result<()> {
     if points.is_empty() {
-        return Err(DetectError::TooFewPoints { got: 0, needed: 1 });
+        return Err(DetectError::TooFewPoints {
+            what: "points",
+            got: 0,
+            needed: 1,
+        });
     }
     crate::segment::graph::check_points_finite(points)
 }

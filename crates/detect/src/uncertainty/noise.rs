@@ -67,7 +67,11 @@ pub fn estimate_noise(
     opts: &NoiseOptions,
 ) -> Result<NoiseEstimate> {
     if objects.is_empty() {
-        return Err(DetectError::TooFewPoints { got: 0, needed: 1 });
+        return Err(DetectError::TooFewPoints {
+            what: "objects",
+            got: 0,
+            needed: 1,
+        });
     }
     for (_, p) in objects {
         check_points(p)?;

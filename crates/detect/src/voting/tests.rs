@@ -280,7 +280,11 @@ fn bad_inputs_are_errors() {
     let few = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 1.0, 1.0]);
     assert!(matches!(
         global_voting(&few, &y, &o),
-        Err(DetectError::TooFewPoints { got: 2, needed: 3 })
+        Err(DetectError::TooFewPoints {
+            got: 2,
+            needed: 3,
+            ..
+        })
     ));
     // Identical points.
     let same = DMatrix::from_element(10, 2, 1.5);

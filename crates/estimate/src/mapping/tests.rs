@@ -436,7 +436,7 @@ fn bad_input_gives_clear_errors_and_leaves_state_untouched() {
         r.update(&[node(4, [0.0; 3], Some(neg))])
             .unwrap_err()
             .to_string()
-            .contains("negative")
+            .contains("a range must be >= 0")
     );
     // A pose beyond 32-bit cell indices (1e300 m), and poses whose box cannot be allocated
     // (1e8 m apart at 0.1 m: 1e18 cells).

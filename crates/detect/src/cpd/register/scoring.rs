@@ -116,7 +116,11 @@ pub(super) fn median_spacing(p: &DMatrix<f64>) -> Result<f64> {
 
 fn nearest_other<const D: usize>(p: &DMatrix<f64>) -> Result<Vec<f64>> {
     let t = tree::<D>(p)?;
-    let two = NonZero::new(2).ok_or(DetectError::TooFewPoints { got: 0, needed: 2 })?;
+    let two = NonZero::new(2).ok_or(DetectError::TooFewPoints {
+        what: "points",
+        got: 0,
+        needed: 2,
+    })?;
     Ok((0..p.nrows())
         .map(|r| {
             let q: [f64; D] = std::array::from_fn(|c| p[(r, c)]);
