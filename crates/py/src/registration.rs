@@ -90,11 +90,7 @@ fn rigid_dict<'py>(py: Python<'py>, r: &RigidResult) -> PyResult<Bound<'py, PyDi
     d.set_item("translation", vector_out(py, &r.translation)?)?;
     d.set_item("scale", r.scale)?;
     d.set_item("transformed", matrix_out(py, &r.transformed)?)?;
-    d.set_item("sigma2", r.sigma2)?;
-    d.set_item("iterations", r.iterations)?;
-    d.set_item("converged", r.converged)?;
-    d.set_item("p", posterior(py, &r.p)?)?;
-    Ok(d)
+    em_fields(py, d, r.sigma2, r.iterations, r.converged, &r.p)
 }
 
 /// See [`rigid_dict`].
@@ -103,11 +99,7 @@ fn affine_dict<'py>(py: Python<'py>, r: &AffineResult) -> PyResult<Bound<'py, Py
     d.set_item("matrix", matrix_out(py, &r.matrix)?)?;
     d.set_item("translation", vector_out(py, &r.translation)?)?;
     d.set_item("transformed", matrix_out(py, &r.transformed)?)?;
-    d.set_item("sigma2", r.sigma2)?;
-    d.set_item("iterations", r.iterations)?;
-    d.set_item("converged", r.converged)?;
-    d.set_item("p", posterior(py, &r.p)?)?;
-    Ok(d)
+    em_fields(py, d, r.sigma2, r.iterations, r.converged, &r.p)
 }
 
 /// See [`rigid_dict`].
@@ -116,20 +108,25 @@ fn nonrigid_dict<'py>(py: Python<'py>, r: &NonrigidResult) -> PyResult<Bound<'py
     d.set_item("w", matrix_out(py, &r.w)?)?;
     d.set_item("transformed", matrix_out(py, &r.transformed)?)?;
     d.set_item("energy", r.energy)?;
-    d.set_item("sigma2", r.sigma2)?;
-    d.set_item("iterations", r.iterations)?;
-    d.set_item("converged", r.converged)?;
     d.set_item("rank", r.rank)?;
-    d.set_item("p", posterior(py, &r.p)?)?;
-    Ok(d)
+    em_fields(py, d, r.sigma2, r.iterations, r.converged, &r.p)
 }
 
-/// The posterior matrix `P` (M × N) of the last E-step, or `None`.
-fn posterior<'py>(
+/// The fields every CPD result shares: the final σ², the EM iterations, convergence and the
+/// posterior matrix `P` (M × N) of the last E-step or `None`.
+fn em_fields<'py>(
     py: Python<'py>,
+    d: Bound<'py, PyDict>,
+    sigma2: f64,
+    iterations: usize,
+    converged: bool,
     p: &Option<DMatrix<f64>>,
-) -> PyResult<Option<Bound<'py, PyArrayDyn<f64>>>> {
-    p.as_ref().map(|p| matrix_out(py, p)).transpose()
+) -> PyResult<Bound<'py, PyDict>> {
+    d.set_item("sigma2", sigma2)?;
+    d.set_item("iterations", iterations)?;
+    d.set_item("converged", converged)?;
+    d.set_item("p", p.as_ref().map(|p| matrix_out(py, p)).transpose()?)?;
+    Ok(d)
 }
 
 /// Rigid CPD of `y` (M, D) onto `x` (N, D).
