@@ -133,15 +133,15 @@ def test_colorize_marks_occluded_points():
     assert out.colors[0].tolist() == [10, 20, 30]
 
 
-@pytest.mark.xfail(
-    reason="open (issue 34): first build -- one of the six tangent errors exceeds 3 sigma "
-    "(e.g. 1.50e-3 vs 3 x 4.6e-4): covariance too small or estimate biased, undiagnosed",
-    strict=True,
-)
 def test_extrinsics_within_three_sigma_of_truth(hallway):
+    # "Within 3 sigma" in 6-D: the truth lies in the fit's 99.73 % region (NEES < chi2_6 quantile
+    # 20.06), judged over 200 trials, since one trial's six per-axis 3-sigma checks fail 1.6 % of
+    # the time when the covariance is exact. An inconsistent covariance fails: a left-perturbation
+    # delta against this right-perturbation covariance gives a mean NEES of 46, one 2x too small 13.
     truth = hallway.T_cam_lidar
     sel = np.flatnonzero(hallway.colored.ravel())
-    for trial in range(8):
+    nees, z = [], []
+    for trial in range(200):
         rng = np.random.default_rng(100 + trial)
         idx = rng.choice(sel, 30, replace=False)
         pts = hallway.true_points.reshape(-1, 3)[idx]
@@ -149,10 +149,16 @@ def test_extrinsics_within_three_sigma_of_truth(hallway):
         pix = hallway.camera.project(cam_pts) + rng.normal(0.0, 0.5, (30, 2))
         start = truth @ geometry.se3_exp(np.r_[rng.normal(0, 0.03, 3), rng.normal(0, 0.05, 3)])
         fit = segment.calibrate_extrinsics(hallway.camera, pts, pix, start, sigma=0.5)
-        delta = geometry.se3_minus(truth, fit.t_cam_lidar)
         assert fit.converged
-        assert np.all(np.abs(delta) < 3 * fit.std)
-        assert delta @ np.linalg.solve(fit.covariance, delta) < 20.06  # chi2(6) 99.73 %
+        delta = geometry.se3_minus(truth, fit.t_cam_lidar)
+        nees.append(delta @ np.linalg.solve(fit.covariance, delta))
+        z.append(np.abs(delta) / fit.std)
+    nees, z = np.array(nees), np.array(z)
+    # Binomial(200, 0.0027): more than 3 beyond the 3-sigma region has probability 0.2 %.
+    assert np.sum(nees > 20.06) <= 3
+    # E[NEES] = 6 with sampling sd sqrt(12 / 200) = 0.245: four sd either side.
+    assert 6 - 4 * 0.245 < nees.mean() < 6 + 4 * 0.245
+    assert np.mean(z > 3) < 0.01  # per axis, 0.27 % expected
     # Without sigma the noise is estimated from the residuals.
     fit = segment.calibrate_extrinsics(hallway.camera, pts, pix, start)
     assert 0.3 < fit.sigma < 0.8
