@@ -69,3 +69,37 @@ def test_bad_inputs_raise_clear_errors(scene):
         plan.clearance(ws, [np.nan, 0, 0, 0, 0])
     with pytest.raises(AutoteachError, match="unknown method"):
         plan.plan_path(ws, poses["home"], poses["chamber"], method="prm")
+
+
+def test_free_waypoint_velocities_beat_zero_velocities_and_keep_the_limits():
+    # Seed 000 Table 2.2 on a free-space straight move split by two way-points: stopping at
+    # them costs two decelerations that free way-point velocities avoid.
+    ws = plan.Workspace([])
+    w = [np.array([0.6 * k, 0.5 - 0.05 * k, -0.1 * k, 0.1 * k, 0.1]) for k in range(4)]
+    paths = [np.stack([w[k], w[k + 1]]) for k in range(3)]
+    lim = plan.Limits()
+    zero = plan.optimize_waypoints(ws, paths, lim, free_velocities=False)
+    free = plan.optimize_waypoints(ws, paths, lim, free_velocities=True)
+    assert np.all(zero.velocities == 0.0)
+    assert free.duration <= zero.duration
+    assert np.linalg.norm(free.velocities) > 0.1
+    # Dense 1 ms samples of every segment against the limits, independent of the optimiser.
+    for seg in free.segments:
+        t = np.arange(0.0, seg.duration, 1e-3)
+        _, dq, ddq, dddq = seg.sample(t)
+        for x, bound in ((dq, lim.velocity), (ddq, lim.acceleration), (dddq, lim.jerk)):
+            assert np.all(np.abs(x) <= np.asarray(bound) * (1.0 + 1e-9))
+    # The segments join at the way-points with the reported velocity and zero acceleration.
+    for k in range(2):
+        a, b = free.segments[k], free.segments[k + 1]
+        qa, dqa, ddqa, _ = a.sample(a.duration)
+        qb, dqb, ddqb, _ = b.sample(0.0)
+        np.testing.assert_allclose(qa[0], w[k + 1], atol=1e-9)
+        np.testing.assert_allclose(qb[0], w[k + 1], atol=1e-9)
+        np.testing.assert_allclose(dqa[0], free.velocities[k], atol=1e-9)
+        np.testing.assert_allclose(dqb[0], free.velocities[k], atol=1e-9)
+        assert np.abs(ddqa).max() < 1e-6 and np.abs(ddqb).max() < 1e-6
+    assert sum(s.duration for s in free.segments) == pytest.approx(free.duration, rel=1e-9)
+    paths[1] = paths[1] + 1e-3
+    with pytest.raises(AutoteachError, match="segment 0 ends"):
+        plan.optimize_waypoints(ws, paths, lim)

@@ -1634,6 +1634,7 @@ def plan_path(
     seed: int = 7,
     step_deg: float = 5.0,
     joints_planned: list[int] | None = None,
+    time_limit_s: float | None = None,
 ) -> dict[str, object]: ...
 def plan_optimize(
     workspace: PlanWorkspace,
@@ -1643,6 +1644,18 @@ def plan_optimize(
     jerk: object,
     torque: object,
     d_safe: float = 0.01,
+    n_ctrl: int = 0,
+    max_iterations: int = 40,
+) -> dict[str, object]: ...
+def plan_optimize_waypoints(
+    workspace: PlanWorkspace,
+    paths: list[object],
+    velocity: object,
+    acceleration: object,
+    jerk: object,
+    torque: object,
+    d_safe: float = 0.01,
+    free_velocities: bool = True,
     n_ctrl: int = 0,
     max_iterations: int = 40,
 ) -> dict[str, object]: ...

@@ -32,11 +32,13 @@ __all__ = [
     "OptimizeResult",
     "PathResult",
     "Verification",
+    "WaypointResult",
     "Workspace",
     "clearance",
     "default_scene",
     "inverse_dynamics",
     "optimize_trajectory",
+    "optimize_waypoints",
     "plan_path",
 ]
 
@@ -121,6 +123,7 @@ def plan_path(
     seed: int = 7,
     step_deg: float = 5.0,
     joints: list[int] | None = None,
+    time_limit_s: float | None = None,
 ) -> PathResult:
     """Plan a collision-free path with RRT* (``"rrt*"``) or A* on a joint lattice (``"a*"``).
 
@@ -136,6 +139,8 @@ def plan_path(
         seed: RRT*'s sampling seed.
         step_deg: A*'s lattice step of the revolute joints (degrees); the lift's step scales with it.
         joints: the joints A* plans (the others stay at the start's values); default all.
+        time_limit_s: RRT*: stop at the first iteration after this many seconds once a path
+            exists (default: spend the whole iteration budget).
 
     Raises:
         InvalidInputError: start or goal in collision (the message names the link and obstacle) or
@@ -162,6 +167,7 @@ def plan_path(
         as_int(seed, "seed"),
         as_float(step_deg, "step_deg"),
         joints,
+        None if time_limit_s is None else as_float(time_limit_s, "time_limit_s"),
     )
     keys = ("path", "cost", "iterations", "collision_checks", "time_s")
     return PathResult(*(d.pop(k) for k in keys), extra=d)
@@ -289,6 +295,66 @@ def optimize_trajectory(
         accepted=d["accepted"],
         time_s=d["time_s"],
         verification=Verification(**d["verification"]),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class WaypointResult:
+    """A transfer through fixed way-points (Rust ``plan::WaypointResult``, seed Table 2.2)."""
+
+    segments: list[BSplineTrajectory]
+    velocities: np.ndarray
+    duration: float
+    initial_duration: float
+    iterations: int
+    accepted: int
+    time_s: float
+    verification: list[Verification]
+
+
+def optimize_waypoints(
+    workspace: Workspace,
+    paths: list[Any],
+    limits: Limits | None = None,
+    free_velocities: bool = True,
+    n_ctrl: int = 0,
+    max_iterations: int = 40,
+) -> WaypointResult:
+    """Time-optimal transfer through the fixed way-points that join ``paths`` (seed Table 2.2).
+
+    Segment ``k`` follows ``paths[k]`` (N x 5); ``paths[k][-1]`` must equal ``paths[k + 1][0]``
+    (the way-point). The transfer starts and ends at rest and has zero acceleration at the
+    way-points. Every segment is first optimised rest to rest (total ``initial_duration``); the
+    joint problem then refines all segments together, with the way-point velocities as unknowns
+    when ``free_velocities`` (eqs. 2.15-2.17) and held at zero otherwise (same iterations).
+
+    Raises:
+        InvalidInputError: paths that do not join, infeasible limits, a way-point in collision,
+            or a malformed path.
+    """
+    if isinstance(paths, (str, bytes)) or not hasattr(paths, "__iter__"):
+        raise InvalidInputError(f"paths must be a list of (N, 5) arrays, got {type(paths).__name__}")
+    lim = limits or Limits()
+    names = ("velocity", "acceleration", "jerk", "torque")
+    vec = [as_f64(getattr(lim, n), f"limits.{n}") for n in names]
+    d = _core.plan_optimize_waypoints(
+        workspace._ws,
+        [as_f64(p, f"paths[{k}]") for k, p in enumerate(paths)],
+        *vec,
+        as_float(lim.d_safe, "limits.d_safe"),
+        bool(free_velocities),
+        as_int(n_ctrl, "n_ctrl"),
+        as_int(max_iterations, "max_iterations"),
+    )
+    return WaypointResult(
+        segments=[BSplineTrajectory(np.asarray(k), np.asarray(c)) for k, c in d["segments"]],
+        velocities=np.asarray(d["velocities"]).reshape(-1, 5),
+        duration=d["duration"],
+        initial_duration=d["initial_duration"],
+        iterations=d["iterations"],
+        accepted=d["accepted"],
+        time_s=d["time_s"],
+        verification=[Verification(**v) for v in d["verification"]],
     )
 
 

@@ -2,7 +2,7 @@
 //! B-splines, dynamics, limits) and `autoteach_estimate::plan` (time-optimal optimisation).
 //! The friendly wrapper is `python/autoteach/plan.py`.
 
-use autoteach_estimate::plan::{OptimizeConfig, optimize_trajectory};
+use autoteach_estimate::plan::{OptimizeConfig, optimize_trajectory, optimize_waypoints};
 use autoteach_geometry::collision::{LinkDims, Obstacle};
 use autoteach_geometry::plan::PlanError;
 use autoteach_geometry::plan::astar::{AStarConfig, astar};
@@ -162,9 +162,10 @@ fn plan_default_scene() -> PyResult<(PyPlanWorkspace, NamedPoses)> {
 }
 
 /// Plans a path with `method` `"rrt*"` or `"a*"`; returns a dict of the `PathResult` fields
-/// (plus `tree_cost`, `first_solution_s`, `nodes` for RRT*).
+/// (plus `tree_cost`, `first_solution_s`, `nodes` for RRT*). `time_limit_s` ends RRT* at the
+/// first iteration after that many seconds once a path exists.
 #[pyfunction]
-#[pyo3(signature = (workspace, q_start, q_goal, method="rrt*", margin=0.01, max_iterations=3000, seed=7, step_deg=5.0, joints_planned=None))]
+#[pyo3(signature = (workspace, q_start, q_goal, method="rrt*", margin=0.01, max_iterations=3000, seed=7, step_deg=5.0, joints_planned=None, time_limit_s=None))]
 #[allow(clippy::too_many_arguments)]
 fn plan_path<'py>(
     py: Python<'py>,
@@ -177,8 +178,14 @@ fn plan_path<'py>(
     seed: u64,
     step_deg: f64,
     joints_planned: Option<Vec<usize>>,
+    time_limit_s: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (a, b) = (joints(q_start, "q_start")?, joints(q_goal, "q_goal")?);
+    if let Some(t) = time_limit_s.filter(|t| !(t.is_finite() && *t > 0.0)) {
+        return Err(errors::invalid_input(format!(
+            "time_limit_s must be positive and finite, got {t}"
+        )));
+    }
     if !(margin.is_finite() && margin >= 0.0 && step_deg.is_finite() && step_deg > 0.0) {
         return Err(errors::invalid_input(format!(
             "margin ({margin}) must be non-negative and step_deg ({step_deg}) positive"
@@ -192,6 +199,7 @@ fn plan_path<'py>(
                 max_iterations,
                 margin,
                 seed,
+                time_limit_s,
                 ..RrtStarConfig::default()
             };
             let r = convert::detached(py, || rrt_star(ws, &a, &b, &cfg).map_err(err))?;
@@ -299,7 +307,83 @@ fn plan_optimize<'py>(
     out.set_item("active", r.active)?;
     out.set_item("iterations", r.iterations)?;
     out.set_item("accepted", r.accepted)?;
-    let v = &r.verification;
+    out.set_item("verification", verification_dict(py, &r.verification)?)?;
+    Ok(out)
+}
+
+/// Optimises a transfer through the way-points that join `paths` (each N×5); with
+/// `free_velocities` the way-point velocities are unknowns. Returns a dict: `segments` as
+/// `(knots, control_points)` pairs, `velocities` (K−1, 5), the durations, counts and the
+/// per-segment verification.
+#[pyfunction]
+#[pyo3(signature = (workspace, paths, velocity, acceleration, jerk, torque, d_safe=0.01, free_velocities=true, n_ctrl=0, max_iterations=40))]
+#[allow(clippy::too_many_arguments)]
+fn plan_optimize_waypoints<'py>(
+    py: Python<'py>,
+    workspace: &PyPlanWorkspace,
+    paths: Vec<Bound<'py, PyAny>>,
+    velocity: &Bound<'py, PyAny>,
+    acceleration: &Bound<'py, PyAny>,
+    jerk: &Bound<'py, PyAny>,
+    torque: &Bound<'py, PyAny>,
+    d_safe: f64,
+    free_velocities: bool,
+    n_ctrl: usize,
+    max_iterations: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let paths = paths
+        .iter()
+        .map(|p| joints_rows(p, "paths"))
+        .collect::<PyResult<Vec<_>>>()?;
+    let limits = Limits {
+        velocity: joints(velocity, "velocity")?,
+        acceleration: joints(acceleration, "acceleration")?,
+        jerk: joints(jerk, "jerk")?,
+        torque: joints(torque, "torque")?,
+        d_safe,
+    };
+    let ws = &workspace.ws;
+    let dy = Dynamics::new(
+        &ws.robot.params,
+        &DynamicsParams::default(),
+        ws.wafer.as_ref(),
+    );
+    let cfg = OptimizeConfig {
+        n_ctrl,
+        max_iterations,
+        ..OptimizeConfig::default()
+    };
+    let r = convert::detached(py, || {
+        optimize_waypoints(ws, &dy, &paths, &limits, &cfg, free_velocities).map_err(err)
+    })?;
+    let out = PyDict::new(py);
+    let mut segs = Vec::with_capacity(r.segments.len());
+    for tr in &r.segments {
+        let n = tr.knots().len();
+        segs.push((
+            convert::to_numpy(py, tr.knots().to_vec(), &[n])?,
+            rows_out(py, tr.control_points())?,
+        ));
+    }
+    out.set_item("segments", segs)?;
+    out.set_item("velocities", rows_out(py, &r.velocities)?)?;
+    out.set_item("duration", r.duration)?;
+    out.set_item("initial_duration", r.initial_duration)?;
+    out.set_item("iterations", r.iterations)?;
+    out.set_item("accepted", r.accepted)?;
+    out.set_item("time_s", r.time_s)?;
+    let mut vers = Vec::with_capacity(r.verification.len());
+    for v in &r.verification {
+        vers.push(verification_dict(py, v)?);
+    }
+    out.set_item("verification", vers)?;
+    Ok(out)
+}
+
+fn verification_dict<'py>(
+    py: Python<'py>,
+    v: &autoteach_geometry::plan::limits::Verification,
+) -> PyResult<Bound<'py, PyDict>> {
     let ver = PyDict::new(py);
     ver.set_item("velocity_ratio", v.velocity_ratio)?;
     ver.set_item("acceleration_ratio", v.acceleration_ratio)?;
@@ -307,8 +391,7 @@ fn plan_optimize<'py>(
     ver.set_item("torque_ratio", v.torque_ratio)?;
     ver.set_item("min_clearance", v.min_clearance)?;
     ver.set_item("samples", v.samples)?;
-    out.set_item("verification", ver)?;
-    Ok(out)
+    Ok(ver)
 }
 
 /// Samples a clamped cubic B-spline trajectory at `times`: `(q, dq, ddq, dddq)`, each (M, 5).
@@ -368,6 +451,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(plan_default_scene, m)?)?;
     m.add_function(wrap_pyfunction!(plan_path, m)?)?;
     m.add_function(wrap_pyfunction!(plan_optimize, m)?)?;
+    m.add_function(wrap_pyfunction!(plan_optimize_waypoints, m)?)?;
     m.add_function(wrap_pyfunction!(plan_sample, m)?)?;
     m.add_function(wrap_pyfunction!(plan_inverse_dynamics, m)?)?;
     Ok(())

@@ -4,5 +4,7 @@
 //! (clarabel) and the geometry crate stays solver-free.
 
 mod time_optimal;
+mod waypoints;
 
 pub use time_optimal::{OptimizeConfig, OptimizeResult, optimize_trajectory};
+pub use waypoints::{WaypointResult, optimize_waypoints};

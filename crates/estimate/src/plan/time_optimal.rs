@@ -101,25 +101,25 @@ pub struct OptimizeResult {
 
 /// A value with its sparse gradient in the optimisation variables (exact forward mode).
 #[derive(Debug, Clone)]
-struct Lin {
-    v: f64,
-    g: Vec<(usize, f64)>,
+pub(super) struct Lin {
+    pub(super) v: f64,
+    pub(super) g: Vec<(usize, f64)>,
 }
 
 impl Lin {
-    fn sub(&self, o: &Lin) -> Lin {
+    pub(super) fn sub(&self, o: &Lin) -> Lin {
         let mut g = self.g.clone();
         g.extend(o.g.iter().map(|(i, x)| (*i, -x)));
         Lin { v: self.v - o.v, g }
     }
-    fn scale(&self, s: f64) -> Lin {
+    pub(super) fn scale(&self, s: f64) -> Lin {
         Lin {
             v: self.v * s,
             g: self.g.iter().map(|(i, x)| (*i, x * s)).collect(),
         }
     }
     /// `self / den`.
-    fn div(&self, den: &Lin) -> Lin {
+    pub(super) fn div(&self, den: &Lin) -> Lin {
         let v = self.v / den.v;
         let mut g: Vec<(usize, f64)> = self.g.iter().map(|(i, x)| (*i, x / den.v)).collect();
         g.extend(den.g.iter().map(|(i, x)| (*i, -v * x / den.v)));
@@ -188,7 +188,7 @@ fn derivative_points(lay: &Layout, ctrl: &[Joints], spans: &[f64], d: usize) -> 
 }
 
 /// Cubic B-spline basis values at `t`: the span index `s` and `N_{s−3..s}` (NURBS book A2.2).
-fn basis(knots: &[f64], n: usize, t: f64) -> (usize, [f64; 4]) {
+pub(super) fn basis(knots: &[f64], n: usize, t: f64) -> (usize, [f64; 4]) {
     let mut s = 3;
     while s + 1 < n && knots[s + 1] <= t {
         s += 1;
@@ -213,7 +213,7 @@ fn basis(knots: &[f64], n: usize, t: f64) -> (usize, [f64; 4]) {
 
 /// The smallest time stretch `λ ≥ 1` that satisfies every kinematic limit (convex hull) and the
 /// torque limits (sampled every `dt`).
-fn required_stretch(
+pub(super) fn required_stretch(
     traj: &BSplineTrajectory,
     limits: &Limits,
     dynamics: &Dynamics,
@@ -285,7 +285,11 @@ fn feasible(
     }
 }
 
-fn min_clearance(ws: &PlanWorkspace, tr: &BSplineTrajectory, dt: f64) -> Result<f64, PlanError> {
+pub(super) fn min_clearance(
+    ws: &PlanWorkspace,
+    tr: &BSplineTrajectory,
+    dt: f64,
+) -> Result<f64, PlanError> {
     let mut m = f64::INFINITY;
     for t in tr.check_times(dt) {
         m = m.min(ws.signed_distance(&tr.sample(t).q)?);
@@ -417,12 +421,20 @@ pub fn optimize_trajectory(
             rows.push((vec![(k, 1.0)], r));
             rows.push((vec![(k, -1.0)], r));
         }
+        // The span box shrinks with the radius: V, A, R scale as 1/Δt, 1/Δt², 1/Δt³, so their
+        // linearisation only holds for small relative span changes. (A fixed ±50 % box let the
+        // trust region collapse after a few steps, 0–3 accepted on the default transfers.)
+        let frac = (0.5 * radius / cfg.trust_radius).min(0.5);
         for j in 0..n - 3 {
             let k = lay.span_var(j);
-            rows.push((vec![(k, 1.0)], 0.5 * spans[j]));
-            rows.push((vec![(k, -1.0)], 0.5 * spans[j]));
+            rows.push((vec![(k, 1.0)], frac * spans[j]));
+            rows.push((vec![(k, -1.0)], frac * spans[j]));
         }
-        let step = solve_qp(nv, &lay, &rows, mu)?;
+        let mut cost = vec![0.0; nv];
+        for j in 0..n - 3 {
+            cost[lay.span_var(j)] = 1.0;
+        }
+        let step = solve_qp(nv, &cost, &rows, mu)?;
         let Some(step) = step else {
             radius *= 0.5;
             continue;
@@ -498,18 +510,16 @@ pub fn optimize_trajectory(
     })
 }
 
-/// `min Σ Δt_j + μ/2 ‖x‖²` subject to the rows; `None` if clarabel reports infeasibility.
-fn solve_qp(
+/// `min cost·x + μ/2 ‖x‖²` (the cost is 1 on the span steps: `Σ Δt_j`) subject to the rows;
+/// `None` if clarabel reports infeasibility.
+pub(super) fn solve_qp(
     nv: usize,
-    lay: &Layout,
+    cost: &[f64],
     rows: &[(Vec<(usize, f64)>, f64)],
     mu: f64,
 ) -> Result<Option<Vec<f64>>, PlanError> {
     let p = CscMatrix::new(nv, nv, (0..=nv).collect(), (0..nv).collect(), vec![mu; nv]);
-    let mut q = vec![0.0; nv];
-    for j in 0..lay.n - 3 {
-        q[lay.span_var(j)] = 1.0;
-    }
+    let q = cost.to_vec();
     // Build A in CSC from the rows (duplicates summed).
     let mut cols: Vec<Vec<(usize, f64)>> = vec![Vec::new(); nv];
     let mut b = Vec::with_capacity(rows.len());
