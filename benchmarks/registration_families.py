@@ -155,6 +155,8 @@ def main() -> None:
             if setting == "issue" and family != "chevron":
                 continue
             ok: dict[str, int] = {}
+            crashed: dict[str, int] = {}
+            last_error: dict[str, str] = {}
             times: dict[str, list[float]] = {}
             fam_methods = methods + ([("fpfh", m_fpfh)] if args.peers and family in FAMILIES_3D else [])
             for trial in range(args.trials):
@@ -165,6 +167,12 @@ def main() -> None:
                         res = fn(sc.x, sc.y, sc.size)
                     except AutoteachError:
                         res = {}
+                    except Exception as exc:  # a peer's own failure counts as a miss, and is tallied
+                        if fn in (m_cpd, m_gcpd, m_reg, m_reg_energy, m_reg_pairs):
+                            raise
+                        crashed[mname] = crashed.get(mname, 0) + 1
+                        last_error[mname] = f"{type(exc).__name__}: {exc}"[:80]
+                        res = {}
                     times.setdefault(mname, []).append(time.perf_counter() - t0)
                     for col, tr in res.items():
                         good = tr is not None and rms(tr, sc.truth) < 0.02 * sc.size
@@ -172,6 +180,8 @@ def main() -> None:
             cols = "  ".join(f"{c}={v / args.trials:.0%}" for c, v in ok.items())
             tms = "  ".join(f"{k}:{1e3 * float(np.median(v)):.0f}ms" for k, v in times.items())
             print(f"{family:<10} {setting:<12} {cols}  | {tms}", flush=True)
+            for mname, count in crashed.items():
+                print(f"    {mname} raised in {count} of {args.trials} trials ({last_error[mname]})", flush=True)
 
 
 if __name__ == "__main__":
