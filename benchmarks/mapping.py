@@ -157,7 +157,7 @@ def main():
             "speedup_total_cover4": float(sum(rebuild) / cover_t.sum()),
         }
     except ImportError as err:
-        out["octomap"] = f"unavailable: {err}"
+        out["octomap"] = f"unavailable: {err}; install the bench extra: pip install 'autoteach[bench]'"
 
     if args.two_hours:
         long = TeamSimulator("showgrounds", robots=args.robots, graphs=720, seed=args.seed)

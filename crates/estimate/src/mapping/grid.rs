@@ -93,7 +93,7 @@ impl VoteModel {
 
     /// The ternary value of a cell with these counts.
     #[inline]
-    pub fn classify(&self, free: u16, occ: u16) -> i8 {
+    pub fn classify(&self, free: u32, occ: u32) -> i8 {
         if free == 0 && occ == 0 {
             return UNKNOWN;
         }
@@ -123,13 +123,26 @@ pub struct OccupancyGrid {
 impl OccupancyGrid {
     /// The threshold step of Algorithm 2.1 (line 18): classify every cell of `votes`.
     pub fn from_votes(votes: &DenseVotes, model: &VoteModel, resolution: f64) -> Self {
-        let b: CellBox = votes.bbox;
-        let cells = votes
-            .free
-            .iter()
-            .zip(&votes.occ)
-            .map(|(&f, &o)| model.classify(f, o))
-            .collect();
+        Self::from_votes_in(votes, votes.bbox, model, resolution)
+    }
+
+    /// [`OccupancyGrid::from_votes`] over the part `b` of the box of `votes` (`b` must lie
+    /// inside it).
+    pub fn from_votes_in(
+        votes: &DenseVotes,
+        b: CellBox,
+        model: &VoteModel,
+        resolution: f64,
+    ) -> Self {
+        let vb = votes.bbox;
+        debug_assert!(vb.contains(&b));
+        let (w, vw) = (b.width(), vb.width());
+        let mut cells = Vec::with_capacity(b.area());
+        for j in 0..b.height() {
+            let s = (j + (b.y0 - vb.y0) as usize) * vw + (b.x0 - vb.x0) as usize;
+            let (f, o) = (&votes.free[s..s + w], &votes.occ[s..s + w]);
+            cells.extend(f.iter().zip(o).map(|(&f, &o)| model.classify(f, o)));
+        }
         Self {
             resolution,
             origin_x: b.x0 as f64 * resolution,

@@ -38,7 +38,7 @@ pub use eval::{
 };
 pub use grid::{FREE, OCCUPIED, OccupancyGrid, UNKNOWN, VoteModel};
 pub use raster::{Method, NodeInput, RasterConfig, Rasterizer, UpdateReport};
-pub use scan::{LocalScan, QuantizedPose, ScanGeometry, quanta};
+pub use scan::{LocalScan, ScanGeometry, footprint_displacement};
 pub use sim::{Edge, EdgeKind, GraphSnapshot, TeamConfig, TeamSimulator};
 pub use votes::{CellBox, DenseVotes, Projection, SparseVotes};
 pub use world::{World, WorldConfig};

@@ -3,18 +3,20 @@
 //! CoverComposite(N) (Algorithm 2.1 COVER_COMPOSITE: slice caching §2.3, node coverings
 //! §2.4, transient removal by voting §2.5).
 //!
-//! Every method projects each node's scan at its QUANTISED posterior ([`QuantizedPose`]), so
+//! Every method projects each node's scan at its RENDERED pose: the posterior at which it was
+//! last rendered, replaced by the current posterior as soon as that moves some point of the
+//! projection by more than one cell (§2.3's regeneration test, [`footprint_displacement`]).
+//! Every map is thus within one cell of the projection of the maximum-likelihood graph, and
 //! with coverings off CoverComposite's map equals NaïveComposite's cell for cell (a cached
-//! slice is reused only when none of its members' quantised poses changed, i.e. no
-//! member's projection moved), and with coverings on the two differ only by the dropped
-//! redundant scans.
+//! slice is reused only when none of its members was re-rendered); with coverings on the two
+//! differ only by the dropped redundant scans.
 
 use std::collections::HashMap;
 use std::time::Instant;
 
 use super::cover::CoverTest;
 use super::grid::{OccupancyGrid, VoteModel};
-use super::scan::{LocalScan, QuantizedPose, ScanGeometry, quanta};
+use super::scan::{LocalScan, ScanGeometry, footprint_displacement};
 use super::votes::{CellBox, DenseVotes, Projection, SparseVotes};
 use crate::{EstimateError, Result};
 
@@ -144,15 +146,19 @@ struct Node {
     /// The scan (kept only while the node may be rasterized: dropped for uncovered nodes).
     scan: Option<LocalScan>,
     pose: [f64; 3],
-    q: QuantizedPose,
+    /// The pose its scan is projected at (see the module documentation).
+    render: [f64; 3],
+    /// Times `render` changed.
+    version: u64,
     in_cover: bool,
-    /// The tight box of its votes at quantised pose `.0`.
-    bbox: Option<(QuantizedPose, CellBox)>,
+    /// The tight box of its votes at render version `.0`.
+    bbox: Option<(u64, CellBox)>,
 }
 
 struct Slice {
     members: Vec<usize>,
-    cached: Vec<QuantizedPose>,
+    /// The members' render versions when the slice was generated.
+    cached: Vec<u64>,
     votes: SparseVotes,
     valid: bool,
 }
@@ -166,7 +172,6 @@ struct RobotState {
 /// Rasterizes a sequence of graphs G₁, G₂, … (node sets growing: V_i ⊆ V_{i+1}) into maps.
 pub struct Rasterizer {
     cfg: RasterConfig,
-    q: (f64, f64),
     nodes: Vec<Node>,
     index: HashMap<u64, usize>,
     robots: HashMap<u32, RobotState>,
@@ -191,7 +196,6 @@ impl Rasterizer {
     pub fn new(cfg: RasterConfig) -> Result<Self> {
         cfg.validate()?;
         Ok(Self {
-            q: quanta(cfg.resolution, cfg.scan.max_range),
             cfg,
             nodes: Vec::new(),
             index: HashMap::new(),
@@ -227,7 +231,7 @@ impl Rasterizer {
             .map(|s| s.ends.capacity() * 8 + s.hit.capacity())
             .sum();
         let slices: usize = self.slices.iter().map(|s| s.votes.bytes()).sum();
-        let map = self.map.free.capacity() * 8 + self.scratch.free.capacity() * 8;
+        let map = (self.map.free.capacity() + self.scratch.free.capacity()) * 8;
         scans + slices + map + self.nodes.capacity() * std::mem::size_of::<Node>()
     }
 
@@ -335,12 +339,18 @@ impl Rasterizer {
             nodes: graph.len(),
             ..Default::default()
         };
-        // Posteriors of the known nodes.
+        // Posteriors of the known nodes; a node is re-rendered when its projection moved by
+        // more than one cell.
+        let (res, reach) = (self.cfg.resolution, self.cfg.scan.max_range);
         for n in graph {
             if let Some(&i) = self.index.get(&n.id) {
                 let node = &mut self.nodes[i];
                 node.pose = n.pose;
-                node.q = QuantizedPose::new(&n.pose, self.q);
+                let moved = footprint_displacement(&node.render, &n.pose, reach) > res;
+                if moved {
+                    node.render = n.pose;
+                    node.version += 1;
+                }
             }
         }
         // Lines 1–8: new nodes, the covering test, the next slice of their robot.
@@ -390,7 +400,8 @@ impl Rasterizer {
                 robot: n.robot,
                 scan: in_cover.then_some(scan),
                 pose: n.pose,
-                q: QuantizedPose::new(&n.pose, self.q),
+                render: n.pose,
+                version: 0,
                 in_cover,
                 bbox: None,
             });
@@ -406,16 +417,16 @@ impl Rasterizer {
 
     fn node_bbox(&mut self, i: usize) -> CellBox {
         let node = &self.nodes[i];
-        if let Some((q, b)) = node.bbox
-            && q == node.q
+        if let Some((v, b)) = node.bbox
+            && v == node.version
         {
             return b;
         }
         let b = match &node.scan {
-            Some(s) => Projection::new(s, &node.q.pose(self.q), self.cfg.resolution).bbox,
+            Some(s) => Projection::new(s, &node.render, self.cfg.resolution).bbox,
             None => CellBox::EMPTY,
         };
-        self.nodes[i].bbox = Some((self.nodes[i].q, b));
+        self.nodes[i].bbox = Some((self.nodes[i].version, b));
         b
     }
 
@@ -423,7 +434,7 @@ impl Rasterizer {
         let node = &self.nodes[i];
         node.scan
             .as_ref()
-            .map(|s| Projection::new(s, &node.q.pose(self.q), self.cfg.resolution))
+            .map(|s| Projection::new(s, &node.render, self.cfg.resolution))
     }
 
     /// NaïveComposite / NaïveCoverComposite: every (cover) node onto a fresh map.
@@ -454,8 +465,20 @@ impl Rasterizer {
         grid
     }
 
-    /// Algorithm 2.1, lines 9–19.
+    /// Algorithm 2.1, lines 9–19. The map's counts are kept between updates: a regenerated
+    /// slice's old votes are subtracted and its new ones added, so an update costs the moved
+    /// slices, not the whole map (the final threshold pass excepted).
     fn cover_composite(&mut self, report: &mut UpdateReport) -> OccupancyGrid {
+        // The map's box: the union of the slices' boxes (each the union of its members'),
+        // grown once per update rather than once per slice.
+        let mut bbox = CellBox::EMPTY;
+        for s in 0..self.slices.len() {
+            for k in 0..self.slices[s].members.len() {
+                bbox = bbox.union(&self.node_bbox(self.slices[s].members[k]));
+            }
+        }
+        let mut map = std::mem::take(&mut self.map);
+        map.grow_to(&bbox);
         // Lines 9–13: regenerate the slices whose members' projections moved.
         for s in 0..self.slices.len() {
             let slice = &self.slices[s];
@@ -464,7 +487,7 @@ impl Rasterizer {
                     .members
                     .iter()
                     .zip(&slice.cached)
-                    .any(|(&m, q)| self.nodes[m].q != *q);
+                    .any(|(&m, &v)| self.nodes[m].version != v);
             if !moved {
                 continue;
             }
@@ -480,27 +503,21 @@ impl Rasterizer {
                     scratch.rasterize(&p);
                 }
             }
-            let slice = &mut self.slices[s];
-            slice.votes = SparseVotes::from_dense(&scratch);
-            slice.cached = members.iter().map(|&m| self.nodes[m].q).collect();
-            slice.valid = true;
+            let votes = SparseVotes::from_dense(&scratch);
             self.scratch = scratch;
+            let slice = &mut self.slices[s];
+            let old = std::mem::replace(&mut slice.votes, votes);
+            old.remove_from(&mut map);
+            slice.votes.composite_onto(&mut map);
+            slice.cached = members.iter().map(|&m| self.nodes[m].version).collect();
+            slice.valid = true;
             report.slices_regenerated += 1;
             report.nodes_rasterized += members.len();
         }
-        // Lines 14–18: a map bounded by the slices, every slice composited, thresholded.
-        let bbox = self
-            .slices
-            .iter()
-            .fold(CellBox::EMPTY, |b, s| b.union(&s.votes.bbox));
-        let mut map = std::mem::take(&mut self.map);
-        map.reset(bbox);
-        for s in &self.slices {
-            s.votes.composite_onto(&mut map);
-        }
+        // Lines 14–18: a map bounded by the slices (their votes are in `map`), thresholded.
         report.slices = self.slices.len();
         report.nodes_composited = self.slices.iter().map(|s| s.members.len()).sum();
-        let grid = OccupancyGrid::from_votes(&map, &self.cfg.votes, self.cfg.resolution);
+        let grid = OccupancyGrid::from_votes_in(&map, bbox, &self.cfg.votes, self.cfg.resolution);
         self.map = map;
         grid
     }

@@ -1,6 +1,6 @@
 //! A node's local laser scan (seed 004_815695db12a6b16c.txt §2.1: "each node is associated
 //! with a local occupancy grid taken at that moment") and its projection into the global
-//! grid at a quantised pose.
+//! grid.
 
 use crate::{EstimateError, Result};
 
@@ -102,43 +102,61 @@ impl LocalScan {
     }
 }
 
-/// A pose quantised to a lattice fine enough that moving to a neighbouring lattice point
-/// moves every beam end by less than one cell: translation step `resolution / 2`, rotation
-/// step `resolution / (2 · max_range)`. The rasterizer projects every node at its quantised
-/// posterior, so "the projection changed" (§2.3: "more than 1 grid cell of change in its
-/// projection") is an exact integer comparison, and every method projects identically.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct QuantizedPose {
-    /// x / (resolution / 2), rounded.
-    pub ix: i64,
-    /// y / (resolution / 2), rounded.
-    pub iy: i64,
-    /// θ / (resolution / (2 max_range)), rounded (θ wrapped to (−π, π]).
-    pub it: i64,
+/// The largest displacement (m) of a point within `reach` of the sensor when the node's pose
+/// changes from `from` to `to` (`[x, y, θ]`): a point `e` of the node frame moves by
+/// `Δt + (R(θ') − R(θ))·e`, and `R(θ') − R(θ)` is `2 sin(Δθ/2)` times a rotation, so the
+/// largest move over `|e| ≤ reach` is `|Δt| + 2|sin(Δθ/2)|·reach`. The rasterizer re-renders a
+/// node when this exceeds one cell (seed §2.3: "more than 1 grid cell of change in its
+/// projection"); it bounds every scan's projection (all beams end within `max_range`) and does
+/// not depend on what the scan saw, so a run with transient objects hidden re-renders the
+/// same nodes.
+pub fn footprint_displacement(from: &[f64; 3], to: &[f64; 3], reach: f64) -> f64 {
+    let dt = (to[0] - from[0]).hypot(to[1] - from[1]);
+    dt + 2.0 * (0.5 * (to[2] - from[2])).sin().abs() * reach
 }
 
-/// Quantisation steps (translation m, rotation rad) for a resolution and range.
-pub fn quanta(resolution: f64, max_range: f64) -> (f64, f64) {
-    (resolution / 2.0, resolution / (2.0 * max_range))
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-impl QuantizedPose {
-    /// Quantises a pose `[x, y, θ]`.
-    pub fn new(p: &[f64; 3], q: (f64, f64)) -> Self {
-        let th = crate::lsq::se2::wrap_angle(p[2]);
-        Self {
-            ix: (p[0] / q.0).round() as i64,
-            iy: (p[1] / q.0).round() as i64,
-            it: (th / q.1).round() as i64,
+    /// Against the brute-force largest displacement of points of the disc of radius `reach`
+    /// (rings of 720 points, the rim included).
+    #[test]
+    fn footprint_displacement_matches_brute_force() {
+        let reach = 30.0;
+        let place = |p: &[f64; 3], e: [f64; 2]| {
+            let (s, c) = p[2].sin_cos();
+            [p[0] + c * e[0] - s * e[1], p[1] + s * e[0] + c * e[1]]
+        };
+        let from = [3.0, -2.0, 0.4];
+        for k in 0..60 {
+            let t = k as f64 / 60.0;
+            let to = [
+                from[0] + 0.08 * (7.0 * t).sin(),
+                from[1] + 0.06 * (5.0 * t).cos(),
+                from[2]
+                    + 0.006 * (11.0 * t).sin()
+                    + if k == 59 {
+                        2.0 * std::f64::consts::PI
+                    } else {
+                        0.0
+                    },
+            ];
+            let mut worst: f64 = 0.0;
+            for ring in 0..=10 {
+                let r = reach * ring as f64 / 10.0;
+                for a in 0..720 {
+                    let a = a as f64 * std::f64::consts::PI / 360.0;
+                    let e = [r * a.cos(), r * a.sin()];
+                    let (p, q) = (place(&from, e), place(&to, e));
+                    worst = worst.max((q[0] - p[0]).hypot(q[1] - p[1]));
+                }
+            }
+            let got = footprint_displacement(&from, &to, reach);
+            assert!(
+                got >= worst - 1e-9 && got <= worst + 1e-4 * (1.0 + worst),
+                "step {k}: {got} vs {worst}"
+            );
         }
-    }
-
-    /// The lattice pose.
-    pub fn pose(&self, q: (f64, f64)) -> [f64; 3] {
-        [
-            self.ix as f64 * q.0,
-            self.iy as f64 * q.0,
-            self.it as f64 * q.1,
-        ]
     }
 }
