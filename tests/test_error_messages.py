@@ -263,6 +263,18 @@ def _optimize(path: Any = None, **kw: Any) -> Callable[[], Any]:
     return call
 
 
+def _waypoints(paths: Any = None, gap: bool = False, **kw: Any) -> Callable[[], Any]:
+    def call() -> Any:
+        ws, poses = _scene()
+        h = poses["home"]
+        a = h + [0.2, -0.1, 0.1, 0.0, 0.01]
+        b = a + [0.1, 0.05, 0.0, 0.0, 0.0]
+        p = [np.array([h, a]), np.array([b, a]) if gap else np.array([a, b])] if paths is None else paths
+        plan.optimize_waypoints(ws, p, **{"max_iterations": 2, **kw})
+
+    return call
+
+
 def _opening() -> Any:
     return polygon.simulate_opening(3, width=160, height=120)
 
@@ -533,6 +545,11 @@ CASES: list[Any] = [
     Case("optimize_trajectory", "n_ctrl", "-1", _optimize(n_ctrl=-1)),
     Case("optimize_trajectory", "velocity", "-1", _optimize(limits=plan.Limits(velocity=(-1.0,) * 5))),
     Case("optimize_trajectory", "d_safe", "nan", _optimize(limits=plan.Limits(d_safe=NAN))),
+    Case("optimize_waypoints", "paths", "no segment", _waypoints(paths=[])),
+    Case("optimize_waypoints", "paths", "str", _waypoints(paths="abc")),
+    Case("optimize_waypoints", "paths", "(2, 4)", _waypoints(paths=[np.zeros((2, 4)), np.zeros((2, 5))])),
+    Case("optimize_waypoints", "paths", "1.118e-1", _waypoints(gap=True)),
+    Case("optimize_waypoints", "max_iterations", "-1", _waypoints(max_iterations=-1)),
     # polygons
     Case("detect_polygon", "template", "(3,)", _polygon(template=np.zeros(3))),
     Case("detect_polygon", "homography", "(2, 2)", _polygon(homography=np.eye(2))),
