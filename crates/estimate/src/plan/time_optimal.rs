@@ -13,10 +13,13 @@
 //! `min Σ Δt + μ/2 ‖step‖²` within a trust region with clarabel. The new point is then made
 //! exactly feasible by uniform time scaling, which leaves the geometric path (hence the
 //! clearance) unchanged and divides velocity, acceleration, jerk and the inertial torque by
-//! `λ, λ², λ³, λ²`: the smallest `λ ≥ 1` that satisfies every limit (torques checked at 1 ms).
-//! The step is accepted when the scaled duration decreases and the clearance, sampled every
-//! 1 ms, stays at least `d_safe`; otherwise the trust region shrinks. Torque limits thus enter
-//! through the scaling, not the QP.
+//! `λ, λ², λ³, λ²`: the smallest `λ` that satisfies every limit (torques sampled 8 times per
+//! knot span). The step is accepted when the scaled duration decreases and the clearance is
+//! certified at least `d_safe` on the whole curve (conservative advancement,
+//! [`clearance_certified`]); otherwise the trust region shrinks. Torque limits thus enter
+//! through the scaling, not the QP. The last iterate is rescaled with the torques sampled every
+//! 1 ms and verified at 1 ms ([`verify`]); if that fails, the initial trajectory (built with the
+//! 1 ms checks) is returned instead.
 
 // Control points, spans and basis values are indexed together by the same span and joint
 // indices, as in eqs. (2.12)–(2.14); index loops read closer to the equations than zips.
@@ -219,6 +222,16 @@ pub(super) fn required_stretch(
     dynamics: &Dynamics,
     dt: f64,
 ) -> Result<f64, PlanError> {
+    required_stretch_at(traj, limits, dynamics, traj.check_times(dt))
+}
+
+/// [`required_stretch`] with the torques sampled at `times`.
+fn required_stretch_at(
+    traj: &BSplineTrajectory,
+    limits: &Limits,
+    dynamics: &Dynamics,
+    times: impl Iterator<Item = f64>,
+) -> Result<f64, PlanError> {
     let (vb, ab, jb) = (
         traj.velocity.hull_bounds(),
         traj.acceleration.hull_bounds(),
@@ -231,7 +244,7 @@ pub(super) fn required_stretch(
             .max((ab[i] / limits.acceleration[i]).sqrt())
             .max((jb[i] / limits.jerk[i]).cbrt());
     }
-    for t in traj.check_times(dt) {
+    for t in times {
         let s = traj.sample(t);
         let (inertial, stat) = dynamics.split(&s.q, &s.dq, &s.ddq);
         for i in 0..5 {
@@ -263,25 +276,137 @@ fn stretched(
     Ok((s, tr))
 }
 
-/// Makes `(ctrl, spans)` exactly feasible by time scaling (module docs); returns the scaled spans
-/// and trajectory.
+/// Where the torques are sampled: every `dt` seconds (the dense grid of [`verify`]), or at
+/// `m` equally spaced times per knot span (and the end).
+#[derive(Debug, Clone, Copy)]
+enum TorqueGrid {
+    Dense(f64),
+    PerSpan(usize),
+}
+
+/// Torque samples per knot span inside the iteration; the returned trajectory is rescaled on the
+/// dense grid.
+const TORQUE_SAMPLES_PER_SPAN: usize = 8;
+
+fn torque_times(tr: &BSplineTrajectory, grid: TorqueGrid) -> Vec<f64> {
+    match grid {
+        TorqueGrid::Dense(dt) => tr.check_times(dt).collect(),
+        TorqueGrid::PerSpan(m) => {
+            let k = tr.knots();
+            let n_spans = tr.control_points().len() - 3;
+            let mut out: Vec<f64> = (0..n_spans)
+                .flat_map(|j| {
+                    let (a, b) = (k[j + 3], k[j + 4]);
+                    (0..m).map(move |i| a + (b - a) * i as f64 / m as f64)
+                })
+                .collect();
+            out.push(tr.duration());
+            out
+        }
+    }
+}
+
+/// Makes `(ctrl, spans)` exactly feasible by time scaling (module docs) with the torques sampled
+/// on `grid`; returns the scaled spans and trajectory.
 fn feasible(
     ctrl: &[Joints],
     spans: &[f64],
     limits: &Limits,
     dynamics: &Dynamics,
-    dt: f64,
+    grid: TorqueGrid,
 ) -> Result<(Vec<f64>, BSplineTrajectory), PlanError> {
     let tr = BSplineTrajectory::from_spans(ctrl.to_vec(), spans)?;
-    let lam = required_stretch(&tr, limits, dynamics, dt)?;
+    let lam = required_stretch_at(&tr, limits, dynamics, torque_times(&tr, grid).into_iter())?;
     let (s, tr) = stretched(ctrl, spans, lam)?;
-    // The torque check is sampled: confirm on the scaled trajectory, stretching a little more
-    // if a sample between the previous ones binds.
-    let lam2 = required_stretch(&tr, limits, dynamics, dt)?;
+    confirmed(ctrl, s, tr, limits, dynamics, grid)
+}
+
+/// The torque check is sampled: confirms `tr` (spans `s`) on `grid`, stretching a little more
+/// if a sample between the previous ones binds (`λ > 1`; scaling keeps the path).
+fn confirmed(
+    ctrl: &[Joints],
+    s: Vec<f64>,
+    tr: BSplineTrajectory,
+    limits: &Limits,
+    dynamics: &Dynamics,
+    grid: TorqueGrid,
+) -> Result<(Vec<f64>, BSplineTrajectory), PlanError> {
+    let lam2 = required_stretch_at(&tr, limits, dynamics, torque_times(&tr, grid).into_iter())?;
     if lam2 > 1.0 {
         stretched(ctrl, &s, lam2)
     } else {
         Ok((s, tr))
+    }
+}
+
+/// Certifies `d(q(t)) ≥ d_safe` on the whole of `[0, T]`, not only at samples, by conservative
+/// advancement in time (the continuous check of `PlanWorkspace::segment_free`, applied to the
+/// curve). On knot span `j` the velocity is in the convex hull of its three control points
+/// `V_j..V_{j+2}` (eq. 2.12), so no robot point moves faster than
+/// `L_j = Σ_i r_i max_k |V_{k,i}|` (`r_i` = [`PlanWorkspace::reach`]); the clearance is
+/// 1-Lipschitz in point motion, so a clearance `d` at `t` holds `d_safe` on
+/// `[t, t + (d − d_safe)/L_j]`.
+///
+/// Returns `Some(true)` when certified, `Some(false)` when a point below `d_safe` is found, and
+/// `None` when more than `budget` clearance evaluations would be needed (a close approach).
+pub(super) fn clearance_certified(
+    ws: &PlanWorkspace,
+    tr: &BSplineTrajectory,
+    d_safe: f64,
+    budget: usize,
+) -> Result<Option<bool>, PlanError> {
+    let reach = ws.reach();
+    let knots = tr.knots();
+    let ctrl = tr.control_points();
+    let n = ctrl.len();
+    let vel = &tr.velocity.ctrl;
+    let mut evals = 0usize;
+    for j in 0..n - 3 {
+        let (a, b) = (knots[j + 3], knots[j + 4]);
+        let speed: f64 = (0..5)
+            .map(|i| reach[i] * (j..j + 3).map(|k| vel[k][i].abs()).fold(0.0, f64::max))
+            .sum();
+        if !speed.is_finite() {
+            return Ok(None);
+        }
+        let mut t = a;
+        loop {
+            let (s, nb) = basis(knots, n, t);
+            let q: Joints = (0..4).map(|k| ctrl[s - 3 + k] * nb[k]).sum();
+            let d = ws.signed_distance(&q)?;
+            evals += 1;
+            if d < d_safe {
+                return Ok(Some(false));
+            }
+            if speed <= 0.0 {
+                break;
+            }
+            let step = (d - d_safe) / speed;
+            if t + step >= b {
+                break;
+            }
+            if evals >= budget {
+                return Ok(None);
+            }
+            t += step;
+        }
+    }
+    Ok(Some(true))
+}
+
+/// Whether the clearance keeps `d_safe`: certified continuously ([`clearance_certified`]), or,
+/// for a close approach that the advancement cannot certify within the cost of the dense check,
+/// sampled every `dt` as [`verify`] does.
+fn keeps_clearance(
+    ws: &PlanWorkspace,
+    tr: &BSplineTrajectory,
+    d_safe: f64,
+    dt: f64,
+) -> Result<bool, PlanError> {
+    let budget = tr.check_times(dt).size_hint().0 / 2;
+    match clearance_certified(ws, tr, d_safe, budget.max(1))? {
+        Some(ok) => Ok(ok),
+        None => Ok(min_clearance(ws, tr, dt)? >= d_safe),
     }
 }
 
@@ -347,7 +472,13 @@ pub fn optimize_trajectory(
     // until it keeps the clearance.
     let (mut ctrl, mut spans, mut traj) = loop {
         let ctrl = fit_path(path, n, &cfg.weights)?;
-        let (spans, tr) = feasible(&ctrl, &vec![0.1; n - 3], limits, dynamics, dt)?;
+        let (spans, tr) = feasible(
+            &ctrl,
+            &vec![0.1; n - 3],
+            limits,
+            dynamics,
+            TorqueGrid::Dense(dt),
+        )?;
         let c = min_clearance(ws, &tr, dt)?;
         if c >= limits.d_safe {
             break (ctrl, spans, tr);
@@ -364,6 +495,7 @@ pub fn optimize_trajectory(
         n = (2 * n).min(60);
     };
     let initial_duration = traj.duration();
+    let initial = traj.clone();
     let lay = Layout { n };
     let mut radius = cfg.trust_radius;
     let mut iterations = 0;
@@ -372,6 +504,18 @@ pub fn optimize_trajectory(
     while iterations < cfg.max_iterations && radius > 1e-4 {
         iterations += 1;
         let nv = lay.n_vars();
+        // The trust-region box `|x_k| ≤ w_k`. The span box shrinks with the radius: V, A, R
+        // scale as 1/Δt, 1/Δt², 1/Δt³, so their linearisation only holds for small relative span
+        // changes. (A fixed ±50 % box let the trust region collapse after a few steps, 0–3
+        // accepted on the default transfers.)
+        let frac = (0.5 * radius / cfg.trust_radius).min(0.5);
+        let half_width: Vec<f64> = (0..nv)
+            .map(|k| match k.checked_sub(lay.n_p()) {
+                Some(j) => frac * spans[j],
+                None if k % 5 == 4 => 0.2 * radius,
+                None => radius,
+            })
+            .collect();
         // Rows of A x ≤ b with x the step.
         let mut rows: Vec<(Vec<(usize, f64)>, f64)> = Vec::new();
         for d in 0..5 {
@@ -385,8 +529,9 @@ pub fn optimize_trajectory(
                     if p.g.is_empty() {
                         continue;
                     }
-                    rows.push((p.g.clone(), lim - p.v));
-                    rows.push((p.g.iter().map(|(i, x)| (*i, -x)).collect(), lim + p.v));
+                    let neg = p.g.iter().map(|(i, x)| (*i, -x)).collect();
+                    rows.push((p.g, lim - p.v));
+                    rows.push((neg, lim + p.v));
                 }
             }
         }
@@ -416,19 +561,9 @@ pub fn optimize_trajectory(
             }
         }
         // Trust region and positive spans.
-        for k in 0..lay.n_p() {
-            let r = if k % 5 == 4 { 0.2 * radius } else { radius };
-            rows.push((vec![(k, 1.0)], r));
-            rows.push((vec![(k, -1.0)], r));
-        }
-        // The span box shrinks with the radius: V, A, R scale as 1/Δt, 1/Δt², 1/Δt³, so their
-        // linearisation only holds for small relative span changes. (A fixed ±50 % box let the
-        // trust region collapse after a few steps, 0–3 accepted on the default transfers.)
-        let frac = (0.5 * radius / cfg.trust_radius).min(0.5);
-        for j in 0..n - 3 {
-            let k = lay.span_var(j);
-            rows.push((vec![(k, 1.0)], frac * spans[j]));
-            rows.push((vec![(k, -1.0)], frac * spans[j]));
+        for (k, w) in half_width.iter().enumerate() {
+            rows.push((vec![(k, 1.0)], *w));
+            rows.push((vec![(k, -1.0)], *w));
         }
         let mut cost = vec![0.0; nv];
         for j in 0..n - 3 {
@@ -450,9 +585,15 @@ pub fn optimize_trajectory(
         let s2: Vec<f64> = (0..n - 3)
             .map(|j| (spans[j] + step[lay.span_var(j)]).max(1e-6 * spans[j]))
             .collect();
-        let (s2, tr2) = feasible(&c2, &s2, limits, dynamics, dt)?;
+        let (s2, tr2) = feasible(
+            &c2,
+            &s2,
+            limits,
+            dynamics,
+            TorqueGrid::PerSpan(TORQUE_SAMPLES_PER_SPAN),
+        )?;
         let ok = tr2.duration() < traj.duration() * (1.0 - 1e-6)
-            && min_clearance(ws, &tr2, dt)? >= limits.d_safe;
+            && keeps_clearance(ws, &tr2, limits.d_safe, dt)?;
         if ok {
             let gain = 1.0 - tr2.duration() / traj.duration();
             ctrl = c2;
@@ -467,7 +608,23 @@ pub fn optimize_trajectory(
             radius *= 0.5;
         }
     }
-    let verification = verify(ws, dynamics, &traj, limits, 1e-3)?;
+    // The iterates' torques were sampled per span: rescale on the dense grid (`λ ≥ 1` only),
+    // verify densely, and fall back to the initial trajectory (dense torque and clearance
+    // checks) if the verification fails; never return an unverified trajectory.
+    if accepted > 0 {
+        traj = confirmed(&ctrl, spans, traj, limits, dynamics, TorqueGrid::Dense(dt))?.1;
+    }
+    let mut verification = verify(ws, dynamics, &traj, limits, 1e-3)?;
+    if accepted > 0 && !verification.ok(1e-9, limits.d_safe) {
+        traj = initial;
+        verification = verify(ws, dynamics, &traj, limits, 1e-3)?;
+    }
+    if !verification.ok(1e-9, limits.d_safe) {
+        return Err(PlanError::Infeasible {
+            constraint: "dense verification".into(),
+            reason: format!("the trajectory fails its 1 ms check: {verification:?}"),
+        });
+    }
     let (lower_bound, bound_joint) = per_joint_bound(&path[0], &path[path.len() - 1], limits);
     let duration = traj.duration();
     let mut active = Vec::new();
@@ -622,6 +779,47 @@ mod tests {
             let q: Joints = (0..4).map(|j| ctrl[s - 3 + j] * nb[j]).sum();
             assert!((q - tr.sample(t).q).norm() < 1e-12);
         }
+    }
+
+    /// The continuous certificate never accepts a trajectory that dense sampling rejects: random
+    /// splines between the default scene's poses (through a perturbed mid-point, random spans),
+    /// with `d_safe` just above, just below and well below each one's own minimum clearance
+    /// (sampled every 0.2 ms), and the default 10 mm.
+    #[test]
+    fn certified_clearance_never_accepts_what_dense_sampling_rejects() {
+        use rand::{Rng, SeedableRng};
+        let (ws, poses) = default_scene().unwrap();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(30);
+        let weights = OptimizeConfig::default().weights;
+        let (mut certified, mut refused) = (0, 0);
+        for _ in 0..12 {
+            let a = poses[rng.random_range(0..poses.len())].q;
+            let b = poses[rng.random_range(0..poses.len())].q;
+            let mut mid = (a + b) * 0.5;
+            for d in 0..4 {
+                mid[d] += rng.random_range(-0.4..0.4);
+            }
+            let ctrl = fit_path(&[a, mid, b], 12, &weights).unwrap();
+            let spans: Vec<f64> = (0..9).map(|_| rng.random_range(0.03..0.15)).collect();
+            let tr = BSplineTrajectory::from_spans(ctrl, &spans).unwrap();
+            let fine = min_clearance(&ws, &tr, 2e-4).unwrap();
+            for d_safe in [fine + 1e-4, fine - 1e-3, fine - 2e-2, 0.01] {
+                if d_safe < 0.0 {
+                    continue;
+                }
+                let cert = clearance_certified(&ws, &tr, d_safe, 20_000).unwrap();
+                let accepted = keeps_clearance(&ws, &tr, d_safe, 1e-3).unwrap();
+                if cert == Some(true) || accepted {
+                    certified += 1;
+                    assert!(fine >= d_safe, "accepted {d_safe} with samples at {fine}");
+                    let v = min_clearance(&ws, &tr, 1e-3).unwrap();
+                    assert!(v >= d_safe, "accepted {d_safe}, 1 ms check {v}");
+                } else {
+                    refused += 1;
+                }
+            }
+        }
+        assert!(certified > 0 && refused > 0, "{certified} {refused}");
     }
 
     #[test]
