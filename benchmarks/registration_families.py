@@ -138,6 +138,7 @@ def main() -> None:
     ap.add_argument("--peers", action="store_true", help="also run probreg / Open3D")
     ap.add_argument("--no-old", action="store_true", help="skip the original global_cpd columns")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--skip", action="append", default=[], help="drop a method by name, e.g. gmmtree (repeatable)")
     ap.add_argument("--energy", action="store_true", help="also rank by deformation energy (slow)")
     args = ap.parse_args()
     methods: list[tuple[str, Method]] = [("cpd", m_cpd)]
@@ -159,6 +160,7 @@ def main() -> None:
             last_error: dict[str, str] = {}
             times: dict[str, list[float]] = {}
             fam_methods = methods + ([("fpfh", m_fpfh)] if args.peers and family in FAMILIES_3D else [])
+            fam_methods = [(name, fn) for name, fn in fam_methods if name not in args.skip]
             for trial in range(args.trials):
                 sc = make_scene(family, setting, seed=args.seed + 7919 * trial + 101 * SETTINGS.index(setting))
                 for mname, fn in fam_methods:
