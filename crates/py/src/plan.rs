@@ -245,24 +245,17 @@ fn fill<'py>(
     Ok(())
 }
 
-/// Optimises a trajectory along `path` (N×5); limits as 5-vectors. Returns a dict of the
-/// `OptimizeResult` fields with the trajectory as `knots` and `control_points`.
-#[pyfunction]
-#[pyo3(signature = (workspace, path, velocity, acceleration, jerk, torque, d_safe=0.01, n_ctrl=0, max_iterations=40))]
-#[allow(clippy::too_many_arguments)]
-fn plan_optimize<'py>(
-    py: Python<'py>,
+/// What both optimiser bindings build from their arguments: the limits (velocity,
+/// acceleration, jerk and torque 5-vectors, in that order), the workspace robot's dynamics with
+/// the default masses, and the optimiser's configuration.
+fn optimizer_inputs(
     workspace: &PyPlanWorkspace,
-    path: &Bound<'py, PyAny>,
-    velocity: &Bound<'py, PyAny>,
-    acceleration: &Bound<'py, PyAny>,
-    jerk: &Bound<'py, PyAny>,
-    torque: &Bound<'py, PyAny>,
+    vectors: [&Bound<'_, PyAny>; 4],
     d_safe: f64,
     n_ctrl: usize,
     max_iterations: usize,
-) -> PyResult<Bound<'py, PyDict>> {
-    let path = joints_rows(path, "path")?;
+) -> PyResult<(Limits, Dynamics, OptimizeConfig)> {
+    let [velocity, acceleration, jerk, torque] = vectors;
     let limits = Limits {
         velocity: joints(velocity, "velocity")?,
         acceleration: joints(acceleration, "acceleration")?,
@@ -281,6 +274,35 @@ fn plan_optimize<'py>(
         max_iterations,
         ..OptimizeConfig::default()
     };
+    Ok((limits, dy, cfg))
+}
+
+/// Optimises a trajectory along `path` (N×5); limits as 5-vectors. Returns a dict of the
+/// `OptimizeResult` fields with the trajectory as `knots` and `control_points`.
+#[pyfunction]
+#[pyo3(signature = (workspace, path, velocity, acceleration, jerk, torque, d_safe=0.01, n_ctrl=0, max_iterations=40))]
+#[allow(clippy::too_many_arguments)]
+fn plan_optimize<'py>(
+    py: Python<'py>,
+    workspace: &PyPlanWorkspace,
+    path: &Bound<'py, PyAny>,
+    velocity: &Bound<'py, PyAny>,
+    acceleration: &Bound<'py, PyAny>,
+    jerk: &Bound<'py, PyAny>,
+    torque: &Bound<'py, PyAny>,
+    d_safe: f64,
+    n_ctrl: usize,
+    max_iterations: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let path = joints_rows(path, "path")?;
+    let (limits, dy, cfg) = optimizer_inputs(
+        workspace,
+        [velocity, acceleration, jerk, torque],
+        d_safe,
+        n_ctrl,
+        max_iterations,
+    )?;
+    let ws = &workspace.ws;
     let r = convert::detached(py, || {
         optimize_trajectory(ws, &dy, &path, &limits, &cfg).map_err(err)
     })?;
@@ -335,24 +357,14 @@ fn plan_optimize_waypoints<'py>(
         .iter()
         .map(|p| joints_rows(p, "paths"))
         .collect::<PyResult<Vec<_>>>()?;
-    let limits = Limits {
-        velocity: joints(velocity, "velocity")?,
-        acceleration: joints(acceleration, "acceleration")?,
-        jerk: joints(jerk, "jerk")?,
-        torque: joints(torque, "torque")?,
+    let (limits, dy, cfg) = optimizer_inputs(
+        workspace,
+        [velocity, acceleration, jerk, torque],
         d_safe,
-    };
-    let ws = &workspace.ws;
-    let dy = Dynamics::new(
-        &ws.robot.params,
-        &DynamicsParams::default(),
-        ws.wafer.as_ref(),
-    );
-    let cfg = OptimizeConfig {
         n_ctrl,
         max_iterations,
-        ..OptimizeConfig::default()
-    };
+    )?;
+    let ws = &workspace.ws;
     let r = convert::detached(py, || {
         optimize_waypoints(ws, &dy, &paths, &limits, &cfg, free_velocities).map_err(err)
     })?;

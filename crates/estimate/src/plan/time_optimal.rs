@@ -723,7 +723,7 @@ pub(super) fn solve_qp(
 }
 
 #[cfg(test)]
-mod tests {
+pub(in crate::plan) mod tests {
     use super::*;
     use autoteach_geometry::collision::LinkDims;
     use autoteach_geometry::plan::dynamics::DynamicsParams;
@@ -822,8 +822,8 @@ mod tests {
         assert!(certified > 0 && refused > 0, "{certified} {refused}");
     }
 
-    #[test]
-    fn free_space_move_approaches_the_per_joint_bound_and_verifies() {
+    /// The robot alone (no obstacles, no wafer) with its default masses: the tests' free space.
+    pub(in crate::plan) fn free_space() -> (PlanWorkspace, Dynamics) {
         let (lo, hi) = default_limits();
         let ws = PlanWorkspace::new(
             WaferRobot::default(),
@@ -835,6 +835,12 @@ mod tests {
         )
         .unwrap();
         let dy = Dynamics::new(&ws.robot.params, &DynamicsParams::default(), None);
+        (ws, dy)
+    }
+
+    #[test]
+    fn free_space_move_approaches_the_per_joint_bound_and_verifies() {
+        let (ws, dy) = free_space();
         let limits = Limits::default();
         let path = vec![
             Joints::new(0.0, 0.5, 0.0, 0.0, 0.1),

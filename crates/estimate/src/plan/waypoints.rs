@@ -439,27 +439,9 @@ pub fn optimize_waypoints(
 
 #[cfg(test)]
 mod tests {
+    use super::super::time_optimal::tests::free_space;
     use super::*;
-    use autoteach_geometry::collision::LinkDims;
-    use autoteach_geometry::plan::dynamics::DynamicsParams;
     use autoteach_geometry::plan::limits::per_joint_bound;
-    use autoteach_geometry::plan::workspace::default_limits;
-    use autoteach_geometry::robot::WaferRobot;
-
-    fn free_space() -> (PlanWorkspace, Dynamics) {
-        let (lo, hi) = default_limits();
-        let ws = PlanWorkspace::new(
-            WaferRobot::default(),
-            LinkDims::default(),
-            None,
-            lo,
-            hi,
-            vec![],
-        )
-        .unwrap();
-        let dy = Dynamics::new(&ws.robot.params, &DynamicsParams::default(), None);
-        (ws, dy)
-    }
 
     fn collinear() -> (Vec<Joints>, Vec<Vec<Joints>>) {
         let w: Vec<Joints> = (0..4)
