@@ -16,10 +16,12 @@ than blocking CI. Examples are derandomised, so a run is reproducible; each entr
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
 import faulthandler
 import math
 import os
+import tempfile
 import warnings
 from collections.abc import Callable
 from typing import Any
@@ -35,6 +37,9 @@ from autoteach.sigma_points import MerweScaledSigmaPoints
 
 EXAMPLES = int(os.environ.get("AUTOTEACH_PROPERTY_EXAMPLES", "200"))
 HANG_SECONDS = 120
+#: Where the watchdog writes the stacks before it ends the run: pytest's capture of fd 2 would
+#: swallow them (the run then stops with status 1 and no summary).
+HANG_LOG = os.path.join(tempfile.gettempdir(), "autoteach-property-hang.txt")
 
 SETTINGS = settings(
     max_examples=EXAMPLES,
@@ -188,8 +193,25 @@ def _nonfinite(value: Any, path: str = "result") -> str | None:
     return None
 
 
+def _arm_watchdog() -> None:
+    """(Re)start the hang watchdog: HANG_SECONDS from now, dump every thread's stack to HANG_LOG and exit."""
+    global _hang_file
+    if _hang_file is None:
+        _hang_file = open(HANG_LOG, "w")  # noqa: SIM115 - kept open for the watchdog thread
+        atexit.register(_hang_file.close)
+    faulthandler.dump_traceback_later(HANG_SECONDS, exit=True, file=_hang_file)
+
+
+_hang_file: Any = None
+
+
 def holds(call: Callable[[], Any], *, finite: bool = True) -> None:
-    """The property: a finite result, or an AutoteachError that is not a caught panic."""
+    """The property: a finite result, or an AutoteachError that is not a caught panic.
+
+    Each call gets its own HANG_SECONDS (the watchdog is re-armed here): a property test of 200
+    examples may take longer than that in all without any one example hanging.
+    """
+    _arm_watchdog()
     try:
         out = call()
     except InternalError as e:  # a Rust panic caught at the boundary
@@ -203,7 +225,7 @@ def holds(call: Callable[[], Any], *, finite: bool = True) -> None:
 
 @pytest.fixture(autouse=True)
 def _no_hang():
-    faulthandler.dump_traceback_later(HANG_SECONDS, exit=True)
+    _arm_watchdog()
     yield
     faulthandler.cancel_dump_traceback_later()
 
